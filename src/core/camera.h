@@ -1,0 +1,38 @@
+#pragma once
+// Pinhole camera with optional OpenCV (Brown-Conrady) distortion.
+//
+// Frames: the camera frame is OpenCV's (x right, y down, z forward), metres.
+// Pixels: continuous image coordinates (u, v) in pixels; pixel (i, j) covers [i, i+1) x [j, j+1), so its
+// centre is (i + 0.5, j + 0.5). Intrinsics read from datasets are used as given (u = fx*x/z + cx).
+#include <optional>
+
+#include <Eigen/Core>
+
+namespace sd {
+
+struct Distortion {
+  double k1 = 0, k2 = 0, p1 = 0, p2 = 0, k3 = 0;  // OpenCV order
+  bool IsZero() const { return k1 == 0 && k2 == 0 && p1 == 0 && p2 == 0 && k3 == 0; }
+};
+
+struct PinholeCamera {
+  int width = 0, height = 0;  // pixels
+  double fx = 0, fy = 0, cx = 0, cy = 0;
+  Distortion distortion;
+
+  static PinholeCamera FromK(const Eigen::Matrix3d& K, int width, int height);
+  Eigen::Matrix3d K() const;
+
+  // Projects a point in the camera frame. Empty when the point is not in front of the camera
+  // (z <= min_depth). The result may lie outside the image; see InImage().
+  std::optional<Eigen::Vector2d> Project(const Eigen::Vector3d& p_cam, double min_depth = 1e-3) const;
+  // Unit-length ray direction in the camera frame through image point `uv` (undoes distortion).
+  Eigen::Vector3d RayDirection(const Eigen::Vector2d& uv) const;
+  bool InImage(const Eigen::Vector2d& uv) const { return uv.x() >= 0 && uv.y() >= 0 && uv.x() < width && uv.y() < height; }
+
+  // Normalised image plane <-> distorted normalised plane.
+  Eigen::Vector2d Distort(const Eigen::Vector2d& xy) const;
+  Eigen::Vector2d Undistort(const Eigen::Vector2d& xy_distorted) const;
+};
+
+}  // namespace sd

@@ -1,0 +1,14 @@
+#include "core/error.h"
+
+#include <cstdio>
+#include <cstdlib>
+
+namespace sd {
+
+void CheckFailed(const char* file, int line, const char* cond, const std::string& msg) {
+  std::fprintf(stderr, "internal error: %s:%d: check failed: %s %s\n", file, line, cond, msg.c_str());
+  std::fflush(stderr);
+  std::abort();
+}
+
+}  // namespace sd

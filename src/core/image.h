@@ -1,0 +1,61 @@
+#pragma once
+// Images: interleaved channels, row-major, (0, 0) is the top-left pixel.
+//  - ImageU8: 8-bit, sRGB-encoded colour as stored on disk (1, 3 or 4 channels).
+//  - ImageF: 32-bit float, linear light where lighting is computed (values usually 0..1, HDR allowed).
+// Alpha, when present, is linear and not premultiplied.
+#include <cstdint>
+#include <vector>
+
+#include "core/error.h"
+
+namespace sd {
+
+template <typename T>
+class Image {
+ public:
+  Image() = default;
+  Image(int width, int height, int channels, T fill = T{})
+      : width_(width), height_(height), channels_(channels),
+        data_(static_cast<size_t>(width) * height * channels, fill) {
+    SD_CHECK(width >= 0 && height >= 0 && channels > 0, << width << "x" << height << "x" << channels);
+  }
+
+  int width() const { return width_; }
+  int height() const { return height_; }
+  int channels() const { return channels_; }
+  bool empty() const { return data_.empty(); }
+  size_t size() const { return data_.size(); }
+
+  T& at(int x, int y, int c = 0) { return data_[Index(x, y, c)]; }
+  const T& at(int x, int y, int c = 0) const { return data_[Index(x, y, c)]; }
+  T* pixel(int x, int y) { return &data_[Index(x, y, 0)]; }
+  const T* pixel(int x, int y) const { return &data_[Index(x, y, 0)]; }
+  T* data() { return data_.data(); }
+  const T* data() const { return data_.data(); }
+  std::vector<T>& vector() { return data_; }
+  const std::vector<T>& vector() const { return data_; }
+
+ private:
+  size_t Index(int x, int y, int c) const {
+    return (static_cast<size_t>(y) * width_ + x) * channels_ + c;
+  }
+  int width_ = 0, height_ = 0, channels_ = 0;
+  std::vector<T> data_;
+};
+
+using ImageU8 = Image<uint8_t>;
+using ImageF = Image<float>;
+
+// sRGB transfer function (IEC 61966-2-1), per channel value in [0, 1].
+float SrgbToLinear(float v);
+float LinearToSrgb(float v);
+// Colour channels go through the transfer function; a 4th (alpha) channel is only rescaled.
+ImageF ToLinear(const ImageU8& srgb);
+ImageU8 ToSrgb8(const ImageF& linear);
+
+// Bilinear sample at continuous coordinates (pixel centres at +0.5), clamped at the border.
+// `out` receives channels() values.
+void SampleBilinear(const ImageF& img, double u, double v, float* out);
+void SampleBilinear(const ImageU8& img, double u, double v, float* out);  // out in 0..255
+
+}  // namespace sd

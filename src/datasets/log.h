@@ -1,0 +1,92 @@
+#pragma once
+// One model of a driving log for every dataset we read (nuScenes tables, mmdetection3d infos, KITTI).
+//
+// Frames and conventions (converted once, at each reader; see the reader's header for its source
+// convention and the test that pins it):
+//  - ego: x forward, y left, z up, metres; the ego pose at the frame's LiDAR timestamp. For KITTI, which has
+//    no ego frame, ego = the Velodyne frame (also x forward, y left, z up).
+//  - world: the dataset's global/map frame (nuScenes "global"); KITTI object frames have none (identity).
+//  - Camera extrinsics are T_ego_cam of the camera *as seen from the frame's ego pose*: camera motion
+//    between the LiDAR and the camera timestamps is folded in (T_ego_cam = T_world_ego(t_lidar)^-1 *
+//    T_world_ego(t_cam) * T_egocam_cam), so projecting ego-frame points through it is exact for static
+//    objects. `T_egocam_cam` keeps the pure calibration.
+//  - Annotation boxes are Box3 in the ego frame with the geometric centre and (length, width, height).
+#include <filesystem>
+#include <limits>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/box3.h"
+#include "core/camera.h"
+#include "core/pointcloud.h"
+#include "core/rigid3.h"
+#include "io/pointcloud_io.h"
+
+namespace sd {
+
+struct CameraSensor {
+  std::string channel;        // "CAM_FRONT", "image_2", ...
+  std::string token;          // dataset id of this image record (nuScenes sample_data token), may be empty
+  std::filesystem::path image_path;  // absolute path of the image file
+  std::string image_relpath;  // the path as the dataset's record writes it (for writers)
+  double timestamp = 0;       // seconds
+  PinholeCamera intrinsics;   // width/height filled from the record or the image header
+  Rigid3d T_ego_cam;          // see the file comment: includes ego motion to the LiDAR time
+  Rigid3d T_egocam_cam;       // pure calibration (camera -> ego at camera time)
+  Rigid3d T_world_egocam;     // ego pose at the camera timestamp
+};
+
+struct LidarSensor {
+  std::string channel;        // "LIDAR_TOP", "velodyne"
+  std::string token;
+  std::filesystem::path path;  // absolute path of the sweep file
+  std::string relpath;         // as written in the dataset's record
+  PointLayout layout;          // record layout of the file
+  double timestamp = 0;        // seconds
+  Rigid3d T_ego_lidar;
+};
+
+struct Annotation {
+  std::string category;           // the dataset's own class name ("traffic_cone", "Car", "movable_object.trafficcone")
+  Box3 box;                       // ego frame, geometric centre
+  std::string token;              // annotation id, may be empty
+  std::string instance_token;     // track id, may be empty
+  int num_lidar_pts = -1;         // -1 when unknown
+  Eigen::Vector2d velocity = Eigen::Vector2d::Constant(std::numeric_limits<double>::quiet_NaN());  // ego frame m/s
+  int visibility = -1;            // dataset-specific level, -1 unknown (nuScenes 1..4; KITTI occluded 0..3)
+  double truncation = -1;         // KITTI truncated 0..1, -1 unknown
+};
+
+struct Frame {
+  std::string token;               // sample token / frame id ("000008")
+  double timestamp = 0;            // seconds (LiDAR time)
+  Rigid3d T_world_ego;             // at the LiDAR timestamp
+  std::vector<CameraSensor> cameras;
+  std::optional<LidarSensor> lidar;
+  std::vector<Annotation> annotations;
+  bool has_annotations = false;    // false when the source carries no boxes for this frame (unknown, not "empty")
+
+  const CameraSensor* FindCamera(const std::string& channel) const;
+};
+
+struct GeoLocation {
+  double latitude_deg = 0, longitude_deg = 0;
+  std::string name;  // e.g. "singapore-onenorth"
+};
+
+enum class LogFormat { kNuScenesTables, kMmdet3dV1, kMmdet3dV0, kKitti };
+const char* ToString(LogFormat f);
+
+struct Log {
+  LogFormat format = LogFormat::kMmdet3dV1;
+  std::filesystem::path source;     // what the user passed (root directory or info file)
+  std::filesystem::path data_root;  // the directory dataset-relative paths resolve against
+  std::string name;                 // log/scene name if known
+  std::string version;              // dataset version string if known ("v1.0-mini")
+  std::vector<std::string> categories;  // the dataset's class list where it defines one (mmdet3d metainfo)
+  std::optional<GeoLocation> location;
+  std::vector<Frame> frames;
+};
+
+}  // namespace sd

@@ -1,0 +1,38 @@
+#pragma once
+// Opening driving logs. Each reader converts its dataset's conventions into datasets/log.h once.
+//
+// How to add a reader: implement `Log ReadXxx(path, options)`, add a probe to the table in readers.cpp
+// (a cheap check of the directory layout or file content), and pin its conventions in a test on real data.
+#include <filesystem>
+#include <optional>
+
+#include "core/pointcloud.h"
+#include "datasets/log.h"
+
+namespace sd {
+
+struct OpenLogOptions {
+  std::optional<LogFormat> format;      // force a reader instead of probing
+  std::filesystem::path data_root;      // where dataset-relative paths resolve; default: probed
+};
+
+// `path`: a dataset root directory (nuScenes tables, KITTI object layout) or an info file (mmdet3d .json).
+// Probes the format unless forced. InputError (naming the path) when no reader recognises it.
+Log OpenLog(const std::filesystem::path& path, const OpenLogOptions& options = {});
+
+// nuScenes devkit tables (also Lyft Level 5, which uses the nuScenes schema). `path` is the dataset root
+// (holding v1.0-*/ or a version directory with sample.json) or the version directory itself. Missing
+// optional tables (sample_annotation, instance, log, map) are tolerated: frames then have
+// has_annotations = false. Keyframes (samples) become frames, in timestamp order.
+Log ReadNuScenesTables(const std::filesystem::path& path, const OpenLogOptions& options = {});
+// mmdetection3d info JSON, v1.x (`data_list`, `instances`, boxes [x y z l w h yaw] in the LiDAR frame) or
+// v0.x (`infos`, `gt_boxes` [x y z w l h yaw_old] with yaw_old = -yaw - pi/2). Image and LiDAR paths are
+// resolved against data_root (probed: the nearest ancestor of the info file holding samples/ or training/).
+Log ReadMmdet3dInfo(const std::filesystem::path& info_json, const OpenLogOptions& options = {});
+// KITTI 3D object layout: <root>/{image_2,velodyne,calib,label_2}/NNNNNN.* (or <root>/training/...).
+Log ReadKitti(const std::filesystem::path& root, const OpenLogOptions& options = {});
+
+// Reads the frame's sweep in its own layout (sensor frame).
+PointCloud ReadLidar(const LidarSensor& lidar);
+
+}  // namespace sd

@@ -1,0 +1,81 @@
+#include "io/json.h"
+
+#include <fstream>
+#include <sstream>
+
+#include "core/error.h"
+#include "io/files.h"
+
+namespace sd {
+
+nlohmann::json ReadJsonFile(const std::filesystem::path& path) {
+  const std::string text = ReadFileToString(path);
+  try {
+    return nlohmann::json::parse(text);
+  } catch (const nlohmann::json::parse_error& e) {
+    // nlohmann's message starts with "[json.exception.parse_error.101] parse error at line 3, column 5: ..."
+    std::string what = e.what();
+    const auto pos = what.find("] ");
+    throw InputError(path, "malformed JSON: " + (pos == std::string::npos ? what : what.substr(pos + 2)));
+  }
+}
+
+void WriteJsonFile(const std::filesystem::path& path, const nlohmann::json& j, int indent) {
+  WriteFileAtomic(path, j.dump(indent) + "\n");
+}
+
+void JsonReader::Fail(const std::string& problem) const {
+  throw InputError(file_, (path_.empty() ? std::string("(root)") : path_) + ": " + problem);
+}
+
+JsonReader JsonReader::operator[](const std::string& key) const {
+  if (!j_.is_object()) Fail("expected an object");
+  auto it = j_.find(key);
+  if (it == j_.end()) Fail("missing required field '" + key + "'");
+  return JsonReader(*it, file_, path_ + "." + key);
+}
+
+JsonReader JsonReader::operator[](size_t index) const {
+  if (!j_.is_array()) Fail("expected an array");
+  if (index >= j_.size()) Fail(Msg() << "index " << index << " out of range (size " << j_.size() << ")");
+  return JsonReader(j_[index], file_, path_ + "[" + std::to_string(index) + "]");
+}
+
+size_t JsonReader::Size() const {
+  if (!j_.is_array()) Fail("expected an array");
+  return j_.size();
+}
+
+double JsonReader::Number() const {
+  if (!j_.is_number()) Fail(std::string("expected a number, found ") + j_.type_name());
+  return j_.get<double>();
+}
+
+double JsonReader::NumberOr(const std::string& key, double fallback) const {
+  return Has(key) ? (*this)[key].Number() : fallback;
+}
+
+int64_t JsonReader::Integer() const {
+  if (!j_.is_number_integer()) {
+    if (j_.is_number_float() && j_.get<double>() == static_cast<double>(static_cast<int64_t>(j_.get<double>())))
+      return static_cast<int64_t>(j_.get<double>());
+    Fail(std::string("expected an integer, found ") + j_.type_name());
+  }
+  return j_.get<int64_t>();
+}
+
+std::string JsonReader::String() const {
+  if (!j_.is_string()) Fail(std::string("expected a string, found ") + j_.type_name());
+  return j_.get<std::string>();
+}
+
+std::string JsonReader::StringOr(const std::string& key, const std::string& fallback) const {
+  return Has(key) ? (*this)[key].String() : fallback;
+}
+
+bool JsonReader::Bool() const {
+  if (!j_.is_boolean()) Fail(std::string("expected true/false, found ") + j_.type_name());
+  return j_.get<bool>();
+}
+
+}  // namespace sd

@@ -1,0 +1,41 @@
+#pragma once
+// JSON helpers: reading with located errors (the file and the JSON path of the bad value).
+#include <filesystem>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+namespace sd {
+
+// Parses a JSON file; throws InputError naming the file and the parse error position.
+nlohmann::json ReadJsonFile(const std::filesystem::path& path);
+// Writes `j` atomically (temporary file + rename). indent < 0 writes compactly.
+void WriteJsonFile(const std::filesystem::path& path, const nlohmann::json& j, int indent = 2);
+
+// Typed access that throws InputError("<file>: <json path>: <problem>") instead of nlohmann's messages.
+class JsonReader {
+ public:
+  JsonReader(const nlohmann::json& j, std::filesystem::path file, std::string json_path = "")
+      : j_(j), file_(std::move(file)), path_(std::move(json_path)) {}
+  JsonReader operator[](const std::string& key) const;  // required member
+  JsonReader operator[](size_t index) const;            // required element
+  bool Has(const std::string& key) const { return j_.is_object() && j_.contains(key) && !j_.at(key).is_null(); }
+  size_t Size() const;                                   // array size (throws if not an array)
+  double Number() const;
+  double NumberOr(const std::string& key, double fallback) const;
+  int64_t Integer() const;
+  std::string String() const;
+  std::string StringOr(const std::string& key, const std::string& fallback) const;
+  bool Bool() const;
+  const nlohmann::json& raw() const { return j_; }
+  const std::filesystem::path& file() const { return file_; }
+  const std::string& json_path() const { return path_; }
+  [[noreturn]] void Fail(const std::string& problem) const;
+
+ private:
+  const nlohmann::json& j_;
+  std::filesystem::path file_;
+  std::string path_;
+};
+
+}  // namespace sd

@@ -1,1 +1,107 @@
+#include "io/files.h"
+
 #include <gtest/gtest.h>
+
+#include "core/error.h"
+#include "testing/testing.h"
+
+namespace sd {
+namespace {
+namespace fs = std::filesystem;
+
+size_t CountEntries(const fs::path& dir) {
+  size_t n = 0;
+  for ([[maybe_unused]] const auto& e : fs::directory_iterator(dir)) ++n;
+  return n;
+}
+
+TEST(Files, WriteFileAtomicLeavesOnlyTheFile) {
+  testing::TempDir tmp;
+  const fs::path p = tmp / "sub/dir/a.bin";  // parents are created
+  const std::string bytes("abc\0def", 7);
+  WriteFileAtomic(p, bytes);
+  EXPECT_EQ(ReadFileToString(p), bytes);
+  WriteFileAtomic(p, "replaced");
+  EXPECT_EQ(ReadFileToString(p), "replaced");
+  EXPECT_EQ(CountEntries(tmp / "sub/dir"), 1u);  // no *.tmp-* siblings left
+}
+
+TEST(Files, ReadMissingFileNamesIt) {
+  testing::TempDir tmp;
+  try {
+    ReadFileToString(tmp / "missing.txt");
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("missing.txt"), std::string::npos);
+    EXPECT_EQ(e.where(), tmp / "missing.txt");
+  }
+  EXPECT_THROW(ReadFileToString(tmp.path()), InputError);  // a directory
+}
+
+TEST(Files, TemporarySiblingsAreDistinct) {
+  const fs::path a = TemporarySibling("/x/y/out.json"), b = TemporarySibling("/x/y/out.json");
+  EXPECT_NE(a, b);
+  EXPECT_EQ(a.parent_path(), fs::path("/x/y"));
+  EXPECT_EQ(a.filename().string().rfind("out.json.tmp-", 0), 0u);
+}
+
+TEST(Files, StagingWithoutCommitLeavesNothing) {
+  testing::TempDir tmp;
+  const fs::path out = tmp / "run";
+  {
+    StagingDirectory stage(out, false);
+    WriteFileAtomic(stage.path() / "x.txt", "x");
+    EXPECT_TRUE(fs::exists(stage.path() / "x.txt"));
+    EXPECT_FALSE(fs::exists(out));
+  }
+  EXPECT_FALSE(fs::exists(out));
+  EXPECT_EQ(CountEntries(tmp.path()), 0u);  // temporary tree removed
+}
+
+TEST(Files, StagingCommitPublishes) {
+  testing::TempDir tmp;
+  const fs::path out = tmp / "run";
+  {
+    StagingDirectory stage(out, false);
+    WriteFileAtomic(stage.path() / "x.txt", "x");
+    stage.Commit();
+  }
+  EXPECT_EQ(ReadFileToString(out / "x.txt"), "x");
+  EXPECT_EQ(CountEntries(tmp.path()), 1u);
+}
+
+TEST(Files, StagingRefusesExistingOutputUnlessOverwrite) {
+  testing::TempDir tmp;
+  const fs::path out = tmp / "run";
+  WriteFileAtomic(out / "old.txt", "old");
+  try {
+    StagingDirectory stage(out, false);
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("run"), std::string::npos);
+  }
+  EXPECT_EQ(ReadFileToString(out / "old.txt"), "old");
+  {
+    // With overwrite, the old tree stays intact until Commit ...
+    StagingDirectory stage(out, true);
+    WriteFileAtomic(stage.path() / "new.txt", "new");
+    EXPECT_TRUE(fs::exists(out / "old.txt"));
+    EXPECT_FALSE(fs::exists(out / "new.txt"));
+    stage.Commit();
+  }
+  // ... and is replaced as a whole at Commit, leaving no temporaries.
+  EXPECT_FALSE(fs::exists(out / "old.txt"));
+  EXPECT_EQ(ReadFileToString(out / "new.txt"), "new");
+  EXPECT_EQ(CountEntries(tmp.path()), 1u);
+  {
+    // Overwrite without Commit: the existing output is untouched.
+    StagingDirectory stage(out, true);
+    WriteFileAtomic(stage.path() / "other.txt", "o");
+  }
+  EXPECT_EQ(ReadFileToString(out / "new.txt"), "new");
+  EXPECT_FALSE(fs::exists(out / "other.txt"));
+  EXPECT_EQ(CountEntries(tmp.path()), 1u);
+}
+
+}  // namespace
+}  // namespace sd

@@ -1,1 +1,99 @@
+#include "io/image_io.h"
+
 #include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "core/error.h"
+#include "io/files.h"
+#include "testing/testing.h"
+
+namespace sd {
+namespace {
+namespace fs = std::filesystem;
+
+const char* kCamFront =
+    "driving/nuscenes-scene0061-kf0/samples/CAM_FRONT/"
+    "n015-2018-07-24-11-22-45+0800__CAM_FRONT__1532402927612460.jpg";
+
+ImageU8 Pattern(int w, int h, int c) {
+  ImageU8 img(w, h, c);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      for (int k = 0; k < c; ++k) img.at(x, y, k) = static_cast<uint8_t>((x * 7 + y * 13 + k * 50) & 255);
+  return img;
+}
+
+// Smooth pattern for the lossy codec (JPEG error on sharp noise says nothing about our code).
+ImageU8 Smooth(int w, int h) {
+  ImageU8 img(w, h, 3);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      img.at(x, y, 0) = static_cast<uint8_t>(255 * x / (w - 1));
+      img.at(x, y, 1) = static_cast<uint8_t>(255 * y / (h - 1));
+      img.at(x, y, 2) = 128;
+    }
+  return img;
+}
+
+TEST(ImageIo, ReadsNuScenesJpeg) {
+  const ImageU8 img = ReadImage(testing::RepoData(kCamFront));
+  EXPECT_EQ(img.width(), 1600);
+  EXPECT_EQ(img.height(), 900);
+  EXPECT_EQ(img.channels(), 3);
+  const ImageU8 rgba = ReadImage(testing::RepoData(kCamFront), 4);
+  EXPECT_EQ(rgba.channels(), 4);
+  EXPECT_EQ(rgba.at(800, 450, 3), 255);
+  EXPECT_EQ(rgba.at(800, 450, 1), img.at(800, 450, 1));
+}
+
+TEST(ImageIo, PngRoundTripIsExact) {
+  testing::TempDir tmp;
+  for (int c : {1, 3, 4}) {
+    const ImageU8 img = Pattern(37, 21, c);
+    const fs::path p = tmp / ("p" + std::to_string(c) + ".png");
+    WriteImage(p, img);
+    const ImageU8 back = ReadImage(p);
+    EXPECT_EQ(back.width(), 37);
+    EXPECT_EQ(back.height(), 21);
+    EXPECT_EQ(back.channels(), c);
+    EXPECT_EQ(back.vector(), img.vector());
+  }
+}
+
+TEST(ImageIo, JpegRoundTripIsClose) {
+  testing::TempDir tmp;
+  const ImageU8 img = Smooth(64, 48);
+  WriteImage(tmp / "s.jpg", img, 95);
+  const ImageU8 back = ReadImage(tmp / "s.jpg");
+  ASSERT_EQ(back.size(), img.size());
+  double sum = 0;
+  int worst = 0;
+  for (size_t i = 0; i < img.size(); ++i) {
+    const int d = std::abs(int(back.data()[i]) - int(img.data()[i]));
+    sum += d;
+    worst = std::max(worst, d);
+  }
+  EXPECT_LT(sum / img.size(), 2.0);
+  EXPECT_LE(worst, 12);
+}
+
+TEST(ImageIo, CorruptOrMissingFilesNameTheFile) {
+  testing::TempDir tmp;
+  std::string bytes = ReadFileToString(testing::RepoData(kCamFront)).substr(0, 64);  // truncated JPEG
+  WriteFileAtomic(tmp / "broken.jpg", bytes);
+  WriteFileAtomic(tmp / "garbage.png", "definitely not a png");
+  for (const char* name : {"broken.jpg", "garbage.png", "missing.png"}) {
+    try {
+      ReadImage(tmp / name);
+      FAIL() << name;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_THROW(WriteImage(tmp / "x.bmp", Pattern(2, 2, 3)), InputError);
+  EXPECT_FALSE(fs::exists(tmp / "x.bmp"));
+}
+
+}  // namespace
+}  // namespace sd

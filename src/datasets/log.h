@@ -82,6 +82,9 @@ struct Log {
   LogFormat format = LogFormat::kMmdet3dV1;
   std::filesystem::path source;     // what the user passed (root directory or info file)
   std::filesystem::path data_root;  // the directory dataset-relative paths resolve against
+  // Where the annotations were read from: the info file (mmdet3d), the tables' version directory
+  // (nuScenes/Lyft) or the label_2 directory (KITTI). Writers use it to rewrite them.
+  std::filesystem::path annotation_path;
   std::string name;                 // log/scene name if known
   std::string version;              // dataset version string if known ("v1.0-mini")
   std::vector<std::string> categories;  // the dataset's class list where it defines one (mmdet3d metainfo)

@@ -40,6 +40,9 @@ enum class UnchangedFiles { kCopy, kSymlink };
 struct WriteOptions {
   UnchangedFiles unchanged = UnchangedFiles::kCopy;
   int jpeg_quality = 95;
+  // Unchanged sensor files the log references but that are missing on disk: InputError when true; skipped
+  // with a warning when false (infos shipped without their sensor files, e.g. the Lyft table fixture).
+  bool require_sensor_files = true;
 };
 
 // Writes into `out_dir` (which must exist and is normally a StagingDirectory): every file the edited frames

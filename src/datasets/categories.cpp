@@ -1,0 +1,70 @@
+#include "datasets/categories.h"
+
+#include <algorithm>
+#include <cctype>
+
+namespace sd {
+
+namespace {
+std::string Lower(std::string s) {
+  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
+  return s;
+}
+}  // namespace
+
+const std::vector<CategoryInfo>& Categories() {
+  // Sizes (length, width, height, m): nuScenes training-set means for the 10 detection classes; typical
+  // product dimensions for the rare objects (EU warning triangle, folding A-frame sign, a fallen crate /
+  // tyre-sized debris, a trailer-mounted portable traffic light). Reflectivity: relative to asphalt,
+  // rough guesses (retro-reflective objects high) for LiDAR simulation.
+  static const std::vector<CategoryInfo> kCategories = {
+      {"car", {4.63, 1.97, 1.74}, "vehicle.car", "Car", 2.0},
+      {"truck", {6.94, 2.51, 2.84}, "vehicle.truck", "Truck", 2.0},
+      {"trailer", {12.29, 2.90, 3.87}, "vehicle.trailer", "Trailer", 2.0},
+      {"bus", {11.0, 2.94, 3.47}, "vehicle.bus.rigid", "Bus", 2.0},
+      {"construction_vehicle", {6.37, 2.85, 3.19}, "vehicle.construction", "ConstructionVehicle", 1.8},
+      {"bicycle", {1.70, 0.60, 1.28}, "vehicle.bicycle", "Cyclist", 1.2},
+      {"motorcycle", {2.11, 0.77, 1.47}, "vehicle.motorcycle", "Motorcycle", 1.5},
+      {"pedestrian", {0.73, 0.67, 1.77}, "human.pedestrian.adult", "Pedestrian", 1.0},
+      {"traffic_cone", {0.41, 0.41, 1.07}, "movable_object.trafficcone", "TrafficCone", 3.0},
+      {"barrier", {2.53, 0.50, 0.98}, "movable_object.barrier", "Barrier", 2.5},
+      {"warning_tripod", {0.45, 0.30, 0.45}, "movable_object.warning_tripod", "WarningTripod", 4.0},
+      {"a_frame_sign", {0.60, 0.55, 1.00}, "movable_object.a_frame_sign", "AFrameSign", 2.5},
+      {"debris", {0.80, 0.60, 0.40}, "movable_object.debris", "Debris", 0.8},
+      {"portable_traffic_light", {1.20, 1.00, 3.00}, "movable_object.portable_traffic_light", "PortableTrafficLight", 2.5},
+  };
+  return kCategories;
+}
+
+std::optional<CategoryInfo> FindCategory(const std::string& name) {
+  const std::string n = Lower(name);
+  for (const CategoryInfo& c : Categories())
+    if (n == c.name || n == Lower(c.nuscenes_name) || n == Lower(c.kitti_name)) return c;
+  // Other spellings seen in the datasets we read.
+  static const std::vector<std::pair<std::string, std::string>> kAliases = {
+      {"van", "car"},
+      {"human.pedestrian.child", "pedestrian"},
+      {"human.pedestrian.construction_worker", "pedestrian"},
+      {"human.pedestrian.police_officer", "pedestrian"},
+      {"person_sitting", "pedestrian"},
+      {"vehicle.bus.bendy", "bus"},
+      {"movable_object.debris", "debris"},
+      {"traffic cone", "traffic_cone"},
+      {"trafficcone", "traffic_cone"},
+  };
+  for (const auto& [alias, canonical] : kAliases)
+    if (n == alias) return FindCategory(canonical);
+  return std::nullopt;
+}
+
+std::string DatasetCategoryName(const CategoryInfo& category, LogFormat format) {
+  switch (format) {
+    case LogFormat::kNuScenesTables: return category.nuscenes_name;
+    case LogFormat::kKitti: return category.kitti_name;
+    case LogFormat::kMmdet3dV1:
+    case LogFormat::kMmdet3dV0: return category.name;
+  }
+  return category.name;
+}
+
+}  // namespace sd

@@ -48,7 +48,8 @@ struct LidarSensor {
 };
 
 struct Annotation {
-  std::string category;           // the dataset's own class name ("traffic_cone", "Car", "movable_object.trafficcone")
+  std::string category;           // the dataset's own class name ("traffic_cone", "Car", "movable_object.trafficcone");
+                                  // empty when the source marks the box as outside its class list (mmdet3d label -1)
   Box3 box;                       // ego frame, geometric centre
   std::string token;              // annotation id, may be empty
   std::string instance_token;     // track id, may be empty

@@ -521,9 +521,10 @@ Log ReadMmdet3dV1(const json& j, const fs::path& file, const OpenLogOptions& opt
         const JsonReader b = inst[k];
         const std::vector<double> v = Vec(b["bbox_3d"], 7);
         const int64_t label = b["bbox_label_3d"].Integer();
-        if (label < 0) continue;  // mmdet3d's "ignore" label
         Annotation a;
-        a.category = static_cast<size_t>(label) < log.categories.size() ? log.categories[label] : std::to_string(label);
+        // Label -1: a real object outside the class list (mmdet3d ignores it in training); category stays empty.
+        if (label >= 0)
+          a.category = static_cast<size_t>(label) < log.categories.size() ? log.categories[label] : std::to_string(label);
         a.box.T_frame_box = T_ego_lidar * Rigid3d::FromYaw(v[6], Eigen::Vector3d(v[0], v[1], v[2]));
         a.box.size = Eigen::Vector3d(v[3], v[4], v[5]);
         if (b.Has("num_lidar_pts")) a.num_lidar_pts = static_cast<int>(b["num_lidar_pts"].Integer());
@@ -609,9 +610,43 @@ Log ReadMmdet3dV0(const json& j, const fs::path& file, const OpenLogOptions& opt
 
 }  // namespace
 
+namespace {
+
+// Python's json module writes NaN / Infinity / -Infinity, which strict JSON (and nlohmann) rejects: pickle
+// conversions of mmdet3d infos contain them (e.g. gt_velocity of boxes without a track). Read them as null.
+json ReadPythonJson(const fs::path& path) {
+  const std::string text = ReadFileToString(path);
+  std::string clean;
+  clean.reserve(text.size());
+  bool in_string = false;
+  for (size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (in_string) {
+      clean += c;
+      if (c == '\\' && i + 1 < text.size()) clean += text[++i];
+      else if (c == '"') in_string = false;
+      continue;
+    }
+    if (c == '"') in_string = true;
+    if (text.compare(i, 3, "NaN") == 0) { clean += "null"; i += 2; continue; }
+    if (text.compare(i, 8, "Infinity") == 0) { clean += "null"; i += 7; continue; }
+    if (text.compare(i, 9, "-Infinity") == 0) { clean += "null"; i += 8; continue; }
+    clean += c;
+  }
+  try {
+    return json::parse(clean);
+  } catch (const json::parse_error& e) {
+    const std::string what = e.what();
+    const size_t pos = what.find("] ");
+    throw InputError(path, "malformed JSON: " + (pos == std::string::npos ? what : what.substr(pos + 2)));
+  }
+}
+
+}  // namespace
+
 Log ReadMmdet3dInfo(const fs::path& info_json, const OpenLogOptions& options) {
   if (!fs::exists(info_json)) throw InputError(info_json, "missing mmdet3d info file");
-  const json j = ReadJsonFile(info_json);
+  const json j = ReadPythonJson(info_json);
   if (!j.is_object()) throw InputError(info_json, "expected a JSON object with data_list (v1.x) or infos (v0.x)");
   if (j.contains("data_list")) return ReadMmdet3dV1(j, info_json, options);
   if (j.contains("infos")) return ReadMmdet3dV0(j, info_json, options);

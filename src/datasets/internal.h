@@ -5,6 +5,7 @@
 #include <string>
 
 #include <Eigen/Core>
+#include <nlohmann/json.hpp>
 
 #include "core/rigid3.h"
 
@@ -29,6 +30,9 @@ std::string RelativePath(const std::filesystem::path& path, const std::filesyste
 
 // Deterministic 32-hex-digit token from a seed string (FNV-1a based), nuScenes token style.
 std::string HexToken(const std::string& seed);
+
+// Parses a JSON file written by Python (NaN / Infinity literals read as null); InputError naming the file.
+nlohmann::json ReadPythonJson(const std::filesystem::path& path);
 
 // Image width/height from a PNG IHDR or JPEG SOF header; {0, 0} when the file is missing or unrecognised.
 std::array<int, 2> ImageSizeFromHeader(const std::filesystem::path& path);

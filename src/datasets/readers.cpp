@@ -83,6 +83,36 @@ std::array<int, 2> ImageSizeFromHeader(const fs::path& path) {
   return {0, 0};
 }
 
+// Python's json module writes NaN / Infinity / -Infinity, which strict JSON (and nlohmann) rejects: pickle
+// conversions of mmdet3d infos contain them (e.g. gt_velocity of boxes without a track). Read them as null.
+json ReadPythonJson(const fs::path& path) {
+  const std::string text = ReadFileToString(path);
+  std::string clean;
+  clean.reserve(text.size());
+  bool in_string = false;
+  for (size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (in_string) {
+      clean += c;
+      if (c == '\\' && i + 1 < text.size()) clean += text[++i];
+      else if (c == '"') in_string = false;
+      continue;
+    }
+    if (c == '"') in_string = true;
+    if (text.compare(i, 3, "NaN") == 0) { clean += "null"; i += 2; continue; }
+    if (text.compare(i, 8, "Infinity") == 0) { clean += "null"; i += 7; continue; }
+    if (text.compare(i, 9, "-Infinity") == 0) { clean += "null"; i += 8; continue; }
+    clean += c;
+  }
+  try {
+    return json::parse(clean);
+  } catch (const json::parse_error& e) {
+    const std::string what = e.what();
+    const size_t pos = what.find("] ");
+    throw InputError(path, "malformed JSON: " + (pos == std::string::npos ? what : what.substr(pos + 2)));
+  }
+}
+
 double CameraYaw(const Eigen::Matrix3d& R_cam_box) {
   const Eigen::Vector3d x = R_cam_box.col(0);
   return std::atan2(-x.z(), x.x());
@@ -610,43 +640,9 @@ Log ReadMmdet3dV0(const json& j, const fs::path& file, const OpenLogOptions& opt
 
 }  // namespace
 
-namespace {
-
-// Python's json module writes NaN / Infinity / -Infinity, which strict JSON (and nlohmann) rejects: pickle
-// conversions of mmdet3d infos contain them (e.g. gt_velocity of boxes without a track). Read them as null.
-json ReadPythonJson(const fs::path& path) {
-  const std::string text = ReadFileToString(path);
-  std::string clean;
-  clean.reserve(text.size());
-  bool in_string = false;
-  for (size_t i = 0; i < text.size(); ++i) {
-    const char c = text[i];
-    if (in_string) {
-      clean += c;
-      if (c == '\\' && i + 1 < text.size()) clean += text[++i];
-      else if (c == '"') in_string = false;
-      continue;
-    }
-    if (c == '"') in_string = true;
-    if (text.compare(i, 3, "NaN") == 0) { clean += "null"; i += 2; continue; }
-    if (text.compare(i, 8, "Infinity") == 0) { clean += "null"; i += 7; continue; }
-    if (text.compare(i, 9, "-Infinity") == 0) { clean += "null"; i += 8; continue; }
-    clean += c;
-  }
-  try {
-    return json::parse(clean);
-  } catch (const json::parse_error& e) {
-    const std::string what = e.what();
-    const size_t pos = what.find("] ");
-    throw InputError(path, "malformed JSON: " + (pos == std::string::npos ? what : what.substr(pos + 2)));
-  }
-}
-
-}  // namespace
-
 Log ReadMmdet3dInfo(const fs::path& info_json, const OpenLogOptions& options) {
   if (!fs::exists(info_json)) throw InputError(info_json, "missing mmdet3d info file");
-  const json j = ReadPythonJson(info_json);
+  const json j = datasets_internal::ReadPythonJson(info_json);
   if (!j.is_object()) throw InputError(info_json, "expected a JSON object with data_list (v1.x) or infos (v0.x)");
   if (j.contains("data_list")) return ReadMmdet3dV1(j, info_json, options);
   if (j.contains("infos")) return ReadMmdet3dV0(j, info_json, options);

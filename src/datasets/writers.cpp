@@ -148,7 +148,7 @@ int AttrLabel(const std::string& canonical) {
 }
 
 std::vector<fs::path> WriteMmdet3dV1(const Log& log, const std::vector<FrameEdit>& edits, const fs::path& out_dir) {
-  json in = ReadJsonFile(log.annotation_path);
+  json in = datasets_internal::ReadPythonJson(log.annotation_path);
   json out = json::object();
   out["metainfo"] = in.contains("metainfo") ? in["metainfo"] : json::object();
   std::vector<std::string> names = log.categories;
@@ -204,7 +204,7 @@ std::vector<fs::path> WriteMmdet3dV1(const Log& log, const std::vector<FrameEdit
 // mmdet3d v0
 
 std::vector<fs::path> WriteMmdet3dV0(const Log& log, const std::vector<FrameEdit>& edits, const fs::path& out_dir) {
-  json in = ReadJsonFile(log.annotation_path);
+  json in = datasets_internal::ReadPythonJson(log.annotation_path);
   json out = json::object();
   if (in.contains("metadata")) out["metadata"] = in["metadata"];
   out["infos"] = json::array();
@@ -250,9 +250,17 @@ std::vector<fs::path> WriteNuScenesTables(const Log& log, const std::vector<Fram
     for (size_t k = 0; k < e.added.size(); ++k) {
       const AddedObject& obj = e.added[k];
       const std::string name = ClassName(obj, LogFormat::kNuScenesTables);
+      // The dataset's own record for this class: its exact nuScenes name, else any name that means the same
+      // canonical class (Lyft calls vehicle.car "car").
       std::string cat_token;
       for (const json& c : categories)
         if (c.value("name", "") == name) cat_token = c.value("token", "");
+      const std::optional<CategoryInfo> canonical = FindCategory(obj.category);
+      for (const json& c : categories) {
+        if (!cat_token.empty() || !canonical) break;
+        const std::optional<CategoryInfo> other = FindCategory(c.value("name", ""));
+        if (other && other->name == canonical->name) cat_token = c.value("token", "");
+      }
       if (cat_token.empty()) {
         cat_token = datasets_internal::HexToken("category:" + name);
         categories.push_back({{"token", cat_token}, {"name", name}, {"description", "added by SynthDrive"}});
@@ -341,8 +349,9 @@ std::vector<fs::path> WriteKitti(const Log& log, const std::vector<FrameEdit>& e
       std::ostringstream line;
       line << ClassName(obj, LogFormat::kKitti) << ' ' << Fixed(std::clamp(truncation, 0.0, 1.0)) << ' ' << occluded << ' '
            << Fixed(alpha) << ' ' << Fixed(box2.x1) << ' ' << Fixed(box2.y1) << ' ' << Fixed(box2.x2) << ' ' << Fixed(box2.y2)
-           << ' ' << Fixed(h, 4) << ' ' << Fixed(w, 4) << ' ' << Fixed(l, 4) << ' ' << Fixed(bottom.x(), 4) << ' '
-           << Fixed(bottom.y(), 4) << ' ' << Fixed(bottom.z(), 4) << ' ' << Fixed(ry, 6) << '\n';
+           // Sub-millimetre digits (official labels carry 2) so the box survives a round trip to 1e-4 m.
+           << ' ' << Fixed(h, 6) << ' ' << Fixed(w, 6) << ' ' << Fixed(l, 6) << ' ' << Fixed(bottom.x(), 6) << ' '
+           << Fixed(bottom.y(), 6) << ' ' << Fixed(bottom.z(), 6) << ' ' << Fixed(ry, 6) << '\n';
       text += line.str();
     }
     const fs::path label_dst = out_dir / "label_2" / (frame.token + ".txt");

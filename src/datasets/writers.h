@@ -48,6 +48,9 @@ struct WriteOptions {
 // Writes into `out_dir` (which must exist and is normally a StagingDirectory): every file the edited frames
 // reference, at the same relative path as in the input, plus the annotation files of the format. Only the
 // frames named in `edits` are written. Returns the written annotation/info file(s).
+// Box rotations: nuScenes tables keep the full rotation; mmdet3d infos keep only yaw about LiDAR +z and
+// KITTI labels only rotation_y about rectified cam0's y axis, so any tilt of an added box relative to
+// that axis (the sensor's mounting tilt, about 0.3-1.4 degrees) is dropped on writing.
 std::vector<std::filesystem::path> WriteDerivative(const Log& log, const std::vector<FrameEdit>& edits,
                                                    const std::filesystem::path& out_dir, const WriteOptions& options = {});
 

@@ -10,6 +10,9 @@
 // receives E = sun_irradiance * max(0, n.l) * V_sun + sky_radiance * pi * AO, where V_sun is the sun's
 // visibility (shadow ray) and AO the unoccluded fraction of the cosine-weighted sky hemisphere (above
 // the horizon). Radiance L = a * E / pi. Callers calibrate sun/sky from the real image (synth/lighting).
+#include <array>
+#include <cstdint>
+#include <optional>
 #include <vector>
 
 #include <Eigen/Core>
@@ -47,7 +50,32 @@ struct CameraRender {
 };
 
 // Renders `scene` seen by a camera with intrinsics `camera` at pose T_scene_cam (OpenCV camera frame).
+// All five images have the camera's full size; pixels outside the rectangle hold the "nothing" values
+// (colour 0, coverage 0, depth +inf, object -1, shadow 1).
+//
+// Sampling: sub-pixel positions are stratified on a ceil(sqrt(spp)) grid with hash jitter seeded by
+// (seed, pixel), so a pixel's result does not depend on threads or on the rectangle. AO directions are
+// cosine-weighted around the shading normal and stratified the same way.
+// Object samples (any mesh other than receiver_mesh): L = a * E / pi with a = BaseColor().rgb (alpha is
+// ignored), normals flipped to face the camera (double-sided), the sun visibility traced with one shadow
+// ray and AO = fraction of the ao_samples directions that point above the horizon (z > 0) and are
+// unoccluded (by any mesh, the receiver included). Shadow and AO rays start at the hit point offset along
+// the geometric normal by 2e-5 * (1 + max |coordinate|) metres.
+// Receiver samples: ratio = Y(E_with_objects) / Y(E_without_objects), where Y is Rec. 709 luminance of the
+// irradiance formula above and visibility there ignores the receiver itself (the real photo already holds
+// the road's own shading; only the shadow the inserted objects add is wanted). One ratio (not per RGB)
+// because `shadow` is a single-channel multiplier; where the light without objects is zero the ratio is 1.
+// The same AO directions serve numerator and denominator so that their noise is correlated.
 CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, const Rigid3d& T_scene_cam,
                           const Lighting& lighting, const CameraRenderOptions& options = {});
+
+// Pixel rectangle {x0, y0, x1, y1} (half-open, clamped to the image) covering the projections of those
+// `points_scene` that lie in front of the camera (z > 1 mm), grown by `pad` pixels on each side. Use it to
+// restrict RenderCamera to the region of objects and their shadows (pass the corners of the objects' boxes
+// and of their shadows on the ground). Points behind the camera are ignored, so a box that straddles the
+// image plane should be clipped by the caller or rendered whole. Empty when no point is in front of the
+// camera or the rectangle misses the image.
+std::optional<std::array<int, 4>> ProjectedRect(const PinholeCamera& camera, const Rigid3d& T_cam_scene,
+                                                const std::vector<Eigen::Vector3d>& points_scene, int pad);
 
 }  // namespace sd

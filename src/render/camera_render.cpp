@@ -1,0 +1,220 @@
+#include "render/camera_render.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "core/error.h"
+#include "core/parallel.h"
+
+namespace sd {
+namespace {
+
+constexpr float kPi = 3.14159265358979323846f;
+
+// "lowbias32" integer hash (Chris Wellons' hash-prospector): good avalanche for counter-based sampling.
+uint32_t Hash(uint32_t x) {
+  x ^= x >> 16;
+  x *= 0x7feb352dU;
+  x ^= x >> 15;
+  x *= 0x846ca68bU;
+  x ^= x >> 16;
+  return x;
+}
+
+// Counter-based generator: every pixel owns an independent stream keyed by (seed, x, y).
+class PixelRng {
+ public:
+  PixelRng(uint32_t seed, int x, int y)
+      : state_(Hash(seed ^ Hash(static_cast<uint32_t>(x) ^ Hash(static_cast<uint32_t>(y) + 0x68e31da4U)))) {}
+  float Next() {  // uniform in [0, 1)
+    state_ += 0x9e3779b9U;
+    return static_cast<float>(Hash(state_) >> 8) * (1.0f / 16777216.0f);
+  }
+
+ private:
+  uint32_t state_;
+};
+
+// k-th of n stratified points in [0,1)^2: cells of a cols x rows grid (cols = ceil(sqrt(n))), jittered.
+Eigen::Vector2f Stratified(int k, int n, PixelRng& rng) {
+  const int cols = static_cast<int>(std::ceil(std::sqrt(static_cast<double>(n))));
+  const int rows = (n + cols - 1) / cols;
+  const float jx = rng.Next(), jy = rng.Next();
+  return {(static_cast<float>(k % cols) + jx) / static_cast<float>(cols),
+          (static_cast<float>(k / cols) + jy) / static_cast<float>(rows)};
+}
+
+// Cosine-weighted direction around unit `n` from a point in [0,1)^2 (Malley's method); the orthonormal
+// basis is Duff et al. 2017, "Building an Orthonormal Basis, Revisited".
+Eigen::Vector3f CosineDirection(const Eigen::Vector3f& n, const Eigen::Vector2f& xi) {
+  const float r = std::sqrt(xi.x());
+  const float phi = 2.0f * kPi * xi.y();
+  const float lx = r * std::cos(phi), ly = r * std::sin(phi), lz = std::sqrt(std::max(0.0f, 1.0f - xi.x()));
+  const float sign = std::copysign(1.0f, n.z());
+  const float a = -1.0f / (sign + n.z());
+  const float b = n.x() * n.y() * a;
+  const Eigen::Vector3f t(1.0f + sign * n.x() * n.x() * a, sign * b, -sign * n.x());
+  const Eigen::Vector3f bt(b, sign + n.y() * n.y() * a, -n.y());
+  return (lx * t + ly * bt + lz * n).normalized();
+}
+
+float Luminance(const Eigen::Vector3f& c) { return 0.2126f * c.x() + 0.7152f * c.y() + 0.0722f * c.z(); }
+
+// Offset for secondary rays: floats carry ~7 digits, so the offset grows with the coordinates' magnitude.
+Eigen::Vector3f OffsetPoint(const Eigen::Vector3f& p, const Eigen::Vector3f& n_geom) {
+  const float eps = 2e-5f * (1.0f + p.cwiseAbs().maxCoeff());
+  return p + eps * n_geom;
+}
+
+struct Frame {
+  Eigen::Vector3f p_offset;  // hit point pushed off the surface
+  Eigen::Vector3f n_shade;   // facing the viewer
+};
+
+// Normals flipped to the side the ray came from (double-sided shading of thin or open meshes).
+Frame ShadingFrame(const RayScene& scene, const RayHit& hit, const Eigen::Vector3f& dir) {
+  Eigen::Vector3f n_geom = scene.GeometricNormal(hit);
+  if (n_geom.squaredNorm() == 0.0f) n_geom = -dir;  // degenerate triangle: face the viewer
+  if (n_geom.dot(dir) > 0) n_geom = -n_geom;
+  Eigen::Vector3f n_shade = scene.ShadingNormal(hit);
+  if (n_shade.squaredNorm() == 0.0f) n_shade = n_geom;
+  if (n_shade.dot(n_geom) < 0) n_shade = -n_shade;
+  return {OffsetPoint(scene.HitPoint(hit), n_geom), n_shade};
+}
+
+}  // namespace
+
+CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, const Rigid3d& T_scene_cam,
+                          const Lighting& lighting, const CameraRenderOptions& options) {
+  SD_CHECK(camera.width > 0 && camera.height > 0, << camera.width << "x" << camera.height);
+  SD_CHECK(options.samples_per_pixel > 0 && options.ao_samples >= 0,
+           << "spp " << options.samples_per_pixel << ", ao " << options.ao_samples);
+  const int w = camera.width, h = camera.height;
+  CameraRender out;
+  out.color = ImageF(w, h, 3, 0.0f);
+  out.coverage = ImageF(w, h, 1, 0.0f);
+  out.depth = ImageF(w, h, 1, std::numeric_limits<float>::infinity());
+  out.object = Image<int>(w, h, 1, -1);
+  out.shadow = ImageF(w, h, 1, 1.0f);
+
+  const bool whole = options.x0 == 0 && options.y0 == 0 && options.x1 == 0 && options.y1 == 0;
+  const int x0 = whole ? 0 : std::clamp(options.x0, 0, w), x1 = whole ? w : std::clamp(options.x1, 0, w);
+  const int y0 = whole ? 0 : std::clamp(options.y0, 0, h), y1 = whole ? h : std::clamp(options.y1, 0, h);
+  if (x0 >= x1 || y0 >= y1) return out;
+
+  const Eigen::Matrix3d R_scene_cam = T_scene_cam.Rotation();
+  const Eigen::Vector3f origin = T_scene_cam.translation.cast<float>();
+  const Eigen::Vector3f sun_dir = lighting.sun_direction.normalized();
+  const Eigen::Vector3f sun = lighting.sun_irradiance, sky = lighting.sky_radiance;
+  const float sun_y = Luminance(sun), sky_y = Luminance(sky);
+  const int spp = options.samples_per_pixel, n_ao = options.ao_samples;
+  const int receiver = options.receiver_mesh;
+  const float inf = std::numeric_limits<float>::infinity();
+
+  ParallelFor(static_cast<size_t>(y0), static_cast<size_t>(y1), [&](size_t row) {
+    const int y = static_cast<int>(row);
+    std::vector<int> ids(static_cast<size_t>(spp));
+    for (int x = x0; x < x1; ++x) {
+      PixelRng rng(options.seed, x, y);
+      Eigen::Vector3f color = Eigen::Vector3f::Zero();
+      int n_obj = 0, n_recv = 0;
+      float depth = inf;
+      double shadow_sum = 0.0;
+      for (int s = 0; s < spp; ++s) {
+        const Eigen::Vector2f jitter = Stratified(s, spp, rng);
+        const Eigen::Vector3d d_cam = camera.RayDirection(Eigen::Vector2d(x + jitter.x(), y + jitter.y()));
+        const Eigen::Vector3f dir = (R_scene_cam * d_cam).cast<float>().normalized();
+        const RayHit hit = scene.Intersect(origin, dir);
+        if (!hit.Hit()) continue;
+        const Frame f = ShadingFrame(scene, hit, dir);
+        const float cos_sun = std::max(0.0f, f.n_shade.dot(sun_dir));
+
+        if (hit.mesh == receiver) {
+          // Light the real road got (no objects) vs what it gets now; visibility ignores the road itself.
+          const bool sun_visible = cos_sun > 0 && !scene.Occluded(f.p_offset, sun_dir, 0.0f, inf, receiver);
+          int sky_with = 0, sky_without = 0;
+          for (int k = 0; k < n_ao; ++k) {
+            const Eigen::Vector3f d = CosineDirection(f.n_shade, Stratified(k, n_ao, rng));
+            if (d.z() <= 0) continue;
+            ++sky_without;
+            if (!scene.Occluded(f.p_offset, d, 0.0f, inf, receiver)) ++sky_with;
+          }
+          const float ao_with = n_ao > 0 ? static_cast<float>(sky_with) / n_ao : 1.0f;
+          const float ao_without = n_ao > 0 ? static_cast<float>(sky_without) / n_ao : 1.0f;
+          const float den = sun_y * cos_sun + sky_y * kPi * ao_without;
+          const float num = sun_y * cos_sun * (sun_visible ? 1.0f : 0.0f) + sky_y * kPi * ao_with;
+          shadow_sum += den > 0 ? num / den : 1.0f;
+          ++n_recv;
+          continue;
+        }
+
+        // Object: Lambertian, L = a * E / pi.
+        const bool sun_visible = cos_sun > 0 && !scene.Occluded(f.p_offset, sun_dir, 0.0f, inf);
+        int sky_open = 0;
+        for (int k = 0; k < n_ao; ++k) {
+          const Eigen::Vector3f d = CosineDirection(f.n_shade, Stratified(k, n_ao, rng));
+          if (d.z() > 0 && !scene.Occluded(f.p_offset, d, 0.0f, inf)) ++sky_open;
+        }
+        const float ao = n_ao > 0 ? static_cast<float>(sky_open) / n_ao : 1.0f;
+        const Eigen::Vector3f E = sun * (sun_visible ? cos_sun : 0.0f) + sky * (kPi * ao);
+        const Eigen::Vector3f albedo = scene.BaseColor(hit).head<3>();
+        color += albedo.cwiseProduct(E) / kPi;
+        depth = std::min(depth, hit.t * static_cast<float>(d_cam.z()));
+        ids[static_cast<size_t>(n_obj++)] = hit.mesh;
+      }
+
+      if (n_obj > 0) {
+        const float inv_spp = 1.0f / static_cast<float>(spp);
+        for (int c = 0; c < 3; ++c) out.color.at(x, y, c) = color[c] * inv_spp;
+        out.coverage.at(x, y) = static_cast<float>(n_obj) * inv_spp;
+        out.depth.at(x, y) = depth;
+        // Majority vote; ties go to the smallest mesh id so the result is independent of sample order.
+        std::sort(ids.begin(), ids.begin() + n_obj);
+        int best = ids[0], best_count = 0;
+        for (int i = 0; i < n_obj;) {
+          int j = i;
+          while (j < n_obj && ids[static_cast<size_t>(j)] == ids[static_cast<size_t>(i)]) ++j;
+          if (j - i > best_count) {
+            best_count = j - i;
+            best = ids[static_cast<size_t>(i)];
+          }
+          i = j;
+        }
+        out.object.at(x, y) = best;
+      }
+      if (n_recv > 0) out.shadow.at(x, y) = static_cast<float>(shadow_sum / n_recv);
+    }
+  });
+  return out;
+}
+
+std::optional<std::array<int, 4>> ProjectedRect(const PinholeCamera& camera, const Rigid3d& T_cam_scene,
+                                                const std::vector<Eigen::Vector3d>& points_scene, int pad) {
+  double u_min = std::numeric_limits<double>::infinity(), v_min = u_min;
+  double u_max = -u_min, v_max = -u_min;
+  bool any = false;
+  for (const Eigen::Vector3d& p : points_scene) {
+    const std::optional<Eigen::Vector2d> uv = camera.Project(T_cam_scene * p);
+    if (!uv || !uv->allFinite()) continue;
+    any = true;
+    u_min = std::min(u_min, uv->x());
+    u_max = std::max(u_max, uv->x());
+    v_min = std::min(v_min, uv->y());
+    v_max = std::max(v_max, uv->y());
+  }
+  if (!any) return std::nullopt;
+  // Clamp in double before converting: projections of points near the image plane can be huge.
+  const auto lo = [&](double v, int size) {
+    return static_cast<int>(std::clamp(std::floor(v) - pad, 0.0, static_cast<double>(size)));
+  };
+  const auto hi = [&](double v, int size) {
+    return static_cast<int>(std::clamp(std::floor(v) + 1.0 + pad, 0.0, static_cast<double>(size)));
+  };
+  const std::array<int, 4> rect = {lo(u_min, camera.width), lo(v_min, camera.height), hi(u_max, camera.width),
+                                   hi(v_max, camera.height)};
+  if (rect[0] >= rect[2] || rect[1] >= rect[3]) return std::nullopt;
+  return rect;
+}
+
+}  // namespace sd

@@ -1,0 +1,239 @@
+#include "render/camera_render.h"
+
+#include <cmath>
+
+#include <gtest/gtest.h>
+
+#include "render/test_meshes.h"
+
+namespace sd {
+namespace {
+
+using testmesh::Box;
+using testmesh::Quad;
+
+constexpr double kPi = 3.14159265358979323846;
+
+PinholeCamera Camera(int w, int h, double f, double cx, double cy) {
+  PinholeCamera c;
+  c.width = w;
+  c.height = h;
+  c.fx = c.fy = f;
+  c.cx = cx;
+  c.cy = cy;
+  return c;
+}
+
+// OpenCV camera at `position` looking straight down (-z): x_cam = +x, y_cam = -y, z_cam = -z.
+Rigid3d LookingDown(const Eigen::Vector3d& position) {
+  Eigen::Matrix3d R;
+  R << 1, 0, 0, 0, -1, 0, 0, 0, -1;
+  return Rigid3d(R, position);
+}
+
+float Luma(const Eigen::Vector3f& c) { return 0.2126f * c.x() + 0.7152f * c.y() + 0.0722f * c.z(); }
+
+// pbrt's habit: a Lambertian plane under a uniform sky, with the whole upper hemisphere open, has L = a * S.
+TEST(RenderCamera, UniformSkyOnUpwardPlaneGivesAlbedoTimesSky) {
+  auto quad = Quad({0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 20, 20);  // faces +z
+  Material m;
+  m.base_color_factor = Eigen::Vector4f(0.6f, 0.5f, 0.4f, 1.0f);
+  quad->materials = {m};
+  RayScene scene;
+  scene.AddMesh(quad);
+  scene.Commit();
+  Lighting light;
+  light.sun_irradiance.setZero();
+  light.sky_radiance = Eigen::Vector3f(0.2f, 0.3f, 0.4f);
+  const PinholeCamera cam = Camera(64, 48, 60, 32, 24);
+  const CameraRender r = RenderCamera(scene, cam, LookingDown({0.3, -0.2, 5}), light);
+  for (int y = 0; y < cam.height; ++y) {
+    for (int x = 0; x < cam.width; ++x) {
+      ASSERT_EQ(r.coverage.at(x, y), 1.0f);
+      for (int c = 0; c < 3; ++c) ASSERT_NEAR(r.color.at(x, y, c), m.base_color_factor[c] * light.sky_radiance[c], 1e-6f);
+      ASSERT_NEAR(r.depth.at(x, y), 5.0f, 1e-5f);
+      ASSERT_EQ(r.object.at(x, y), 0);
+      ASSERT_EQ(r.shadow.at(x, y), 1.0f);
+    }
+  }
+}
+
+// Sun only on a plane whose normal is tilted by theta from the sun: L = a * E * cos(theta) / pi, on either
+// side of the plane (normals are flipped towards the camera).
+TEST(RenderCamera, SunOnTiltedPlaneFollowsCosineLaw) {
+  for (float theta : {0.0f, 0.4f, 1.0f}) {
+    for (bool flipped : {false, true}) {
+      const Eigen::Vector3f a(std::cos(theta), 0, -std::sin(theta)), b(0, 1, 0);  // a x b = (sin, 0, cos)
+      auto quad = flipped ? Quad({0, 0, 0}, b, a, 6, 6) : Quad({0, 0, 0}, a, b, 6, 6);
+      RayScene scene;
+      scene.AddMesh(quad);
+      scene.Commit();
+      Lighting light;
+      light.sun_direction = Eigen::Vector3f(0, 0, 1);
+      light.sun_irradiance = Eigen::Vector3f(3.0f, 2.0f, 1.0f);
+      light.sky_radiance.setZero();
+      const CameraRender r = RenderCamera(scene, Camera(32, 32, 40, 16, 16), LookingDown({0, 0, 10}), light);
+      for (int y = 8; y < 24; ++y) {
+        for (int x = 8; x < 24; ++x) {
+          ASSERT_EQ(r.coverage.at(x, y), 1.0f);
+          for (int c = 0; c < 3; ++c) {
+            ASSERT_NEAR(r.color.at(x, y, c), light.sun_irradiance[c] * std::cos(theta) / kPi, 1e-6f)
+                << theta << " " << flipped;
+          }
+        }
+      }
+    }
+  }
+}
+
+// A 1 m square at 5 m seen head-on covers (f / 5)^2 pixels; depth is the plane distance.
+TEST(RenderCamera, CoverageMatchesProjectedAreaAndDepth) {
+  RayScene scene;
+  scene.AddMesh(Quad({0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 0.5f, 0.5f));
+  scene.AddMesh(Quad({5, 5, 0}, {1, 0, 0}, {0, 1, 0}, 0.5f, 0.5f));  // out of view
+  scene.Commit();
+  const double f = 200;
+  const PinholeCamera cam = Camera(100, 100, f, 50.3, 49.6);
+  CameraRenderOptions opt;
+  opt.samples_per_pixel = 16;
+  opt.ao_samples = 4;
+  const CameraRender r = RenderCamera(scene, cam, LookingDown({0, 0, 5}), Lighting{}, opt);
+  double sum = 0;
+  for (float c : r.coverage.vector()) sum += c;
+  const double expected = (f / 5) * (f / 5);
+  EXPECT_NEAR(sum, expected, 0.01 * expected);
+  for (int y = 0; y < cam.height; ++y) {
+    for (int x = 0; x < cam.width; ++x) {
+      if (r.coverage.at(x, y) > 0) {
+        ASSERT_NEAR(r.depth.at(x, y), 5.0f, 1e-5f);
+        ASSERT_EQ(r.object.at(x, y), 0);
+      } else {
+        ASSERT_TRUE(std::isinf(r.depth.at(x, y)));
+        ASSERT_EQ(r.object.at(x, y), -1);
+        ASSERT_EQ(r.color.at(x, y, 0), 0.0f);
+      }
+    }
+  }
+  // Fully covered pixels: upward plane in the default light, L = a * (E * 1 + S * pi) / pi, a = 1.
+  const Lighting l;
+  EXPECT_NEAR(r.color.at(50, 50, 1), (l.sun_irradiance.y() + l.sky_radiance.y() * kPi) / kPi, 1e-5);
+}
+
+// Form factor from a point to a parallel rectangle [0, a] x [0, b] at height h above it, the point under one
+// corner (Howell's catalogue, configuration B-3): the cosine-weighted fraction of the hemisphere it covers.
+double CornerFormFactor(double a, double b, double h) {
+  const double X = a / h, Y = b / h;
+  const double sx = std::sqrt(1 + X * X), sy = std::sqrt(1 + Y * Y);
+  return (X / sx * std::atan(Y / sx) + Y / sy * std::atan(X / sy)) / (2 * kPi);
+}
+
+// Sun overhead, a 2 m x 2 m roof 2 m above the road: under it the sun is blocked and the sky is open except
+// for the roof's form factor F, so shadow = S*pi*(1-F) / (E + S*pi) (luminance).
+TEST(RenderCamera, ShadowUnderRoofIsSkyOnlyFraction) {
+  RayScene scene;
+  const int road = scene.AddMesh(Quad({0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 30, 30));
+  scene.AddMesh(Quad({0, 0, 2}, {1, 0, 0}, {0, 1, 0}, 1, 1));
+  scene.Commit();
+  Lighting light;
+  light.sun_direction = Eigen::Vector3f(0, 0, 1);
+  light.sun_irradiance = Eigen::Vector3f(3.0f, 2.8f, 2.5f);
+  light.sky_radiance = Eigen::Vector3f(0.25f, 0.3f, 0.4f);
+  CameraRenderOptions opt;
+  opt.receiver_mesh = road;
+  opt.ao_samples = 1024;
+  // Camera under the roof looking down; the centre pixel looks straight down at (0, 0, 0).
+  const PinholeCamera cam = Camera(21, 21, 100, 10.5, 10.5);
+  const CameraRender r = RenderCamera(scene, cam, LookingDown({0, 0, 0.5}), light, opt);
+  double mean = 0;
+  for (int y = 9; y <= 11; ++y)
+    for (int x = 9; x <= 11; ++x) {
+      EXPECT_EQ(r.coverage.at(x, y), 0.0f);  // the road is never drawn
+      mean += r.shadow.at(x, y) / 9.0;
+    }
+  const double F = 4 * CornerFormFactor(1, 1, 2);
+  const double sky = Luma(light.sky_radiance) * kPi;
+  const double expected = sky * (1 - F) / (Luma(light.sun_irradiance) + sky);
+  EXPECT_NEAR(mean, expected, 3e-3) << "F = " << F;
+}
+
+// Sun at 45 degrees, sky off: the box's shadow is exactly V_sun (0 inside, 1 outside) and its area is the
+// analytic projection of the box onto the road along the sun direction.
+TEST(RenderCamera, ShadowAreaMatchesBoxProjection) {
+  RayScene scene;
+  const int road = scene.AddMesh(Quad({0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 30, 30));
+  const int box = scene.AddMesh(Box({-0.5f, -0.5f, 1.0f}, {0.5f, 0.5f, 1.2f}));
+  scene.Commit();
+  Lighting light;
+  light.sun_direction = Eigen::Vector3f(1, 0, 1).normalized();
+  light.sky_radiance.setZero();
+  CameraRenderOptions opt;
+  opt.receiver_mesh = road;
+  // Shadow on the road: x in [-0.5 - 1.2, 0.5 - 1.0] = [-1.7, -0.5], y in [-0.5, 0.5]: 1.2 m^2. The camera
+  // straight above its centre sees it whole (the box hides the road only from x = -0.433 on).
+  const double f = 400, dist = 10;
+  const PinholeCamera cam = Camera(200, 160, f, 100, 80);
+  const CameraRender r = RenderCamera(scene, cam, LookingDown({-1.1, 0, dist}), light, opt);
+  double shadow_px = 0;
+  for (float s : r.shadow.vector()) shadow_px += 1.0 - s;
+  const double expected = 1.2 * (f / dist) * (f / dist);
+  EXPECT_NEAR(shadow_px, expected, 0.01 * expected);
+  EXPECT_EQ(r.shadow.at(100, 80), 0.0f);  // centre of the shadow
+  EXPECT_EQ(r.shadow.at(10, 10), 1.0f);   // far away
+  EXPECT_EQ(r.shadow.at(190, 150), 1.0f);
+  // The box is drawn where it is seen (x from 0.6 m right of the camera), and it is never "shadow".
+  const int bx = static_cast<int>(100 + f * 1.1 / (dist - 1.2));
+  EXPECT_EQ(r.object.at(bx, 80), box);
+  EXPECT_EQ(r.shadow.at(bx, 80), 1.0f);
+}
+
+TEST(ProjectedRect, CoversProjectedPointsWithPad) {
+  const PinholeCamera cam = Camera(100, 80, 100, 50, 40);
+  const Rigid3d T_cam_scene;  // identity: scene = camera frame
+  const std::vector<Eigen::Vector3d> pts = {{0, 0, 1}, {0.2, -0.1, 1}, {0, 0, -1}, {5, 5, -2}};
+  const auto rect = ProjectedRect(cam, T_cam_scene, pts, 2);
+  ASSERT_TRUE(rect.has_value());
+  EXPECT_EQ(*rect, (std::array<int, 4>{48, 28, 73, 43}));
+  // Clamped to the image.
+  const auto wide = ProjectedRect(cam, T_cam_scene, {{-10, 0, 1}, {10, 0.05, 1}}, 0);
+  ASSERT_TRUE(wide.has_value());
+  EXPECT_EQ(*wide, (std::array<int, 4>{0, 40, 100, 46}));
+  EXPECT_FALSE(ProjectedRect(cam, T_cam_scene, {{0, 0, -1}}, 5).has_value());    // behind
+  EXPECT_FALSE(ProjectedRect(cam, T_cam_scene, {{100, 0, 1}}, 5).has_value());   // off to the right
+}
+
+// Rendering a rectangle gives the same pixels as the full render (per-pixel seeding), nothing outside it,
+// and the same seed gives the same image.
+TEST(RenderCamera, RectangleAndDeterminism) {
+  RayScene scene;
+  const int road = scene.AddMesh(Quad({0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 30, 30));
+  scene.AddMesh(Box({-0.5f, -0.5f, 0.0f}, {0.5f, 0.5f, 1.0f}));
+  scene.Commit();
+  Lighting light;
+  light.sun_direction = Eigen::Vector3f(0.3f, 0.2f, 1).normalized();
+  CameraRenderOptions opt;
+  opt.receiver_mesh = road;
+  const PinholeCamera cam = Camera(60, 40, 30, 30, 20);
+  const Rigid3d T = LookingDown({0.2, 0.1, 6});
+  const CameraRender full = RenderCamera(scene, cam, T, light, opt);
+  const CameraRender again = RenderCamera(scene, cam, T, light, opt);
+  EXPECT_EQ(full.color.vector(), again.color.vector());
+  EXPECT_EQ(full.shadow.vector(), again.shadow.vector());
+  opt.x0 = 10, opt.x1 = 50, opt.y0 = 5, opt.y1 = 30;
+  const CameraRender part = RenderCamera(scene, cam, T, light, opt);
+  for (int y = 0; y < cam.height; ++y) {
+    for (int x = 0; x < cam.width; ++x) {
+      const bool inside = x >= 10 && x < 50 && y >= 5 && y < 30;
+      ASSERT_EQ(part.coverage.at(x, y), inside ? full.coverage.at(x, y) : 0.0f);
+      ASSERT_EQ(part.shadow.at(x, y), inside ? full.shadow.at(x, y) : 1.0f);
+      ASSERT_EQ(part.color.at(x, y, 1), inside ? full.color.at(x, y, 1) : 0.0f);
+    }
+  }
+  // The box casts a real shadow somewhere and is drawn.
+  float min_shadow = 1;
+  for (float s : full.shadow.vector()) min_shadow = std::min(min_shadow, s);
+  EXPECT_LT(min_shadow, 0.5f);
+  EXPECT_GT(full.coverage.at(30, 20), 0.99f);
+}
+
+}  // namespace
+}  // namespace sd

@@ -1,0 +1,31 @@
+#include "render/lidar_cast.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace sd {
+
+std::vector<LidarReturn> CastLidarRays(const RayScene& scene, const Eigen::Vector3f& origin,
+                                       const std::vector<Eigen::Vector3f>& dirs, float max_range) {
+  const std::vector<Eigen::Vector3f> origins(dirs.size(), origin);
+  const std::vector<RayHit> hits = scene.IntersectMany(origins, dirs);
+  std::vector<LidarReturn> out(dirs.size());
+  for (size_t i = 0; i < dirs.size(); ++i) {
+    const RayHit& h = hits[i];
+    if (!h.Hit() || !(h.t <= max_range)) continue;
+    LidarReturn& r = out[i];
+    r.hit = true;
+    r.range = h.t;
+    r.mesh = h.mesh;
+    r.face = h.face;
+    r.point = scene.HitPoint(h);
+    Eigen::Vector3f n = scene.GeometricNormal(h);
+    const float c = n.dot(dirs[i]);
+    if (c > 0) n = -n;
+    r.normal = n;
+    r.cos_incidence = std::min(1.0f, std::abs(c));
+  }
+  return out;
+}
+
+}  // namespace sd

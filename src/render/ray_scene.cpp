@@ -1,0 +1,278 @@
+#include "render/ray_scene.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+#include <embree3/rtcore.h>
+
+#include "core/error.h"
+#include "core/image.h"
+#include "core/parallel.h"
+
+namespace sd {
+namespace {
+
+void EmbreeError(void* /*user*/, RTCError code, const char* str) {
+  SD_CHECK(false, << "Embree error " << static_cast<int>(code) << ": " << (str ? str : ""));
+}
+
+// One Embree device for the whole process: creating a device spins up Embree's thread pool, which is too
+// costly per scene (synth builds one scene per frame). Devices are thread-safe; it is never released.
+RTCDevice SharedDevice() {
+  static RTCDevice device = [] {
+    RTCDevice d = rtcNewDevice(nullptr);
+    SD_CHECK(d != nullptr, << "rtcNewDevice failed (error " << static_cast<int>(rtcGetDeviceError(nullptr)) << ")");
+    rtcSetDeviceErrorFunction(d, EmbreeError, nullptr);
+    return d;
+  }();
+  return device;
+}
+
+// Occluded(skip_mesh): the context carries the geometry id to ignore and a context filter function rejects
+// its candidate hits. Unlike geometry masks (32 bits, so ids collide modulo 32) this is exact for any number
+// of meshes. The filter only runs when a context sets it (skip_mesh >= 0), so plain queries pay nothing.
+struct SkipContext {
+  RTCIntersectContext context;  // must be first: Embree hands back a pointer to it
+  unsigned skip_geom;
+};
+
+void SkipFilter(const RTCFilterFunctionNArguments* args) {
+  const auto* ctx = reinterpret_cast<const SkipContext*>(args->context);
+  for (unsigned i = 0; i < args->N; ++i) {
+    if (args->valid[i] != -1) continue;
+    if (RTCHitN_geomID(args->hit, args->N, i) == ctx->skip_geom) args->valid[i] = 0;
+  }
+}
+
+RTCRayHit MakeRayHit(const Eigen::Vector3f& origin, const Eigen::Vector3f& dir, float t_near, float t_far) {
+  RTCRayHit rh;
+  rh.ray.org_x = origin.x();
+  rh.ray.org_y = origin.y();
+  rh.ray.org_z = origin.z();
+  rh.ray.dir_x = dir.x();
+  rh.ray.dir_y = dir.y();
+  rh.ray.dir_z = dir.z();
+  rh.ray.tnear = t_near;
+  rh.ray.tfar = t_far;
+  rh.ray.time = 0.0f;
+  rh.ray.mask = 0xFFFFFFFFu;
+  rh.ray.id = 0;
+  rh.ray.flags = 0;
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  return rh;
+}
+
+// Linear value of each 8-bit sRGB code.
+const std::array<float, 256>& SrgbLut() {
+  static const std::array<float, 256> lut = [] {
+    std::array<float, 256> t{};
+    for (int i = 0; i < 256; ++i) t[i] = SrgbToLinear(static_cast<float>(i) / 255.0f);
+    return t;
+  }();
+  return lut;
+}
+
+// Linear RGBA of one texel; 1-channel textures are grey, 2-channel grey + alpha.
+Eigen::Vector4f Texel(const ImageU8& img, int x, int y) {
+  const auto& lut = SrgbLut();
+  const uint8_t* p = img.pixel(x, y);
+  switch (img.channels()) {
+    case 1: return {lut[p[0]], lut[p[0]], lut[p[0]], 1.0f};
+    case 2: return {lut[p[0]], lut[p[0]], lut[p[0]], p[1] / 255.0f};
+    case 3: return {lut[p[0]], lut[p[1]], lut[p[2]], 1.0f};
+    default: return {lut[p[0]], lut[p[1]], lut[p[2]], p[3] / 255.0f};
+  }
+}
+
+int Wrap(int i, int n) {
+  const int r = i % n;
+  return r < 0 ? r + n : r;
+}
+
+// Bilinear lookup with repeat addressing (glTF's default sampler); texels are linearised before filtering
+// so that filtering happens in linear light.
+Eigen::Vector4f SampleRepeat(const ImageU8& img, const Eigen::Vector2f& uv) {
+  const int w = img.width(), h = img.height();
+  const double x = static_cast<double>(uv.x()) * w - 0.5;
+  const double y = static_cast<double>(uv.y()) * h - 0.5;
+  if (!std::isfinite(x) || !std::isfinite(y)) return Texel(img, 0, 0);
+  const double fx0 = std::floor(x), fy0 = std::floor(y);
+  const float fx = static_cast<float>(x - fx0), fy = static_cast<float>(y - fy0);
+  // Reduce before converting to int so huge UVs cannot overflow.
+  const int x0 = Wrap(static_cast<int>(std::fmod(fx0, static_cast<double>(w))), w);
+  const int y0 = Wrap(static_cast<int>(std::fmod(fy0, static_cast<double>(h))), h);
+  const int x1 = (x0 + 1) % w, y1 = (y0 + 1) % h;
+  const Eigen::Vector4f a = Texel(img, x0, y0) * (1 - fx) + Texel(img, x1, y0) * fx;
+  const Eigen::Vector4f b = Texel(img, x0, y1) * (1 - fx) + Texel(img, x1, y1) * fx;
+  return a * (1 - fy) + b * fy;
+}
+
+}  // namespace
+
+struct RayScene::Impl {
+  RTCScene scene = nullptr;
+  std::vector<std::shared_ptr<const TriangleMesh>> meshes;
+  bool committed = false;
+
+  Impl() {
+    scene = rtcNewScene(SharedDevice());
+    // ROBUST: watertight traversal (no leaks through shared edges/vertices). CONTEXT_FILTER_FUNCTION: lets
+    // Occluded() pass the skip filter through the context.
+    rtcSetSceneFlags(scene, static_cast<RTCSceneFlags>(RTC_SCENE_FLAG_ROBUST | RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION));
+    rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_HIGH);
+  }
+  ~Impl() {
+    if (scene) rtcReleaseScene(scene);
+  }
+
+  const TriangleMesh& MeshOf(const RayHit& hit) const {
+    SD_CHECK(hit.mesh >= 0 && hit.mesh < static_cast<int>(meshes.size()), << "mesh " << hit.mesh);
+    const TriangleMesh& m = *meshes[hit.mesh];
+    SD_CHECK(hit.face >= 0 && hit.face < static_cast<int>(m.NumFaces()), << "face " << hit.face);
+    return m;
+  }
+};
+
+RayScene::RayScene() : impl_(std::make_unique<Impl>()) {}
+RayScene::~RayScene() = default;
+RayScene::RayScene(RayScene&&) noexcept = default;
+RayScene& RayScene::operator=(RayScene&&) noexcept = default;
+
+int RayScene::AddMesh(std::shared_ptr<const TriangleMesh> mesh) {
+  SD_CHECK(mesh != nullptr, << "null mesh");
+  SD_CHECK(!impl_->committed, << "AddMesh after Commit");
+  const int id = static_cast<int>(impl_->meshes.size());
+  const TriangleMesh& m = *mesh;
+  if (m.NumFaces() > 0 && m.NumVertices() > 0) {
+    // Copied into Embree-owned buffers: Embree reads vertex buffers with 16-byte loads past the last
+    // element, which a std::vector<Vector3f> does not guarantee to allow.
+    RTCGeometry geom = rtcNewGeometry(SharedDevice(), RTC_GEOMETRY_TYPE_TRIANGLE);
+    auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                                           3 * sizeof(float), m.NumVertices()));
+    for (size_t i = 0; i < m.NumVertices(); ++i) {
+      vb[3 * i + 0] = m.positions[i].x();
+      vb[3 * i + 1] = m.positions[i].y();
+      vb[3 * i + 2] = m.positions[i].z();
+    }
+    auto* ib = static_cast<unsigned*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                                              3 * sizeof(unsigned), m.NumFaces()));
+    const int nv = static_cast<int>(m.NumVertices());
+    for (size_t f = 0; f < m.NumFaces(); ++f) {
+      for (int k = 0; k < 3; ++k) {
+        const int vi = m.faces[f][k];
+        SD_CHECK(vi >= 0 && vi < nv, << "face " << f << " index " << vi << " out of range " << nv);
+        ib[3 * f + k] = static_cast<unsigned>(vi);
+      }
+    }
+    rtcCommitGeometry(geom);
+    rtcAttachGeometryByID(impl_->scene, geom, static_cast<unsigned>(id));
+    rtcReleaseGeometry(geom);
+  }
+  // Empty meshes keep their id but have no geometry: rays never hit them.
+  impl_->meshes.push_back(std::move(mesh));
+  return id;
+}
+
+void RayScene::Commit() {
+  rtcCommitScene(impl_->scene);
+  impl_->committed = true;
+}
+
+int RayScene::NumMeshes() const { return static_cast<int>(impl_->meshes.size()); }
+
+const TriangleMesh& RayScene::Mesh(int id) const {
+  SD_CHECK(id >= 0 && id < NumMeshes(), << "mesh " << id);
+  return *impl_->meshes[id];
+}
+
+RayHit RayScene::Intersect(const Eigen::Vector3f& origin, const Eigen::Vector3f& dir, float t_near,
+                           float t_far) const {
+  SD_CHECK(impl_->committed, << "query before Commit");
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  RTCRayHit rh = MakeRayHit(origin, dir, t_near, t_far);
+  rtcIntersect1(impl_->scene, &context, &rh);
+  RayHit hit;
+  if (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID) {
+    hit.t = rh.ray.tfar;
+    hit.mesh = static_cast<int>(rh.hit.geomID);
+    hit.face = static_cast<int>(rh.hit.primID);
+    hit.u = rh.hit.u;
+    hit.v = rh.hit.v;
+  }
+  return hit;
+}
+
+bool RayScene::Occluded(const Eigen::Vector3f& origin, const Eigen::Vector3f& dir, float t_near, float t_far,
+                        int skip_mesh) const {
+  SD_CHECK(impl_->committed, << "query before Commit");
+  SkipContext ctx;
+  rtcInitIntersectContext(&ctx.context);
+  ctx.skip_geom = RTC_INVALID_GEOMETRY_ID;
+  if (skip_mesh >= 0) {
+    ctx.context.filter = SkipFilter;
+    ctx.skip_geom = static_cast<unsigned>(skip_mesh);
+  }
+  RTCRay ray = MakeRayHit(origin, dir, t_near, t_far).ray;
+  rtcOccluded1(impl_->scene, &ctx.context, &ray);
+  // Embree sets tfar to -inf when the ray is occluded.
+  return ray.tfar < 0.0f;
+}
+
+std::vector<RayHit> RayScene::IntersectMany(const std::vector<Eigen::Vector3f>& origins,
+                                            const std::vector<Eigen::Vector3f>& dirs, float t_near) const {
+  SD_CHECK(origins.size() == dirs.size(), << origins.size() << " origins vs " << dirs.size() << " dirs");
+  std::vector<RayHit> hits(origins.size());
+  ParallelForRange(0, origins.size(), 1024, [&](size_t b, size_t e) {
+    for (size_t i = b; i < e; ++i) hits[i] = Intersect(origins[i], dirs[i], t_near);
+  });
+  return hits;
+}
+
+Eigen::Vector3f RayScene::HitPoint(const RayHit& hit) const {
+  const TriangleMesh& m = impl_->MeshOf(hit);
+  const Eigen::Vector3i& f = m.faces[hit.face];
+  return (1 - hit.u - hit.v) * m.positions[f[0]] + hit.u * m.positions[f[1]] + hit.v * m.positions[f[2]];
+}
+
+Eigen::Vector3f RayScene::GeometricNormal(const RayHit& hit) const {
+  const TriangleMesh& m = impl_->MeshOf(hit);
+  return m.FaceNormal(static_cast<size_t>(hit.face));
+}
+
+Eigen::Vector3f RayScene::ShadingNormal(const RayHit& hit) const {
+  const TriangleMesh& m = impl_->MeshOf(hit);
+  if (m.normals.size() == m.NumVertices()) {
+    const Eigen::Vector3i& f = m.faces[hit.face];
+    const Eigen::Vector3f n = (1 - hit.u - hit.v) * m.normals[f[0]] + hit.u * m.normals[f[1]] + hit.v * m.normals[f[2]];
+    const float len = n.norm();
+    if (len > 1e-12f) return n / len;
+  }
+  return m.FaceNormal(static_cast<size_t>(hit.face));
+}
+
+Eigen::Vector4f RayScene::BaseColor(const RayHit& hit) const {
+  const TriangleMesh& m = impl_->MeshOf(hit);
+  const Eigen::Vector3i& f = m.faces[hit.face];
+  const float w0 = 1 - hit.u - hit.v, w1 = hit.u, w2 = hit.v;
+  Eigen::Vector4f color = Eigen::Vector4f::Ones();
+  const int mat = m.MaterialOf(static_cast<size_t>(hit.face));
+  if (mat >= 0 && mat < static_cast<int>(m.materials.size())) {
+    const Material& material = m.materials[mat];
+    color = material.base_color_factor;
+    const ImageU8* tex = material.base_color_texture.get();
+    if (tex && !tex->empty() && m.uvs.size() == m.NumVertices()) {
+      const Eigen::Vector2f uv = w0 * m.uvs[f[0]] + w1 * m.uvs[f[1]] + w2 * m.uvs[f[2]];
+      color = color.cwiseProduct(SampleRepeat(*tex, uv));
+    }
+  }
+  if (m.colors.size() == m.NumVertices()) {
+    color = color.cwiseProduct(w0 * m.colors[f[0]] + w1 * m.colors[f[1]] + w2 * m.colors[f[2]]);
+  }
+  return color;
+}
+
+}  // namespace sd

@@ -26,9 +26,12 @@ class RayScene {
   RayScene(RayScene&&) noexcept;
   RayScene& operator=(RayScene&&) noexcept;
 
-  // Adds a mesh (positions in the scene frame). The scene keeps a shared reference for shading lookups.
+  // Adds a mesh (positions in the scene frame). The scene keeps a shared reference for shading lookups
+  // (do not modify the mesh afterwards); Embree gets its own copy of positions and indices. Ids are
+  // 0, 1, 2, ... in call order; a mesh without faces keeps its id and is never hit.
   int AddMesh(std::shared_ptr<const TriangleMesh> mesh);
-  // Must be called after the last AddMesh and before any query.
+  // Must be called after the last AddMesh and before any query. Builds a high-quality BVH with Embree's
+  // robust (watertight) traversal: rays through shared edges and vertices of a closed mesh do not leak.
   void Commit();
   int NumMeshes() const;
   const TriangleMesh& Mesh(int id) const;
@@ -36,18 +39,23 @@ class RayScene {
   // Nearest hit with t in [t_near, t_far]; `dir` must be unit length. Thread-safe after Commit().
   RayHit Intersect(const Eigen::Vector3f& origin, const Eigen::Vector3f& dir, float t_near = 0.0f,
                    float t_far = std::numeric_limits<float>::infinity()) const;
-  // Any hit in [t_near, t_far] (shadow rays). `skip_mesh` >= 0 ignores that mesh (e.g. the ground receiver).
+  // Any hit in [t_near, t_far] (shadow rays). `skip_mesh` >= 0 ignores that mesh (e.g. the ground receiver);
+  // exact for any number of meshes (a filter on the geometry id, not 32-bit ray masks).
   bool Occluded(const Eigen::Vector3f& origin, const Eigen::Vector3f& dir, float t_near, float t_far,
                 int skip_mesh = -1) const;
   // Batch form of Intersect for many rays (LiDAR); parallel. origins/dirs same size.
   std::vector<RayHit> IntersectMany(const std::vector<Eigen::Vector3f>& origins,
                                     const std::vector<Eigen::Vector3f>& dirs, float t_near = 0.0f) const;
 
-  // Hit point, interpolated attributes.
-  Eigen::Vector3f HitPoint(const RayHit& hit) const;
+  // Hit point, interpolated attributes; `hit` must be a hit. Normals are unit length and NOT flipped
+  // towards the ray: callers that shade both sides flip them (see camera_render.h).
+  Eigen::Vector3f HitPoint(const RayHit& hit) const;  // barycentric interpolation of the face's vertices
   Eigen::Vector3f ShadingNormal(const RayHit& hit) const;  // interpolated vertex normal, or face normal
-  Eigen::Vector3f GeometricNormal(const RayHit& hit) const;
-  // Base colour (linear RGBA) at the hit: material factor x texture (bilinear, sRGB->linear) x vertex colour.
+  Eigen::Vector3f GeometricNormal(const RayHit& hit) const;  // face normal (CCW side); zero if degenerate
+  // Base colour (linear RGBA) at the hit: material factor x texture x vertex colour. The texture is read
+  // bilinearly at the interpolated UV with repeat (wrap-around) addressing, texels converted sRGB->linear
+  // before filtering (alpha stays linear). No material: white; no UVs or no texture: factor only; no
+  // vertex colours: 1.
   Eigen::Vector4f BaseColor(const RayHit& hit) const;
 
  private:

@@ -758,12 +758,20 @@ Log OpenLog(const fs::path& path, const OpenLogOptions& options) {
     }
   }
   if (!fs::exists(path)) throw InputError(path, "no such file or directory");
-  if (fs::is_regular_file(path)) {
-    if (path.extension() == ".json") return ReadMmdet3dInfo(path, options);
-    throw InputError(path, "unrecognised dataset file (expected an mmdet3d info .json)");
-  }
-  if (!FindVersionDir(path).empty()) return ReadNuScenesTables(path, options);
-  if (!KittiSplitDir(path).empty()) return ReadKitti(path, options);
+  // The probe table: first match wins. Probes are cheap (directory layout, file extension); the reader
+  // then validates the content and reports what is wrong with it.
+  struct Probe {
+    bool (*matches)(const fs::path&);
+    Log (*read)(const fs::path&, const OpenLogOptions&);
+  };
+  static const Probe kProbes[] = {
+      {[](const fs::path& p) { return fs::is_regular_file(p) && p.extension() == ".json"; }, &ReadMmdet3dInfo},
+      {[](const fs::path& p) { return fs::is_directory(p) && !FindVersionDir(p).empty(); }, &ReadNuScenesTables},
+      {[](const fs::path& p) { return fs::is_directory(p) && !KittiSplitDir(p).empty(); }, &ReadKitti},
+  };
+  for (const Probe& probe : kProbes)
+    if (probe.matches(path)) return probe.read(path, options);
+  if (fs::is_regular_file(path)) throw InputError(path, "unrecognised dataset file (expected an mmdet3d info .json)");
   throw InputError(path, "unrecognised dataset directory: no nuScenes tables (v1.0-*/sample.json), no KITTI "
                          "calib/label_2 (or training/); for mmdet3d pass the info .json");
 }

@@ -238,6 +238,19 @@ TEST(Mmdet3dV0, MiniValInfosBoxesAndVelocityHeading) {
   ExpectInputErrorNaming([&] { ReadLidar(*f0.lidar); }, f0.lidar->path);
 }
 
+TEST(Mmdet3dV1, LyftInfosLoad) {
+  SD_REQUIRE_SHARED(info, "driving/lyft-mmdet3d-tests/lyft_infos.json");
+  const Log log = OpenLog(info);
+  EXPECT_EQ(log.format, LogFormat::kMmdet3dV1);
+  ASSERT_FALSE(log.frames.empty());
+  ASSERT_EQ(log.categories.size(), 9u);  // metainfo.CLASSES list
+  EXPECT_EQ(log.categories[3], "emergency_vehicle");
+  const Frame& f = log.frames[0];
+  EXPECT_EQ(f.cameras.size(), 6u);
+  EXPECT_FALSE(f.annotations.empty());
+  for (const Annotation& a : f.annotations) EXPECT_GT(a.box.size.minCoeff(), 0.0);
+}
+
 // Checks each labelled KITTI box: it contains Velodyne points and its projected centre lies in its 2D box.
 void CheckKittiFrames(const Log& log, const fs::path& split, size_t expected_frames) {
   ASSERT_EQ(log.frames.size(), expected_frames);

@@ -17,22 +17,35 @@ struct OpenLogOptions {
 };
 
 // `path`: a dataset root directory (nuScenes tables, KITTI object layout) or an info file (mmdet3d .json).
-// Probes the format unless forced. InputError (naming the path) when no reader recognises it.
+// Probes the format unless forced: *.json -> ReadMmdet3dInfo; a directory holding sample.json, or a
+// version directory (or, Lyft, version/version) that does -> ReadNuScenesTables; calib/ + label_2/ (or
+// training/) -> ReadKitti. InputError (naming the path) when no reader recognises it. docs/datasets.md
+// tabulates every format's conventions.
 Log OpenLog(const std::filesystem::path& path, const OpenLogOptions& options = {});
 
 // nuScenes devkit tables (also Lyft Level 5, which uses the nuScenes schema). `path` is the dataset root
 // (holding v1.0-*/ or a version directory with sample.json) or the version directory itself. Missing
 // optional tables (sample_annotation, instance, log, map) are tolerated: frames then have
-// has_annotations = false. Keyframes (samples) become frames, in timestamp order.
+// has_annotations = false. Keyframes (samples) become frames, in timestamp order. Boxes: global
+// translation/rotation (wxyz) and size (w, l, h) -> ego at the LiDAR time, (l, w, h). The lidar is
+// LIDAR_TOP where there are several. Log::location only for the four nuScenes maps (approximate
+// map-origin coordinates); velocities are NaN (not derived from prev/next).
 Log ReadNuScenesTables(const std::filesystem::path& path, const OpenLogOptions& options = {});
 // mmdetection3d info JSON, v1.x (`data_list`, `instances`, boxes [x y z l w h yaw] in the LiDAR frame) or
 // v0.x (`infos`, `gt_boxes` [x y z w l h yaw_old] with yaw_old = -yaw - pi/2). Image and LiDAR paths are
-// resolved against data_root (probed: the nearest ancestor of the info file holding samples/ or training/).
+// resolved against data_root (probed: the nearest ancestor of the info file holding samples/ or training/);
+// v1 bare file names live in samples/<CHANNEL>/, other paths are cut to their first samples/ or sweeps/
+// component. Python NaN/Infinity literals read as null. v1 boxes with label -1 are kept with an empty
+// category. Sweeps are read as 5 float32 per point. KITTI-flavoured v1 infos are refused (InputError).
 Log ReadMmdet3dInfo(const std::filesystem::path& info_json, const OpenLogOptions& options = {});
 // KITTI 3D object layout: <root>/{image_2,velodyne,calib,label_2}/NNNNNN.* (or <root>/training/...).
+// ego = Velodyne frame; one camera "image_2" with T_ego_cam = inv(T_cam2_rect0 * R0_rect * Tr_velo_to_cam);
+// labels (bottom centre in rectified cam0, h w l, rotation_y) -> geometric-centre boxes (l, w, h) in the
+// Velodyne frame; DontCare skipped; truncation and occlusion kept.
 Log ReadKitti(const std::filesystem::path& root, const OpenLogOptions& options = {});
 
-// Reads the frame's sweep in its own layout (sensor frame).
+// Reads the frame's sweep in its own layout (sensor frame). InputError naming the file when it is missing or
+// not a whole number of records.
 PointCloud ReadLidar(const LidarSensor& lidar);
 
 }  // namespace sd

@@ -51,7 +51,7 @@ TEST(ImageIo, PngRoundTripIsExact) {
   testing::TempDir tmp;
   for (int c : {1, 3, 4}) {
     const ImageU8 img = Pattern(37, 21, c);
-    const fs::path p = tmp / ("p" + std::to_string(c) + ".png");
+    const fs::path p = tmp / (std::to_string(c) + "ch.png");
     WriteImage(p, img);
     const ImageU8 back = ReadImage(p);
     EXPECT_EQ(back.width(), 37);

@@ -38,11 +38,11 @@ std::pair<double, double> ProjectFootprint(const Box3& b, const Eigen::Vector2d&
 
 bool BoxesOverlap(const Box3& a, const Box3& b, double margin) {
   // z overlap, using each box's vertical extent (boxes are near-upright in driving data).
-  const double az = 0.5 * a.size.z() + margin, bz = 0.5 * b.size.z() + margin;
+  // `margin` is a clearance: each box grows by half of it, so boxes closer than `margin` overlap.
+  const double m = 0.5 * margin;
+  const double az = 0.5 * a.size.z() + m, bz = 0.5 * b.size.z() + m;
   if (a.center().z() + az < b.center().z() - bz || b.center().z() + bz < a.center().z() - az) return false;
-  // Separating axis theorem on the 4 edge normals of the two footprints. Each box grows by the full margin,
-  // as in z above and as the header documents (the two must agree, or clearance would depend on direction).
-  const double m = margin;
+  // Separating axis theorem on the 4 edge normals of the two footprints (same half-margin growth as in z).
   for (const Box3* box : {&a, &b}) {
     for (int k = 0; k < 2; ++k) {
       const Eigen::Vector3d e = box->T_frame_box.rotation * (k == 0 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY());

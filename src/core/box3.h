@@ -27,7 +27,8 @@ struct Box3 {
 };
 
 // Overlap test in the ground plane (oriented rectangles, separating axis theorem) of two boxes in the same
-// z-up frame, each grown by `margin` metres; z extents must also overlap (grown by margin).
+// z-up frame; z extents must also overlap. `margin` is a clearance in metres: each box grows by margin / 2
+// on every side (footprint and z), so boxes whose gap is smaller than `margin` count as overlapping.
 bool BoxesOverlap(const Box3& a, const Box3& b, double margin = 0.0);
 
 // Axis-aligned 2D box in pixels, [x1, x2) x [y1, y2).

@@ -51,11 +51,11 @@ TEST(Box3, TransformedKeepsCorners) {
 TEST(Box3, OverlapAxisAligned) {
   const Box3 a = MakeBox(0, 0, 0, 0, 2, 2, 2);
   EXPECT_TRUE(BoxesOverlap(a, MakeBox(1.5, 0, 0, 0, 2, 2, 2)));
-  // Gap of 0.5 along x; each box grows by `margin`, so 0.2 keeps them apart and 0.3 does not.
+  // Gap of 0.5 along x; `margin` is a clearance (each box grows by half), so 0.4 keeps them apart, 0.6 not.
   const Box3 b = MakeBox(2.5, 0, 0, 0, 2, 2, 2);
   EXPECT_FALSE(BoxesOverlap(a, b));
-  EXPECT_FALSE(BoxesOverlap(a, b, 0.2));
-  EXPECT_TRUE(BoxesOverlap(a, b, 0.3));
+  EXPECT_FALSE(BoxesOverlap(a, b, 0.4));
+  EXPECT_TRUE(BoxesOverlap(a, b, 0.6));
 }
 
 TEST(Box3, OverlapRotatedSeparatedByEdgeNormal) {
@@ -66,9 +66,10 @@ TEST(Box3, OverlapRotatedSeparatedByEdgeNormal) {
   const Box3 b = MakeBox(1.8, 1.8, 0, kPi / 4, 2, 2, 2);
   EXPECT_FALSE(BoxesOverlap(a, b));
   EXPECT_FALSE(BoxesOverlap(b, a));
-  // Projected gap along the diagonal: 1.8 * sqrt(2) - sqrt(2) - 1 = 0.1314; margins add 2 * m * (sqrt(2) + 1) / 2.
+  // Projected gap along the diagonal: 1.8 * sqrt(2) - sqrt(2) - 1 = 0.1314. Growing each box by m / 2 widens
+  // A's projection by (m / 2) * sqrt(2) and B's by m / 2, so they touch at m = 2 * gap / (sqrt(2) + 1).
   const double gap = 1.8 * std::sqrt(2.0) - std::sqrt(2.0) - 1.0;
-  const double m_touch = gap / (std::sqrt(2.0) + 1.0);
+  const double m_touch = 2 * gap / (std::sqrt(2.0) + 1.0);
   EXPECT_FALSE(BoxesOverlap(a, b, 0.95 * m_touch));
   EXPECT_TRUE(BoxesOverlap(a, b, 1.05 * m_touch));
 }
@@ -77,8 +78,8 @@ TEST(Box3, OverlapNeedsZOverlap) {
   const Box3 a = MakeBox(0, 0, 0, 0, 2, 2, 2);
   const Box3 above = MakeBox(0.5, 0, 2.5, 0.7, 2, 2, 2);  // footprints overlap, 0.5 m gap in z
   EXPECT_FALSE(BoxesOverlap(a, above));
-  EXPECT_FALSE(BoxesOverlap(a, above, 0.2));
-  EXPECT_TRUE(BoxesOverlap(a, above, 0.3));
+  EXPECT_FALSE(BoxesOverlap(a, above, 0.4));
+  EXPECT_TRUE(BoxesOverlap(a, above, 0.6));
   EXPECT_TRUE(BoxesOverlap(a, MakeBox(0.5, 0, 1.5, 0.7, 2, 2, 2)));
 }
 

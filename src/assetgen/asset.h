@@ -1,0 +1,41 @@
+#pragma once
+// The asset folder (DESIGN.md): <dir>/asset.json, <dir>/mesh.glb (textured, metric, canonical frame),
+// <dir>/preview.png. Canonical frame: metres, z up, x forward (the object's front), origin at the centre
+// of its ground contact (bounding-box centre in x/y, lowest point at z = 0).
+#include <filesystem>
+#include <string>
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+
+#include "core/mesh.h"
+
+namespace sd {
+
+struct AssetInfo {
+  std::string id;        // unique, file-name safe
+  std::string name;      // human readable
+  std::string category;  // canonical category (datasets/categories.h)
+  Eigen::Vector3d extent = Eigen::Vector3d::Zero();  // length (x), width (y), height (z), metres
+  std::string licence;
+  std::string source;       // where the mesh came from
+  std::string attribution;  // required credit, if any
+  nlohmann::json stages = nlohmann::json::array();  // pipeline stages that built it, with versions
+  nlohmann::json quality = nlohmann::json::object();  // quality figures, if measured
+};
+
+struct Asset {
+  AssetInfo info;
+  TriangleMesh mesh;  // canonical frame
+  std::filesystem::path dir;
+};
+
+// Loads an asset folder (or its asset.json). InputError naming the file for a missing/corrupt asset.json,
+// a missing or unloadable mesh, an extent that disagrees with the mesh by more than 5%, or a mesh that is
+// not canonical (not resting on z = 0).
+Asset LoadAsset(const std::filesystem::path& dir_or_json);
+// Writes asset.json + mesh.glb + preview.png into `dir` atomically (staging directory). Refuses an
+// existing `dir` unless `overwrite`.
+void SaveAsset(const Asset& asset, const std::filesystem::path& dir, bool overwrite);
+
+}  // namespace sd

@@ -1,0 +1,44 @@
+#include <CLI/CLI.hpp>
+
+#include "cli/commands.h"
+#include "core/log.h"
+#include "synth/pipeline.h"
+
+namespace sd::cli {
+
+Runner AddSynthCommand(CLI::App& app) {
+  auto req = std::make_shared<SynthRequest>();
+  auto format = std::make_shared<std::string>();
+  auto data_root = std::make_shared<std::string>();
+  auto symlink = std::make_shared<bool>(false);
+  app.add_option("--log", req->log, "Driving log: a dataset root (nuScenes tables, KITTI) or an info file (mmdet3d .json)")
+      ->required();
+  app.add_option("--asset", req->assets, "Asset folder(s) to insert (asset.json + mesh.glb); see `synthdrive asset import`")
+      ->required();
+  app.add_option("--scenario", req->scenario, "Scenario JSON: which objects, how many, where, seed (README)")->required();
+  app.add_option("--out", req->out, "Output directory for the derivative dataset (must not exist unless --overwrite)")
+      ->required();
+  app.add_option("--frame", req->options.frames, "Frame token(s) or index(es) to synthesise (default: all)");
+  app.add_option("--format", *format, "Force the log reader: nuscenes, mmdet3d, kitti (default: probe)")
+      ->check(CLI::IsMember({"nuscenes", "mmdet3d", "kitti"}));
+  app.add_option("--data-root", *data_root, "Directory the log's relative sensor paths resolve against (default: probe)");
+  app.add_option("--spp", req->options.samples_per_pixel, "Camera samples per pixel (anti-aliasing)")->check(CLI::Range(1, 64));
+  app.add_option("--ao-samples", req->options.ao_samples, "Sky-visibility rays per shaded sample")->check(CLI::Range(1, 256));
+  app.add_option("--jpeg-quality", req->options.write.jpeg_quality, "Quality of re-encoded JPEG images")->check(CLI::Range(1, 100));
+  app.add_flag("--symlink-unchanged", *symlink, "Symlink unchanged sensor files instead of copying them");
+  app.add_flag("--overwrite", req->options.overwrite, "Replace an existing output directory (only once the new one is complete)");
+  return [=]() {
+    SynthRequest r = *req;
+    if (*format == "kitti") r.log_options.format = LogFormat::kKitti;
+    else if (*format == "nuscenes") r.log_options.format = LogFormat::kNuScenesTables;
+    else if (*format == "mmdet3d") r.log_options.format.reset();  // v1 vs v0 is probed from the file
+    if (!data_root->empty()) r.log_options.data_root = *data_root;
+    if (*symlink) r.options.write.unchanged = UnchangedFiles::kSymlink;
+    const SynthSummary s = RunSynth(r);
+    SD_LOG(Info, "wrote " << s.frames << " frame(s) with " << s.objects << " inserted object(s) to " << s.out.string());
+    SD_LOG(Info, "report: " << s.report.string());
+    return 0;
+  };
+}
+
+}  // namespace sd::cli

@@ -1,0 +1,178 @@
+#include "synth/report.h"
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include "io/files.h"
+#include "io/image_io.h"
+#include "synth/pipeline.h"
+
+namespace sd {
+namespace fs = std::filesystem;
+namespace {
+
+struct Rgb { uint8_t r, g, b; };
+
+void Plot(ImageU8& img, int x, int y, Rgb c) {
+  if (x < 0 || y < 0 || x >= img.width() || y >= img.height()) return;
+  uint8_t* p = img.pixel(x, y);
+  p[0] = c.r; p[1] = c.g; p[2] = c.b;
+}
+
+void Line(ImageU8& img, double x0, double y0, double x1, double y1, Rgb c, int thickness) {
+  const double len = std::hypot(x1 - x0, y1 - y0);
+  if (!(len < 1e5)) return;  // degenerate projections far outside the image
+  const int steps = std::max(1, static_cast<int>(len));
+  for (int i = 0; i <= steps; ++i) {
+    const double t = static_cast<double>(i) / steps;
+    const int x = static_cast<int>(x0 + t * (x1 - x0)), y = static_cast<int>(y0 + t * (y1 - y0));
+    for (int dy = -thickness / 2; dy <= thickness / 2; ++dy)
+      for (int dx = -thickness / 2; dx <= thickness / 2; ++dx) Plot(img, x + dx, y + dy, c);
+  }
+}
+
+void Rect(ImageU8& img, const Box2& b, Rgb c, int thickness) {
+  Line(img, b.x1, b.y1, b.x2, b.y1, c, thickness);
+  Line(img, b.x2, b.y1, b.x2, b.y2, c, thickness);
+  Line(img, b.x2, b.y2, b.x1, b.y2, c, thickness);
+  Line(img, b.x1, b.y2, b.x1, b.y1, c, thickness);
+}
+
+void ProjectedBox(ImageU8& img, const Box3& box, const CameraSensor& cam, Rgb c, int thickness) {
+  const Rigid3d T_cam_ego = cam.T_ego_cam.Inverse();
+  const auto corners = box.Corners();
+  static const int kEdges[12][2] = {{0, 1}, {1, 2}, {2, 3}, {3, 0}, {4, 5}, {5, 6}, {6, 7}, {7, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
+  for (const auto& e : kEdges) {
+    const auto a = cam.intrinsics.Project(T_cam_ego * corners[e[0]], 0.2);
+    const auto b = cam.intrinsics.Project(T_cam_ego * corners[e[1]], 0.2);
+    if (a && b) Line(img, a->x(), a->y(), b->x(), b->y(), c, thickness);
+  }
+}
+
+ImageU8 Downscale(const ImageU8& img, int factor) {
+  ImageU8 out(img.width() / factor, img.height() / factor, img.channels());
+  for (int y = 0; y < out.height(); ++y)
+    for (int x = 0; x < out.width(); ++x)
+      for (int c = 0; c < img.channels(); ++c) {
+        int sum = 0;
+        for (int dy = 0; dy < factor; ++dy)
+          for (int dx = 0; dx < factor; ++dx) sum += img.at(x * factor + dx, y * factor + dy, c);
+        out.at(x, y, c) = static_cast<uint8_t>(sum / (factor * factor));
+      }
+  return out;
+}
+
+ImageU8 BirdsEye(const Frame& frame, const FrameOutcome& o) {
+  const int size = 800;
+  const double range = 40.0, scale = size / (2 * range);  // px per metre; ego at the centre, x up
+  ImageU8 img(size, size, 3, 16);
+  auto to_px = [&](const Eigen::Vector3d& p) { return Eigen::Vector2d(size / 2 - p.y() * scale, size / 2 - p.x() * scale); };
+  const PointCloud& cloud = *o.edit.points;
+  std::vector<int> on_object(cloud.size(), -1);
+  for (const auto& [i, k] : o.lidar_object_points) on_object[i] = k;
+  for (size_t i = 0; i < cloud.size(); ++i) {
+    const Eigen::Vector3d p = frame.lidar->T_ego_lidar * cloud.xyz(i).cast<double>();
+    const Eigen::Vector2d q = to_px(p);
+    if (on_object[i] >= 0) {
+      for (int d = -1; d <= 1; ++d) { Plot(img, int(q.x()) + d, int(q.y()), {255, 60, 60}); Plot(img, int(q.x()), int(q.y()) + d, {255, 60, 60}); }
+    } else {
+      const double h = std::clamp(o.ground.HeightAboveGround(p), -0.5, 3.0);
+      const uint8_t v = static_cast<uint8_t>(70 + 60 * (h + 0.5));
+      Plot(img, static_cast<int>(q.x()), static_cast<int>(q.y()), {v, v, v});
+    }
+  }
+  auto draw_box = [&](const Box3& b, Rgb c) {
+    const auto k = b.Corners();
+    for (int i = 0; i < 4; ++i) {
+      const auto a = to_px(k[i]), e = to_px(k[(i + 1) % 4]);
+      Line(img, a.x(), a.y(), e.x(), e.y(), c, 1);
+    }
+    const auto f = to_px(b.T_frame_box * Eigen::Vector3d(0.5 * b.size.x(), 0, -0.5 * b.size.z()));
+    const auto m = to_px(b.center());
+    Line(img, m.x(), m.y(), f.x(), f.y(), c, 1);  // heading tick
+  };
+  for (const auto& a : frame.annotations) draw_box(a.box, {80, 140, 255});
+  for (const auto& ob : o.objects) draw_box(ob.placement.box, {255, 60, 60});
+  // Ego marker.
+  Rect(img, Box2{size / 2.0 - 4, size / 2.0 - 8, size / 2.0 + 4, size / 2.0 + 8}, {60, 220, 60}, 1);
+  return img;
+}
+
+std::string Escape(const std::string& s) {
+  std::string out;
+  for (char c : s) {
+    if (c == '<') out += "&lt;";
+    else if (c == '>') out += "&gt;";
+    else if (c == '&') out += "&amp;";
+    else out += c;
+  }
+  return out;
+}
+
+}  // namespace
+
+void WriteSynthReport(const Log& log, const std::vector<FrameOutcome>& frames, const fs::path& html_path) {
+  const fs::path dir = html_path.parent_path() / "report";
+  fs::create_directories(dir);
+  std::ostringstream html;
+  html << "<!doctype html><html><head><meta charset='utf-8'><title>SynthDrive synthesis report</title><style>"
+          "body{font-family:sans-serif;background:#111;color:#ddd;margin:20px}h2{border-bottom:1px solid #444}"
+          ".pair{display:flex;gap:8px;margin-bottom:14px}.pair figure{margin:0}img{max-width:100%;border:1px solid #333}"
+          "table{border-collapse:collapse}td,th{border:1px solid #444;padding:3px 8px;font-size:13px}"
+          "figcaption{font-size:12px;color:#aaa}</style></head><body>";
+  html << "<h1>SynthDrive synthesis report</h1><p>Log: " << Escape(log.source.string()) << " (" << ToString(log.format)
+       << "). Green: visible 2D box of an inserted object; yellow: its 3D box; blue: real annotations.</p>";
+  int img_id = 0;
+  for (const auto& o : frames) {
+    const Frame& frame = log.frames[o.frame_index];
+    html << "<h2>Frame " << Escape(frame.token) << "</h2><p>Sun: " << Escape(o.sun_source) << "</p>";
+    html << "<table><tr><th>#</th><th>asset</th><th>category</th><th>centre (ego, m)</th><th>size (m)</th>"
+            "<th>yaw (deg)</th><th>LiDAR points</th><th>visible</th><th>cameras</th></tr>";
+    for (size_t k = 0; k < o.objects.size(); ++k) {
+      const auto& ob = o.objects[k];
+      const Box3& b = ob.placement.box;
+      char buf[256];
+      std::snprintf(buf, sizeof buf, "(%.2f, %.2f, %.2f)</td><td>%.2f x %.2f x %.2f</td><td>%.1f", b.center().x(), b.center().y(),
+                    b.center().z(), b.size.x(), b.size.y(), b.size.z(), b.Yaw() * 180 / M_PI);
+      std::string cams;
+      for (const auto& cb : ob.label.camera_boxes) cams += cb.channel + " ";
+      html << "<tr><td>" << k << "</td><td>" << Escape(ob.label.asset_id) << "</td><td>" << ob.label.category << "</td><td>" << buf
+           << "</td><td>" << ob.lidar_points << "</td><td>"
+           << static_cast<int>(100 * (ob.rendered_pixels > 0 ? ob.visible_pixels / ob.rendered_pixels : 0)) << "%</td><td>" << cams
+           << "</td></tr>";
+    }
+    html << "</table>";
+    for (const auto& co : o.cameras) {
+      const CameraSensor* cam = frame.FindCamera(co.channel);
+      ImageU8 before = co.before, after = co.after;
+      for (const auto& a : frame.annotations) ProjectedBox(before, a.box, *cam, {80, 140, 255}, 1);
+      for (int k : co.objects) {
+        const auto& ob = o.objects[k];
+        ProjectedBox(after, ob.placement.box, *cam, {255, 220, 0}, 2);
+        for (const auto& cb : ob.label.camera_boxes)
+          if (cb.channel == co.channel) Rect(after, cb.box, {40, 255, 40}, 2);
+      }
+      const std::string b_name = "img" + std::to_string(img_id) + "_before.jpg";
+      const std::string a_name = "img" + std::to_string(img_id) + "_after.jpg";
+      ++img_id;
+      const int factor = before.width() > 1000 ? 2 : 1;
+      WriteImage(dir / b_name, factor > 1 ? Downscale(before, factor) : before, 88);
+      WriteImage(dir / a_name, factor > 1 ? Downscale(after, factor) : after, 88);
+      html << "<h3>" << co.channel << "</h3><div class='pair'><figure><img src='report/" << b_name
+           << "'><figcaption>before (real annotations)</figcaption></figure><figure><img src='report/" << a_name
+           << "'><figcaption>after</figcaption></figure></div>";
+    }
+    if (frame.lidar && o.edit.points) {
+      const std::string name = "bev" + std::to_string(img_id++) + ".png";
+      WriteImage(dir / name, BirdsEye(frame, o));
+      html << "<h3>LiDAR, bird's-eye view (80 m x 80 m, ego at the centre facing up)</h3><img src='report/" << name
+           << "' style='max-width:800px'>";
+    }
+  }
+  html << "</body></html>\n";
+  WriteFileAtomic(html_path, html.str());
+}
+
+}  // namespace sd

@@ -1,0 +1,47 @@
+#pragma once
+// Scenario files: what to insert where. JSON, for example
+//   {
+//     "seed": 7,
+//     "margin_m": 0.5,
+//     "sun": {"azimuth_deg": 120, "elevation_deg": 55},     // optional; "auto" or absent = from the log
+//     "objects": [
+//       {"category": "traffic_cone", "count": 3, "distance_m": [8, 25], "lateral_m": [-5, 5], "yaw": "random"},
+//       {"asset": "torcs_p406", "count": 1, "distance_m": [10, 30], "yaw": "aligned"}
+//     ]
+//   }
+// An object names either an asset id (one of the --asset folders) or a category (any --asset of that
+// category, picked by the seed). distance_m is along the ego x axis (ahead), lateral_m along ego y (left).
+// yaw: "aligned" (along the ego heading, +-10 deg), "random", or a number in degrees in the ego frame.
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace sd {
+
+struct ObjectRequest {
+  std::string asset_id;   // exactly one of asset_id / category is set
+  std::string category;
+  int count = 1;
+  double distance_min = 6, distance_max = 30;  // metres ahead (ego x)
+  double lateral_min = -6, lateral_max = 6;    // metres left (ego y)
+  enum class Yaw { kAligned, kRandom, kFixed } yaw_mode = Yaw::kAligned;
+  double yaw_deg = 0;
+};
+
+struct SunSpec {
+  double azimuth_deg = 0;    // in the ego frame, counter-clockwise from ego +x (forward)
+  double elevation_deg = 0;  // above the horizon
+};
+
+struct Scenario {
+  uint32_t seed = 1;
+  double margin_m = 0.5;  // clearance to real objects and between inserted ones
+  std::optional<SunSpec> sun;
+  std::vector<ObjectRequest> objects;
+};
+
+// InputError naming the file for malformed JSON, unknown fields' bad values, count < 1, empty ranges.
+Scenario ReadScenario(const std::filesystem::path& path);
+
+}  // namespace sd

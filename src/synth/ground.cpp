@@ -193,13 +193,16 @@ GroundModel GroundModel::Estimate(const std::vector<Eigen::Vector3d>& points_ego
   return g;
 }
 
-GroundModel::Surface GroundModel::SurfaceAt(double x, double y) const {
+GroundModel::Surface GroundModel::SurfaceAt(double x, double y, double radius) const {
   Surface s;
-  const double r = options_.local_radius;
+  const double r = radius > 0 ? std::max(radius, options_.local_radius) : options_.local_radius;
   const int span = static_cast<int>(std::ceil(r / options_.cell));
   const int c = CellIndex(x, y);
   std::vector<Eigen::Vector3d> pts;
   std::vector<double> w;
+  for (const bool road_only : {true, false}) {
+  pts.clear();
+  w.clear();
   if (c >= 0) {
     const int cx = c % n_, cy = c / n_;
     for (int dy = -span; dy <= span; ++dy)
@@ -209,10 +212,14 @@ GroundModel::Surface GroundModel::SurfaceAt(double x, double y) const {
         for (int i : cell_points_[ny * n_ + nx]) {
           const double d = (ground_points_[i].head<2>() - Eigen::Vector2d(x, y)).norm();
           if (d > r) continue;
+          // On the road, the pavement behind a kerb is not the surface the object stands on.
+          if (road_only && !IsDrivable(ground_points_[i].x(), ground_points_[i].y())) continue;
           pts.push_back(ground_points_[i]);
           w.push_back(1.0 - 0.5 * d / r);  // nearer points count more; all keep some weight
         }
       }
+  }
+  if (pts.size() >= 8) break;
   }
   if (pts.size() < 8) {
     s.height = seed_.HeightAt(x, y);
@@ -220,8 +227,19 @@ GroundModel::Surface GroundModel::SurfaceAt(double x, double y) const {
     return s;
   }
   GroundPlane local = FitPlane(pts, &w);
-  // A local fit tilted beyond 15 deg is a wall or kerb edge leaking in; fall back to a level fit.
+  // A local fit tilted beyond 15 deg is a wall or kerb edge leaking in; fall back to the seed normal.
   if (local.normal.z() < std::cos(15.0 * M_PI / 180.0)) local.normal = seed_.normal;
+  // At range the support is often a single LiDAR ring: nearly collinear points fix no tilt across the
+  // ring, and a free fit would extrapolate a wrong height to (x, y). Keep the seed normal then.
+  {
+    Eigen::Vector2d m = Eigen::Vector2d::Zero();
+    for (const auto& p : pts) m += p.head<2>();
+    m /= static_cast<double>(pts.size());
+    Eigen::Matrix2d cov = Eigen::Matrix2d::Zero();
+    for (const auto& p : pts) cov += (p.head<2>() - m) * (p.head<2>() - m).transpose();
+    cov /= static_cast<double>(pts.size());
+    if (Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(cov).eigenvalues()(0) < 0.3 * 0.3) local.normal = seed_.normal;
+  }
   Eigen::Vector3d mean = Eigen::Vector3d::Zero();
   double wsum = 0;
   for (size_t i = 0; i < pts.size(); ++i) { mean += w[i] * pts[i]; wsum += w[i]; }

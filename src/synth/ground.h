@@ -63,7 +63,9 @@ class GroundModel {
     Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
     int support = 0;  // ground points used; 0 = fell back to the seed plane
   };
-  Surface SurfaceAt(double x, double y) const;
+  // `radius` <= 0 uses options.local_radius; pass the object's footprint radius so a large object sits on
+  // the plane of the ground it covers rather than on an extrapolated small patch.
+  Surface SurfaceAt(double x, double y, double radius = 0) const;
   // Signed height of an ego-frame point above the local ground.
   double HeightAboveGround(const Eigen::Vector3d& p) const;
 

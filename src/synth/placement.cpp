@@ -105,7 +105,7 @@ std::vector<PlacedObject> PlaceObjects(const Scenario& scenario, const std::vect
           case ObjectRequest::Yaw::kRandom: yaw = (unit(rng) * 2 - 1) * M_PI; break;
           case ObjectRequest::Yaw::kFixed: yaw = req.yaw_deg * M_PI / 180.0; break;
         }
-        const GroundModel::Surface surface = ground.SurfaceAt(x, y);
+        const GroundModel::Surface surface = ground.SurfaceAt(x, y, 0.5 * extent.head<2>().norm() + 0.5);
         // Up axis along the local ground normal, heading `yaw` projected into the tilted plane.
         const Eigen::Vector3d up = surface.normal;
         Eigen::Vector3d fwd(std::cos(yaw), std::sin(yaw), 0);

@@ -1,0 +1,240 @@
+// End-to-end synthesis on the real nuScenes keyframe in data/: the promises of `synthdrive synth`, checked
+// against the data (boxes, ground, projections, point-to-mesh distances), not against golden files.
+#include "synth/pipeline.h"
+
+#include <cmath>
+#include <cstring>
+
+#include <gtest/gtest.h>
+
+#include "assetgen/canonical.h"
+#include "io/mesh_io.h"
+#include "testing/testing.h"
+
+namespace sd {
+namespace {
+
+const char* kInfo = "driving/nuscenes-scene0061-kf0/mmdet3d_info/n015-2018-07-24-11-22-45+0800.json";
+
+Asset Import(const testing::TempDir& dir, const std::string& mesh, const std::string& id, const std::string& category,
+             const std::string& front, double scale, double height) {
+  CanonicalizeOptions o;
+  o.up = "+y";
+  o.front = front;
+  o.scale = scale;
+  if (height > 0) o.target_height = height;
+  const CanonicalizeResult c = Canonicalize(LoadMesh(testing::RepoData(mesh)), o);
+  Asset a;
+  a.mesh = c.mesh;
+  a.mesh.ComputeVertexNormals();
+  a.info.id = id;
+  a.info.category = category;
+  a.info.extent = c.extent;
+  SaveAsset(a, dir / id, false);
+  return LoadAsset(dir / id);
+}
+
+std::vector<Asset> DemoAssets(const testing::TempDir& dir) {
+  return {Import(dir, "assets/metadrive_traffic_cone/scene.gltf", "cone", "traffic_cone", "+x", 0, 0.7),
+          Import(dir, "assets/metadrive_road_barrier/scene.gltf", "barrier", "barrier", "+z", 1.0, 0),
+          Import(dir, "assets/torcs_p406/obj/torcs_p406.obj", "car", "car", "+x", 1.0, 0)};
+}
+
+// Distance from p to triangle abc (Ericson, Real-Time Collision Detection 5.1.5).
+double PointTriangleDistance(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+  const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0 && d2 <= 0) return (p - a).norm();
+  const Eigen::Vector3d bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0 && d4 <= d3) return (p - b).norm();
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) return (p - (a + d1 / (d1 - d3) * ab)).norm();
+  const Eigen::Vector3d cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0 && d5 <= d6) return (p - c).norm();
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) return (p - (a + d2 / (d2 - d6) * ac)).norm();
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) return (p - (b + (d4 - d3) / ((d4 - d3) + (d5 - d6)) * (c - b))).norm();
+  const double denom = 1.0 / (va + vb + vc);
+  return (p - (a + ab * (vb * denom) + ac * (vc * denom))).norm();
+}
+
+class PipelineTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new testing::TempDir();
+    log_ = new Log(OpenLog(testing::RepoData(kInfo)));
+    assets_ = new std::vector<Asset>(DemoAssets(*dir_));
+    scenario_ = new Scenario(ReadScenario(testing::RepoData("scenarios/demo.json")));
+    outcome_ = new FrameOutcome(SynthesizeFrame(*log_, 0, *assets_, *scenario_, SynthOptions{}));
+  }
+  static void TearDownTestSuite() {
+    delete outcome_;
+    delete scenario_;
+    delete assets_;
+    delete log_;
+    delete dir_;
+  }
+  static testing::TempDir* dir_;
+  static Log* log_;
+  static std::vector<Asset>* assets_;
+  static Scenario* scenario_;
+  static FrameOutcome* outcome_;
+};
+testing::TempDir* PipelineTest::dir_ = nullptr;
+Log* PipelineTest::log_ = nullptr;
+std::vector<Asset>* PipelineTest::assets_ = nullptr;
+Scenario* PipelineTest::scenario_ = nullptr;
+FrameOutcome* PipelineTest::outcome_ = nullptr;
+
+TEST_F(PipelineTest, PlacesEveryRequestedObjectWithoutTouchingRealOnes) {
+  ASSERT_EQ(outcome_->objects.size(), 5u);
+  ASSERT_EQ(outcome_->edit.added.size(), 5u);
+  const Frame& f = log_->frames[0];
+  for (size_t i = 0; i < outcome_->objects.size(); ++i) {
+    const Box3& b = outcome_->objects[i].placement.box;
+    for (const auto& a : f.annotations) EXPECT_FALSE(BoxesOverlap(b, a.box, scenario_->margin_m)) << "object " << i;
+    for (size_t j = 0; j < i; ++j) EXPECT_FALSE(BoxesOverlap(b, outcome_->objects[j].placement.box, scenario_->margin_m));
+    const auto& req = scenario_->objects[outcome_->objects[i].placement.request];
+    EXPECT_GE(b.center().x(), req.distance_min - 1e-9);
+    EXPECT_LE(b.center().x(), req.distance_max + 1e-9);
+    EXPECT_TRUE(outcome_->ground.IsDrivable(b.center().x(), b.center().y()));
+  }
+}
+
+TEST_F(PipelineTest, ObjectsRestOnTheLocalLidarGround) {
+  for (const auto& o : outcome_->objects) {
+    const Box3& b = o.placement.box;
+    // Road returns in a ring 0.2..2 m around the footprint.
+    std::vector<double> dz;
+    const Rigid3d T_box_ego = b.T_frame_box.Inverse();
+    for (const auto& p : outcome_->ground.ground_points()) {
+      const Eigen::Vector3d l = T_box_ego * p;
+      const double out = std::max(std::abs(l.x()) - 0.5 * b.size.x(), std::abs(l.y()) - 0.5 * b.size.y());
+      if (out < 0.2 || out > 2.0 || !outcome_->ground.IsDrivable(p.x(), p.y())) continue;
+      dz.push_back(p.z() - (b.center().z() - 0.5 * b.size.z()));
+    }
+    ASSERT_GE(dz.size(), 5u) << o.label.asset_id;
+    std::nth_element(dz.begin(), dz.begin() + dz.size() / 2, dz.end());
+    EXPECT_LT(std::abs(dz[dz.size() / 2]), 0.05) << o.label.asset_id << " bottom vs local ground";
+  }
+}
+
+TEST_F(PipelineTest, RenderedMasksLieInsideTheProjected3DBoxes) {
+  const Frame& f = log_->frames[0];
+  int boxes = 0;
+  for (const auto& o : outcome_->objects) {
+    for (const auto& cb : o.label.camera_boxes) {
+      const CameraSensor* cam = f.FindCamera(cb.channel);
+      ASSERT_NE(cam, nullptr);
+      double u0 = 1e9, v0 = 1e9, u1 = -1e9, v1 = -1e9;
+      for (const auto& c : o.placement.box.Corners()) {
+        const auto uv = cam->intrinsics.Project(cam->T_ego_cam.Inverse() * c);
+        ASSERT_TRUE(uv.has_value());
+        u0 = std::min(u0, uv->x()); v0 = std::min(v0, uv->y()); u1 = std::max(u1, uv->x()); v1 = std::max(v1, uv->y());
+      }
+      EXPECT_GE(cb.box.x1, std::floor(u0) - 1) << cb.channel;
+      EXPECT_GE(cb.box.y1, std::floor(v0) - 1) << cb.channel;
+      EXPECT_LE(cb.box.x2, std::ceil(u1) + 1) << cb.channel;
+      EXPECT_LE(cb.box.y2, std::ceil(v1) + 1) << cb.channel;
+      // A tight box of the mask covers a real share of the projected box (the mask is not a stray pixel).
+      EXPECT_GT(cb.box.Area(), 0.2 * (u1 - u0) * (v1 - v0)) << cb.channel;
+      ++boxes;
+    }
+  }
+  EXPECT_GE(boxes, 5);  // every object is seen by CAM_FRONT at least
+}
+
+TEST_F(PipelineTest, EveryLidarPointOnAnObjectLiesOnItsSurface) {
+  const Frame& f = log_->frames[0];
+  const PointCloud& cloud = *outcome_->edit.points;
+  ASSERT_FALSE(outcome_->lidar_object_points.empty());
+  // Meshes in the ego frame.
+  std::vector<TriangleMesh> meshes;
+  for (const auto& o : outcome_->objects) {
+    TriangleMesh m = o.placement.asset->mesh;
+    m.Transform(o.placement.T_ego_asset);
+    meshes.push_back(std::move(m));
+  }
+  double worst = 0;
+  for (const auto& [i, k] : outcome_->lidar_object_points) {
+    const Eigen::Vector3d p = f.lidar->T_ego_lidar * cloud.xyz(i).cast<double>();
+    double best = 1e9;
+    const TriangleMesh& m = meshes[k];
+    for (const auto& t : m.faces)
+      best = std::min(best, PointTriangleDistance(p, m.positions[t[0]].cast<double>(), m.positions[t[1]].cast<double>(),
+                                                  m.positions[t[2]].cast<double>()));
+    worst = std::max(worst, best);
+  }
+  EXPECT_LT(worst, 0.01) << "metres from the asset surface";
+  for (size_t k = 0; k < outcome_->objects.size(); ++k) EXPECT_EQ(outcome_->objects[k].label.annotation.num_lidar_pts, outcome_->objects[k].lidar_points);
+}
+
+TEST_F(PipelineTest, UntouchedLidarPointsAreBitIdentical) {
+  const PointCloud& before = outcome_->sweep_before;
+  const PointCloud& after = *outcome_->edit.points;
+  ASSERT_EQ(after.num_features, before.num_features);
+  ASSERT_GE(after.size(), before.size());
+  std::vector<uint8_t> touched(after.size(), 0);
+  for (const auto& [i, k] : outcome_->lidar_object_points) touched[i] = 1;
+  size_t moved = 0;
+  for (size_t i = 0; i < before.size(); ++i) {
+    if (touched[i]) { ++moved; continue; }
+    for (int c = 0; c < before.num_features; ++c) ASSERT_EQ(std::memcmp(&before.data[i * before.num_features + c], &after.data[i * after.num_features + c], 4), 0) << i;
+  }
+  // Moved points only get nearer: the object blocks the beam before the original return.
+  for (const auto& [i, k] : outcome_->lidar_object_points)
+    if (static_cast<size_t>(i) < before.size()) EXPECT_LT(after.xyz(i).norm(), before.xyz(i).norm());
+  EXPECT_GT(moved, 0u);
+}
+
+TEST_F(PipelineTest, ImagesChangeOnlyNearTheObjects) {
+  const Frame& f = log_->frames[0];
+  ASSERT_FALSE(outcome_->cameras.empty());
+  for (const auto& co : outcome_->cameras) {
+    ASSERT_EQ(co.before.width(), co.after.width());
+    // Pixels more than 60 px outside every object's projected box + shadow zone keep their value; here we
+    // check the image's top rows (sky/buildings above every inserted object) exactly.
+    const CameraSensor* cam = f.FindCamera(co.channel);
+    double top = 1e9;
+    for (const auto& o : outcome_->objects)
+      for (const auto& c : o.placement.box.Corners()) {
+        const auto uv = cam->intrinsics.Project(cam->T_ego_cam.Inverse() * c);
+        if (uv) top = std::min(top, uv->y());
+      }
+    const int rows = std::max(0, static_cast<int>(top) - 60);
+    for (int y = 0; y < rows; ++y)
+      for (int x = 0; x < co.before.width(); ++x)
+        for (int c = 0; c < 3; ++c) ASSERT_EQ(co.before.at(x, y, c), co.after.at(x, y, c)) << co.channel << " " << x << "," << y;
+  }
+  EXPECT_TRUE(outcome_->edit.images.count("CAM_FRONT"));
+  EXPECT_FALSE(outcome_->edit.images.count("CAM_BACK"));
+}
+
+TEST_F(PipelineTest, SameSeedSameResult) {
+  const FrameOutcome again = SynthesizeFrame(*log_, 0, *assets_, *scenario_, SynthOptions{});
+  ASSERT_EQ(again.objects.size(), outcome_->objects.size());
+  for (size_t i = 0; i < again.objects.size(); ++i)
+    EXPECT_TRUE(again.objects[i].placement.box.center().isApprox(outcome_->objects[i].placement.box.center(), 1e-12));
+  EXPECT_EQ(again.edit.points->data, outcome_->edit.points->data);
+}
+
+TEST_F(PipelineTest, ImpossibleScenarioIsAnErrorNamingTheObject) {
+  Scenario crowded = *scenario_;
+  crowded.objects = {ObjectRequest{}};
+  crowded.objects[0].category = "car";
+  crowded.objects[0].count = 60;
+  crowded.objects[0].distance_min = 6;
+  crowded.objects[0].distance_max = 12;
+  try {
+    SynthesizeFrame(*log_, 0, *assets_, crowded, SynthOptions{});
+    FAIL() << "60 cars fit in 6 m of road";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("impossible scenario"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace sd

@@ -41,6 +41,10 @@ CanonicalizeResult Canonicalize(const TriangleMesh& mesh, const CanonicalizeOpti
   const AlignedBox3f b = r.mesh.Bounds();
   const Eigen::Vector3d size = b.Size().cast<double>();
 
+  if (options.scale < 0 || !std::isfinite(options.scale))
+    throw InputError("", Msg() << "impossible scale " << options.scale << " (must be positive)");
+  if (options.target_height && !(*options.target_height > 0))
+    throw InputError("", Msg() << "impossible target height " << *options.target_height << " m");
   if (options.scale > 0) {
     r.scale = options.scale;
   } else if (options.target_size) {

@@ -1,0 +1,82 @@
+#!/usr/bin/env bash
+# End-to-end CLI checks: every bad input gets one line naming the file and the problem, a non-zero exit,
+# and no output directory; good runs write a dataset our own reader opens again.
+# usage: cli_test.sh <synthdrive binary> <repo data dir>
+set -u
+BIN=$1
+DATA=$2
+T=$(mktemp -d)
+trap 'rm -rf "$T"' EXIT
+pass=0
+fail=0
+ok() { pass=$((pass + 1)); }
+bad() { fail=$((fail + 1)); echo "FAIL: $*"; }
+
+INFO=$DATA/driving/nuscenes-scene0061-kf0/mmdet3d_info/n015-2018-07-24-11-22-45+0800.json
+
+# Assets used by the checks below.
+"$BIN" -q asset import --mesh "$DATA/assets/metadrive_traffic_cone/scene.gltf" --up +y --height 0.7 \
+  --category traffic_cone --out "$T/cone" || bad "asset import"
+cat > "$T/one_cone.json" <<'J'
+{"seed": 3, "objects": [{"category": "traffic_cone", "count": 1, "distance_m": [6, 15], "lateral_m": [-3, 3]}]}
+J
+
+# expect_error <name> <fragment expected in stderr> <output dir that must not exist> -- command...
+expect_error() {
+  local name=$1 fragment=$2 out=$3
+  shift 4
+  "$@" >"$T/stdout" 2>"$T/stderr"
+  local rc=$?
+  local lines
+  lines=$(grep -c . "$T/stderr")
+  if [ $rc -eq 0 ]; then bad "$name: exit 0"; return; fi
+  if ! grep -q -- "$fragment" "$T/stderr"; then bad "$name: stderr lacks '$fragment': $(cat "$T/stderr")"; return; fi
+  if [ "$lines" -ne 1 ]; then bad "$name: $lines lines of error output: $(cat "$T/stderr")"; return; fi
+  if [ -n "$out" ] && [ -e "$out" ]; then bad "$name: output $out was created"; return; fi
+  if ls "$T" | grep -q '\.tmp-'; then bad "$name: temporary output left behind"; return; fi
+  ok
+}
+
+synth() { "$BIN" -q synth "$@"; }
+
+expect_error "missing log" "nope.json: no such file" "$T/o1" -- synth --log "$T/nope.json" --asset "$T/cone" --scenario "$T/one_cone.json" --out "$T/o1"
+printf '{"data_list": [' > "$T/broken.json"
+expect_error "malformed info JSON" "broken.json: malformed JSON" "$T/o2" -- synth --log "$T/broken.json" --asset "$T/cone" --scenario "$T/one_cone.json" --out "$T/o2"
+printf '{"objects": [' > "$T/bad_scenario.json"
+expect_error "malformed scenario" "bad_scenario.json: malformed JSON" "$T/o3" -- synth --log "$INFO" --asset "$T/cone" --scenario "$T/bad_scenario.json" --out "$T/o3"
+expect_error "asset folder without asset.json" "not an asset folder" "$T/o4" -- synth --log "$INFO" --asset "$DATA/assets/torcs_p406" --scenario "$T/one_cone.json" --out "$T/o4"
+cp -r "$T/cone" "$T/odd" && sed -i 's/"traffic_cone"/"flying_saucer"/' "$T/odd/asset.json"
+expect_error "unknown category" "unknown category 'flying_saucer'" "$T/o5" -- synth --log "$INFO" --asset "$T/odd" --scenario "$T/one_cone.json" --out "$T/o5"
+cp -r "$T/cone" "$T/corrupt" && printf 'glTF garbage' > "$T/corrupt/mesh.glb"
+expect_error "corrupt asset mesh" "mesh.glb" "$T/o6" -- synth --log "$INFO" --asset "$T/corrupt" --scenario "$T/one_cone.json" --out "$T/o6"
+cat > "$T/crowd.json" <<'J'
+{"objects": [{"category": "traffic_cone", "count": 400, "distance_m": [6, 8], "lateral_m": [-1, 1]}]}
+J
+expect_error "impossible scenario" "impossible scenario" "$T/o7" -- synth --log "$INFO" --asset "$T/cone" --scenario "$T/crowd.json" --out "$T/o7"
+# A dataset whose sweep is truncated (size not a whole number of 20-byte records).
+mkdir -p "$T/trunc" && cp -r "$DATA/driving/nuscenes-scene0061-kf0/." "$T/trunc/" && chmod -R u+w "$T/trunc"
+SWEEP=$(ls "$T"/trunc/samples/LIDAR_TOP/*.pcd.bin)
+head -c 1003 "$SWEEP" > "$SWEEP.x" && mv "$SWEEP.x" "$SWEEP"
+expect_error "truncated sweep" "not a whole number of 20-byte records" "$T/o8" -- synth --log "$T/trunc/mmdet3d_info/n015-2018-07-24-11-22-45+0800.json" --asset "$T/cone" --scenario "$T/one_cone.json" --out "$T/o8"
+expect_error "impossible asset scale" "impossible scale" "$T/a1" -- "$BIN" -q asset import --mesh "$DATA/assets/torcs_p406/obj/torcs_p406.obj" --category car --scale -2 --out "$T/a1"
+expect_error "missing mesh" "missing.obj: file not found" "$T/a2" -- "$BIN" -q asset import --mesh "$T/missing.obj" --category car --out "$T/a2"
+
+# A good run, then: the existing output is refused and left intact.
+if synth --log "$INFO" --asset "$T/cone" --scenario "$T/one_cone.json" --out "$T/good"; then
+  [ -f "$T/good/report.html" ] && [ -f "$T/good/synth.json" ] && [ -f "$T/good/mmdet3d_info/n015-2018-07-24-11-22-45+0800.json" ] \
+    && [ "$(ls "$T"/good/samples/*/* | wc -l)" -eq 7 ] && ok || bad "good run: missing outputs"
+  before=$(find "$T/good" -type f -exec md5sum {} + | sort | md5sum)
+  expect_error "existing output" "already exists" "" -- synth --log "$INFO" --asset "$T/cone" --scenario "$T/one_cone.json" --out "$T/good"
+  after=$(find "$T/good" -type f -exec md5sum {} + | sort | md5sum)
+  [ "$before" = "$after" ] && ok || bad "existing output was modified"
+  # The derivative dataset reads back through our own reader with one more box.
+  synth --log "$T/good/mmdet3d_info/n015-2018-07-24-11-22-45+0800.json" --asset "$T/cone" --scenario "$T/one_cone.json" \
+    --out "$T/again" && ok || bad "derivative dataset does not read back"
+  n=$(grep -o '"num_lidar_pts"' "$T/again/mmdet3d_info/n015-2018-07-24-11-22-45+0800.json" | wc -l)
+  [ "$n" -eq 71 ] && ok || bad "expected 69 + 1 + 1 boxes after two runs, found $n"
+else
+  bad "good run failed"
+fi
+
+echo "$pass passed, $fail failed"
+[ $fail -eq 0 ]

@@ -1,0 +1,208 @@
+// Synthesising one nuScenes keyframe (6 cameras + LiDAR) with 5 inserted objects, the way `synthdrive demo`
+// does it, and the ground estimation + placement stage alone.
+//
+// Setup (not timed, once per process): the three shipped meshes in data/assets are imported into a temp
+// directory with the demo's axes and scales (see src/cli/cmd_demo.cpp), saved and re-loaded as asset folders;
+// the log and data/scenarios/demo.json are opened. The timed loop of BM_SynthesizeKeyframe is exactly
+// SynthesizeFrame(log, 0, assets, scenario, options): it reads the sweep and the touched camera images from
+// disk (page cache after the first iteration), estimates the ground, places the objects, renders and
+// composites the cameras and simulates the LiDAR. No files are written.
+//
+// Repo root: $SYNTHDRIVE_SOURCE_DIR, else the executable's location (build/bin -> ../../).
+#include <unistd.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <benchmark/benchmark.h>
+
+#include "assetgen/asset.h"
+#include "assetgen/canonical.h"
+#include "core/log.h"
+#include "datasets/categories.h"
+#include "datasets/readers.h"
+#include "io/mesh_io.h"
+#include "synth/ground.h"
+#include "synth/pipeline.h"
+#include "synth/placement.h"
+#include "synth/scenario.h"
+
+namespace {
+namespace fs = std::filesystem;
+
+fs::path g_root;  // repo root, set in main
+
+std::optional<fs::path> FindRepoRoot() {
+  std::vector<fs::path> candidates;
+  if (const char* env = std::getenv("SYNTHDRIVE_SOURCE_DIR"); env && *env) candidates.emplace_back(env);
+  std::error_code ec;
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  if (!ec) candidates.push_back(exe.parent_path() / ".." / "..");
+  for (const auto& c : candidates)
+    if (fs::is_directory(c / "data" / "driving") && fs::is_directory(c / "data" / "assets"))
+      return fs::canonical(c);
+  return std::nullopt;
+}
+
+// A temp directory removed at exit.
+struct TempDir {
+  fs::path path;
+  TempDir() {
+    std::string tmpl = (fs::temp_directory_path() / "synthdrive-bench-XXXXXX").string();
+    if (!mkdtemp(tmpl.data())) throw std::runtime_error("cannot create a temp directory under " + tmpl);
+    path = tmpl;
+  }
+  ~TempDir() {
+    std::error_code ec;
+    fs::remove_all(path, ec);
+  }
+};
+
+// The few lines of cli::ImportAsset the demo needs: load, canonicalise, save the asset folder, load it back.
+sd::Asset ImportAsset(const fs::path& mesh_path, const fs::path& out, const std::string& id,
+                      const std::string& category, const std::string& up, const std::string& front, double scale,
+                      double height) {
+  const auto cat = sd::FindCategory(category);
+  if (!cat) throw std::runtime_error("unknown category " + category);
+  const sd::TriangleMesh mesh = sd::LoadMesh(mesh_path);
+  sd::CanonicalizeOptions opt;
+  opt.up = up;
+  opt.front = front;
+  opt.scale = scale;
+  if (height > 0) opt.target_height = height;
+  sd::CanonicalizeResult c = sd::Canonicalize(mesh, opt);
+  sd::Asset a;
+  a.mesh = std::move(c.mesh);
+  if (a.mesh.normals.empty()) a.mesh.ComputeVertexNormals();
+  a.info.id = id;
+  a.info.name = id;
+  a.info.category = cat->name;
+  a.info.extent = c.extent;
+  a.info.licence = "see data/README.md";
+  a.info.source = "data/" + fs::relative(mesh_path, g_root / "data").string();
+  a.info.stages = nlohmann::json::array({{{"stage", "import"},
+                                          {"version", "synthdrive 0.1.0"},
+                                          {"source_mesh", mesh_path.filename().string()},
+                                          {"up", opt.up},
+                                          {"front", opt.front},
+                                          {"scale_to_metres", c.scale}}});
+  sd::SaveAsset(a, out, /*overwrite=*/false);
+  return sd::LoadAsset(out);  // as RunSynth sees it: through the asset folder
+}
+
+struct Inputs {
+  TempDir tmp;
+  std::vector<sd::Asset> assets;
+  sd::Log log;
+  sd::Scenario scenario;
+};
+
+const Inputs& GetInputs() {
+  static const std::unique_ptr<Inputs> inputs = [] {
+    auto in = std::make_unique<Inputs>();
+    const fs::path data = g_root / "data";
+    struct Source { const char* mesh; const char* id; const char* category; const char* up; const char* front; double scale, height; };
+    const Source sources[] = {
+        {"assets/metadrive_traffic_cone/scene.gltf", "metadrive_traffic_cone", "traffic_cone", "+y", "+x", 0, 0.70},
+        {"assets/metadrive_road_barrier/scene.gltf", "metadrive_road_barrier", "barrier", "+y", "+z", 1.0, 0},
+        {"assets/torcs_p406/obj/torcs_p406.obj", "torcs_p406", "car", "+y", "+x", 1.0, 0},
+    };
+    for (const auto& s : sources)
+      in->assets.push_back(ImportAsset(data / s.mesh, in->tmp.path / "assets" / s.id, s.id, s.category, s.up,
+                                       s.front, s.scale, s.height));
+    in->log = sd::OpenLog(data / "driving/nuscenes-scene0061-kf0/mmdet3d_info/n015-2018-07-24-11-22-45+0800.json");
+    in->scenario = sd::ReadScenario(data / "scenarios/demo.json");
+    if (in->log.frames.empty()) throw std::runtime_error("the nuScenes log has no frames");
+    return in;
+  }();
+  return *inputs;
+}
+
+// The full frame: ground, placement, 6 cameras, LiDAR. Arg: camera samples per pixel (ao_samples 16).
+void BM_SynthesizeKeyframe(benchmark::State& state) {
+  const Inputs& in = GetInputs();
+  sd::SynthOptions options;
+  options.samples_per_pixel = static_cast<int>(state.range(0));
+  options.ao_samples = 16;
+  size_t objects = 0, cameras = 0;
+  for (auto _ : state) {
+    sd::FrameOutcome out = sd::SynthesizeFrame(in.log, 0, in.assets, in.scenario, options);
+    objects = out.objects.size();
+    cameras = out.cameras.size();
+    benchmark::DoNotOptimize(out.edit.points.has_value());
+  }
+  state.counters["objects"] = static_cast<double>(objects);
+  state.counters["cameras_touched"] = static_cast<double>(cameras);
+}
+BENCHMARK(BM_SynthesizeKeyframe)
+    ->ArgName("spp")
+    ->Arg(1)
+    ->Arg(4)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->MeasureProcessCPUTime();
+
+// Ground estimation + placement alone, on the same frame and seeds as SynthesizeFrame(frame 0). The sweep is
+// read and moved to the ego frame outside the timed loop.
+void BM_GroundAndPlacement(benchmark::State& state) {
+  const Inputs& in = GetInputs();
+  const sd::Frame& frame = in.log.frames.at(0);
+  if (!frame.lidar) {
+    state.SkipWithError("frame 0 has no LiDAR sweep");
+    return;
+  }
+  const sd::PointCloud sweep = sd::ReadLidar(*frame.lidar);
+  std::vector<Eigen::Vector3d> points_ego(sweep.size());
+  for (size_t i = 0; i < sweep.size(); ++i) points_ego[i] = frame.lidar->T_ego_lidar * sweep.xyz(i).cast<double>();
+  std::vector<sd::Box3> real_boxes;
+  for (const auto& a : frame.annotations) real_boxes.push_back(a.box);
+  sd::GroundOptions gopt;
+  gopt.seed = in.scenario.seed;
+  gopt.sensor_xy = frame.lidar->T_ego_lidar.translation.head<2>();
+  sd::PlacementInput pin;
+  pin.points_ego = points_ego;
+  pin.real_boxes = real_boxes;
+  for (const auto& c : frame.cameras) pin.cameras.push_back(&c);
+  sd::Scenario frame_scenario = in.scenario;  // frame 0: the pipeline's per-frame seed is scenario.seed + 0
+  size_t placed_count = 0;
+  for (auto _ : state) {
+    const sd::GroundModel ground = sd::GroundModel::Estimate(points_ego, real_boxes, gopt);
+    pin.ground = &ground;
+    const std::vector<sd::PlacedObject> placed = sd::PlaceObjects(frame_scenario, in.assets, pin);
+    placed_count = placed.size();
+    benchmark::DoNotOptimize(placed.data());
+  }
+  state.counters["objects"] = static_cast<double>(placed_count);
+  state.counters["lidar_points"] = static_cast<double>(points_ego.size());
+}
+BENCHMARK(BM_GroundAndPlacement)->Unit(benchmark::kMillisecond)->UseRealTime()->MeasureProcessCPUTime();
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  const auto root = FindRepoRoot();
+  if (!root) {
+    std::fprintf(stderr,
+                 "bench_synth_keyframe: cannot find the repo's data/ directory (needs data/driving and data/assets).\n"
+                 "Set SYNTHDRIVE_SOURCE_DIR to the repo root, or run the binary from <repo>/<build>/bin.\n");
+    return 1;
+  }
+  g_root = *root;
+  sd::SetLogLevel(sd::LogLevel::kWarn);
+  try {
+    GetInputs();  // import assets, open the log and scenario once, before any timing
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench_synth_keyframe: setup failed: %s\n", e.what());
+    return 1;
+  }
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}

@@ -186,7 +186,9 @@ TEST_F(PipelineTest, UntouchedLidarPointsAreBitIdentical) {
   }
   // Moved points only get nearer: the object blocks the beam before the original return.
   for (const auto& [i, k] : outcome_->lidar_object_points)
-    if (static_cast<size_t>(i) < before.size()) EXPECT_LT(after.xyz(i).norm(), before.xyz(i).norm());
+    if (static_cast<size_t>(i) < before.size()) {
+      EXPECT_LT(after.xyz(i).norm(), before.xyz(i).norm());
+    }
   EXPECT_GT(moved, 0u);
 }
 

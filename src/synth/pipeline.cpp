@@ -104,7 +104,7 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
 
   // Scene in the ego frame: objects, then one receiver mesh for shadows.
   std::string sun_source;
-  const Eigen::Vector3d sun_dir = SunDirectionEgo(frame, log.location, scenario.sun, &sun_source);
+  const Eigen::Vector3d sun_dir = SunDirectionEgo(frame, scenario.location ? scenario.location : log.location, scenario.sun, &sun_source);
   out.sun_source = sun_source;
   RayScene scene;
   auto receiver = std::make_shared<TriangleMesh>();

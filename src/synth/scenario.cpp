@@ -1,5 +1,7 @@
 #include "synth/scenario.h"
 
+#include <cmath>
+
 #include "core/error.h"
 #include "io/json.h"
 
@@ -35,6 +37,15 @@ Scenario ReadScenario(const std::filesystem::path& path) {
     sun.elevation_deg = r["sun"]["elevation_deg"].Number();
     if (sun.elevation_deg <= 0 || sun.elevation_deg > 90) r["sun"]["elevation_deg"].Fail("must be in (0, 90]");
     s.sun = sun;
+  }
+  if (r.Has("location")) {
+    GeoLocation loc;
+    loc.latitude_deg = r["location"]["latitude_deg"].Number();
+    loc.longitude_deg = r["location"]["longitude_deg"].Number();
+    loc.name = r["location"].StringOr("name", "scenario location");
+    if (std::abs(loc.latitude_deg) > 90) r["location"]["latitude_deg"].Fail("must be within [-90, 90]");
+    if (std::abs(loc.longitude_deg) > 180) r["location"]["longitude_deg"].Fail("must be within [-180, 180]");
+    s.location = loc;
   }
   const JsonReader objects = r["objects"];
   if (objects.Size() == 0) objects.Fail("no objects requested");

@@ -4,6 +4,8 @@
 //     "seed": 7,
 //     "margin_m": 0.5,
 //     "sun": {"azimuth_deg": 120, "elevation_deg": 55},     // optional; "auto" or absent = from the log
+//     "location": {"latitude_deg": 1.2966, "longitude_deg": 103.787},  // optional; for the sun ephemeris
+//                                                       // when the log does not say where it was recorded
 //     "objects": [
 //       {"category": "traffic_cone", "count": 3, "distance_m": [8, 25], "lateral_m": [-5, 5], "yaw": "random"},
 //       {"asset": "torcs_p406", "count": 1, "distance_m": [10, 30], "yaw": "aligned"}
@@ -16,6 +18,8 @@
 #include <optional>
 #include <string>
 #include <vector>
+
+#include "datasets/log.h"
 
 namespace sd {
 
@@ -38,6 +42,7 @@ struct Scenario {
   uint32_t seed = 1;
   double margin_m = 0.5;  // clearance to real objects and between inserted ones
   std::optional<SunSpec> sun;
+  std::optional<GeoLocation> location;  // overrides the log's location for the sun ephemeris
   std::vector<ObjectRequest> objects;
 };
 

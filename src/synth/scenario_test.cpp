@@ -24,6 +24,8 @@ TEST(Scenario, ParsesTheShippedDemoScenario) {
   EXPECT_EQ(s.objects[0].count, 3);
   EXPECT_EQ(s.objects[0].yaw_mode, ObjectRequest::Yaw::kRandom);
   EXPECT_DOUBLE_EQ(s.objects[2].distance_max, 30.0);
+  ASSERT_TRUE(s.location.has_value());  // nuScenes' singapore-onenorth: the demo's sun comes from the ephemeris
+  EXPECT_NEAR(s.location->latitude_deg, 1.2966, 0.01);
 }
 
 TEST(Scenario, FixedYawAndSun) {
@@ -55,6 +57,7 @@ TEST(Scenario, BadInputNamesTheFileAndTheProblem) {
   ExpectError(R"({"objects":[{"category":"car","asset":"x"}]})", "exactly one");
   ExpectError(R"({"objects":[{"category":"car","distance_m":[30,10]}]})", "min must not exceed max");
   ExpectError(R"({"objects":[{"category":"car","yaw":"sideways"}]})", "yaw");
+  ExpectError(R"({"location":{"latitude_deg":95,"longitude_deg":0},"objects":[{"category":"car"}]})", "latitude_deg");
   ExpectError(R"({"seed":-1,"objects":[{"category":"car"}]})", "seed");
   ExpectError(R"({"margin_m":"wide","objects":[{"category":"car"}]})", "expected a number");
 }

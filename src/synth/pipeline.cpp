@@ -135,13 +135,13 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
   std::vector<uint8_t> is_ground(points_ego.size(), 0);
   for (int i : ground.ground_indices()) is_ground[i] = 1;
   const std::vector<Eigen::Vector3d> road_points = RoadPointsNear(ground, placed);
+  // Everything a camera may need to redraw: the objects' boxes and their shadow receivers.
+  std::vector<Eigen::Vector3d> extent_points;
+  for (const auto& o : placed)
+    for (const auto& c : o.box.Corners()) extent_points.push_back(c);
+  for (const auto& p : receiver->positions) extent_points.push_back(p.cast<double>());
   for (const auto& cam : frame.cameras) {
     const Rigid3d T_cam_ego = cam.T_ego_cam.Inverse();
-    std::vector<Eigen::Vector3d> extent_points;
-    for (const auto& o : placed) {
-      for (const auto& c : o.box.Corners()) extent_points.push_back(c);
-    }
-    for (const auto& p : receiver->positions) extent_points.push_back(p.cast<double>());
     const auto rect = ProjectedRect(cam.intrinsics, T_cam_ego, extent_points, 2);
     if (!rect) continue;
 

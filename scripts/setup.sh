@@ -7,6 +7,7 @@ PACKAGES=(
   build-essential cmake pkg-config
   libeigen3-dev nlohmann-json3-dev libcli11-dev libtbb-dev libembree-dev
   libstb-dev libtinygltf-dev libtinyobjloader-dev
+  libnanoflann-dev
   libgtest-dev libgmock-dev libbenchmark-dev
 )
 

@@ -1,0 +1,1 @@
+#include "geometry/marching_cubes.h"

@@ -1,0 +1,58 @@
+#pragma once
+// Continuous remeshing for inverse rendering (after Palfinger, "Continuous Remeshing for Inverse Rendering",
+// CAVW 2022): an Adam-like optimiser whose per-vertex step and per-vertex target edge length adapt to how
+// fast each vertex moves, interleaved with local remeshing (edge split / collapse / flip and tangential
+// smoothing) that keeps the mesh manifold and free of fold-overs. Where the surface still moves, edges get
+// longer (fast, robust progress); where it has settled, they get shorter so fine detail can appear.
+#include <vector>
+
+#include <Eigen/Core>
+
+namespace sd::geometry {
+
+struct RemeshOptions {
+  float learning_rate = 0.3f;        // step relative to the vertex's target edge length
+  float beta1 = 0.8f;                // momentum of the gradient
+  float beta2 = 0.99f;               // momentum of the squared gradient norm
+  float smooth_gain = 0.2f;          // tangential / Laplacian smoothing of the update
+  float edge_length_min = 0.005f;    // target edge length limits (in the mesh's units)
+  float edge_length_max = 0.15f;
+  float edge_length_tolerance = 0.5f;  // split above (1 + tol) * target, collapse below (1 - tol) * target
+  float gain = 0.2f;                 // how fast the target edge length follows the vertex velocity
+  float velocity_target = 0.015f;    // relative velocity at which the target edge length is stable
+  bool remesh = true;                // false: plain adaptive optimiser, topology fixed
+};
+
+class ContinuousRemesher {
+ public:
+  // Throws InputError when the mesh is empty or not manifold.
+  ContinuousRemesher(std::vector<Eigen::Vector3f> positions, std::vector<Eigen::Vector3i> faces,
+                     const RemeshOptions& options);
+
+  const std::vector<Eigen::Vector3f>& positions() const { return positions_; }
+  const std::vector<Eigen::Vector3i>& faces() const { return faces_; }
+  const RemeshOptions& options() const { return options_; }
+  RemeshOptions& mutable_options() { return options_; }
+
+  // One optimiser step from dL/dpositions (one entry per current vertex).
+  void Step(const std::vector<Eigen::Vector3f>& grad);
+  // One pass of split / collapse / flip / tangential smoothing towards the per-vertex target lengths.
+  // Optimiser state follows the vertices (new vertices interpolate it). Keeps the mesh manifold; an edge
+  // operation that would fold a face over or create a non-manifold configuration is skipped.
+  void Remesh();
+
+  float MeanTargetEdgeLength() const;
+
+ private:
+  RemeshOptions options_;
+  std::vector<Eigen::Vector3f> positions_;
+  std::vector<Eigen::Vector3i> faces_;
+  // Per-vertex optimiser state.
+  std::vector<Eigen::Vector3f> m1_;  // first moment of the gradient
+  std::vector<float> m2_;            // second moment of the gradient norm
+  std::vector<Eigen::Vector3f> velocity_;
+  std::vector<float> target_length_;
+  int step_count_ = 0;
+};
+
+}  // namespace sd::geometry

@@ -1,0 +1,1 @@
+#include "geometry/visual_hull.h"

@@ -1,0 +1,1 @@
+#include "raster/raster.h"

@@ -1,0 +1,107 @@
+#pragma once
+// Differentiable triangle rasterizer: the forward ops and their hand-written backward passes.
+//
+// The ops follow one pattern (one file per op: rasterize.cpp, interpolate.cpp, antialias.cpp, clip.cpp):
+// `Op(inputs..., outputs*)` computes, `OpBackward(inputs..., forward outputs, grad_outputs, grad_inputs*)`
+// ACCUMULATES (+=) into the gradients it is given, so callers can sum several views into one buffer.
+// Buffers are flat float / int32 arrays (std::span), structure of arrays, so the same code structure maps
+// onto CUDA later; nothing here depends on a tensor framework. One image per call; loops over views are
+// the caller's. Work is spread over threads with core/parallel.h and is deterministic (no float atomics:
+// per-thread partial gradients are summed in a fixed order).
+//
+// Conventions
+//  - Clip space: 4 floats (x, y, z, w) per vertex. Pixel coordinates follow OpenCV / core/camera.h:
+//      u = (x/w + 1) * W / 2,  v = (y/w + 1) * H / 2   (v grows DOWN the image),
+//    and pixel (i, j) is sampled at its centre (i + 0.5, j + 0.5). Depth is z/w in [-1, 1], smaller is
+//    nearer. Triangles with any vertex at w <= 0 are not drawn (callers keep geometry in front of the
+//    near plane; the refinement cameras always do).
+//  - Triangles: 3 int32 vertex indices each; both windings are drawn (no culling).
+//  - Barycentrics are perspective-correct, (b0, b1) of the triangle's vertices 0 and 1; b2 = 1 - b0 - b1.
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/camera.h"
+#include "core/rigid3.h"
+
+namespace sd::raster {
+
+// Rasterize's output, one entry per pixel (row-major, width * height).
+struct RasterBuffer {
+  int width = 0, height = 0;
+  std::vector<float> bary;        // 2 per pixel: b0, b1 (0 where background)
+  std::vector<float> depth;       // 1 per pixel: z/w (1 where background)
+  std::vector<int32_t> triangle;  // 1 per pixel: triangle index, -1 where background
+
+  size_t NumPixels() const { return static_cast<size_t>(width) * height; }
+};
+
+// --- rasterize.cpp -------------------------------------------------------------------------------------
+// Per pixel centre: the nearest covering triangle (smallest z/w, ties to the lower triangle index), its
+// perspective-correct barycentrics and depth.
+void Rasterize(std::span<const float> clip_pos, std::span<const int32_t> tris, int width, int height,
+               RasterBuffer* out);
+// Gradients of the loss with respect to clip positions through the barycentrics (and depth, when
+// grad_depth is non-empty) at fixed triangle assignment. grad_bary: 2 per pixel; grad_depth: empty or 1 per
+// pixel; grad_clip: 4 per vertex, accumulated.
+void RasterizeBackward(std::span<const float> clip_pos, std::span<const int32_t> tris, const RasterBuffer& rast,
+                       std::span<const float> grad_bary, std::span<const float> grad_depth,
+                       std::span<float> grad_clip);
+
+// --- interpolate.cpp -----------------------------------------------------------------------------------
+// out[pixel] = sum_k b_k * attr[tri_k] for covered pixels, 0 for background. attr: `channels` per vertex;
+// out: `channels` per pixel.
+void Interpolate(std::span<const float> attr, int channels, std::span<const int32_t> tris, const RasterBuffer& rast,
+                 std::span<float> out);
+// grad_attr: `channels` per vertex, accumulated; grad_bary: 2 per pixel, accumulated (may be empty when the
+// caller does not need gradients to geometry).
+void InterpolateBackward(std::span<const float> attr, int channels, std::span<const int32_t> tris,
+                         const RasterBuffer& rast, std::span<const float> grad_out, std::span<float> grad_attr,
+                         std::span<float> grad_bary);
+
+// --- antialias.cpp -------------------------------------------------------------------------------------
+// Analytic anti-aliasing of silhouette edges, after nvdiffrast's idea (Laine et al. 2020): for each pair of
+// horizontally or vertically adjacent pixels whose triangles differ, if a silhouette edge of the nearer
+// triangle (a mesh boundary edge, or an edge between a front- and a back-facing triangle in screen space)
+// crosses the segment between the two pixel centres, the colours of the pair are blended by the fraction of
+// the segment on each side. The blend is differentiable in the edge's projected endpoints, so a loss on
+// the antialiased image moves the outline (gradients to clip positions), and in the colours.
+struct EdgeTopology {  // built once per mesh topology, reused across views and iterations
+  // For each triangle, for each of its 3 edges (v0v1, v1v2, v2v0): the adjacent triangle across it, or -1
+  // (boundary). Non-manifold edges (more than two triangles) are treated as boundaries.
+  std::vector<int32_t> neighbour;  // 3 per triangle
+};
+EdgeTopology BuildEdgeTopology(std::span<const int32_t> tris, int num_vertices);
+
+// What the forward pass found, kept for the backward pass.
+struct AntialiasRecord {
+  struct PixelPair {
+    int32_t pixel_a, pixel_b;  // pixel indices; a is left of / above b
+    int32_t triangle;          // the triangle owning the silhouette edge
+    int32_t edge;              // 0, 1, 2: which of its edges
+    float alpha;               // blend weight moved across the pair
+  };
+  std::vector<PixelPair> pairs;
+};
+// color: `channels` per pixel (e.g. an interpolated attribute, or a 1-channel coverage mask); out: same.
+void Antialias(std::span<const float> color, int channels, const RasterBuffer& rast, std::span<const float> clip_pos,
+               std::span<const int32_t> tris, const EdgeTopology& topology, std::span<float> out,
+               AntialiasRecord* record);
+// grad_color: `channels` per pixel, accumulated; grad_clip: 4 per vertex, accumulated.
+void AntialiasBackward(std::span<const float> color, int channels, const RasterBuffer& rast,
+                       std::span<const float> clip_pos, std::span<const int32_t> tris, const EdgeTopology& topology,
+                       const AntialiasRecord& record, std::span<const float> grad_out, std::span<float> grad_color,
+                       std::span<float> grad_clip);
+
+// --- clip.cpp ------------------------------------------------------------------------------------------
+// 4x4 matrix taking homogeneous world points to clip space for a pinhole camera (distortion ignored),
+// following the conventions above; z/w maps camera depth near..far to -1..1.
+Eigen::Matrix4f ClipFromWorld(const PinholeCamera& camera, const Rigid3d& T_cam_world, float near, float far);
+// clip[4v..4v+3] = M * (p_v, 1). positions: 3 per vertex.
+void TransformToClip(std::span<const float> positions, const Eigen::Matrix4f& M, std::span<float> clip);
+// grad_positions (3 per vertex, accumulated) from grad_clip (4 per vertex).
+void TransformToClipBackward(const Eigen::Matrix4f& M, std::span<const float> grad_clip, std::span<float> grad_positions);
+
+}  // namespace sd::raster

@@ -17,7 +17,8 @@ Eigen::SparseMatrix<float> CotangentLaplacian(const std::vector<Eigen::Vector3f>
                                               const std::vector<Eigen::Vector3i>& faces);
 
 // Smoothness loss sum_i |(L x)_i|^2 / num_vertices for a fixed L, with its gradient
-// (2 / n) L^T L x accumulated into *grad_positions (times `weight`). Returns the loss (times `weight`).
+// (2 / n) L^T L x accumulated into *grad_positions (times `weight`; resized to positions.size() if empty,
+// skipped if null). Returns the loss (times `weight`).
 double LaplacianLoss(const Eigen::SparseMatrix<float>& L, const std::vector<Eigen::Vector3f>& positions,
                      float weight, std::vector<Eigen::Vector3f>* grad_positions);
 

@@ -1,1 +1,95 @@
+// Interpolate / InterpolateBackward: out = b0 a0 + b1 a1 + (1 - b0 - b1) a2 per covered pixel, so
+// dL/db0 = g . (a0 - a2), dL/db1 = g . (a1 - a2) and dL/da_k = b_k g.
+#include <vector>
+
+#include "core/parallel.h"
+#include "raster/internal.h"
 #include "raster/raster.h"
+
+namespace sd::raster {
+namespace {
+
+void CheckInterpolateArgs(std::span<const float> attr, int channels, std::span<const int32_t> tris,
+                          const RasterBuffer& rast) {
+  SD_CHECK(channels > 0, << "channels " << channels);
+  SD_CHECK(attr.size() % channels == 0, << "attr: " << attr.size() << " floats for " << channels << " channels");
+  SD_CHECK(tris.size() % 3 == 0);
+  internal::CheckRaster(rast);
+}
+
+// Rows per task: interpolation is cheap per pixel, so tasks need a few rows to be worth scheduling.
+constexpr size_t kRowsPerTask = 8;
+
+}  // namespace
+
+void Interpolate(std::span<const float> attr, int channels, std::span<const int32_t> tris, const RasterBuffer& rast,
+                 std::span<float> out) {
+  CheckInterpolateArgs(attr, channels, tris, rast);
+  const size_t C = static_cast<size_t>(channels);
+  SD_CHECK(out.size() == C * rast.NumPixels(), << "out: " << out.size());
+  const size_t width = static_cast<size_t>(rast.width);
+  ParallelForRange(0, static_cast<size_t>(rast.height), kRowsPerTask, [&](size_t row0, size_t row1) {
+    for (size_t pixel = row0 * width; pixel < row1 * width; ++pixel) {
+      float* o = &out[C * pixel];
+      const int32_t t = rast.triangle[pixel];
+      if (t < 0) {
+        for (size_t c = 0; c < C; ++c) o[c] = 0.0f;
+        continue;
+      }
+      const float b0 = rast.bary[2 * pixel], b1 = rast.bary[2 * pixel + 1], b2 = 1.0f - b0 - b1;
+      const float* a0 = &attr[C * static_cast<size_t>(tris[3 * static_cast<size_t>(t)])];
+      const float* a1 = &attr[C * static_cast<size_t>(tris[3 * static_cast<size_t>(t) + 1])];
+      const float* a2 = &attr[C * static_cast<size_t>(tris[3 * static_cast<size_t>(t) + 2])];
+      for (size_t c = 0; c < C; ++c) o[c] = b0 * a0[c] + b1 * a1[c] + b2 * a2[c];
+    }
+  });
+}
+
+void InterpolateBackward(std::span<const float> attr, int channels, std::span<const int32_t> tris,
+                         const RasterBuffer& rast, std::span<const float> grad_out, std::span<float> grad_attr,
+                         std::span<float> grad_bary) {
+  CheckInterpolateArgs(attr, channels, tris, rast);
+  const size_t C = static_cast<size_t>(channels);
+  const size_t num_pixels = rast.NumPixels();
+  SD_CHECK(grad_out.size() == C * num_pixels, << "grad_out: " << grad_out.size());
+  SD_CHECK(grad_attr.size() == attr.size(), << "grad_attr: " << grad_attr.size());
+  SD_CHECK(grad_bary.empty() || grad_bary.size() == 2 * num_pixels, << "grad_bary: " << grad_bary.size());
+
+  const size_t width = static_cast<size_t>(rast.width);
+  if (!grad_bary.empty()) {
+    ParallelForRange(0, static_cast<size_t>(rast.height), kRowsPerTask, [&](size_t row0, size_t row1) {
+      for (size_t pixel = row0 * width; pixel < row1 * width; ++pixel) {
+        const int32_t t = rast.triangle[pixel];
+        if (t < 0) continue;
+        const float* a0 = &attr[C * static_cast<size_t>(tris[3 * static_cast<size_t>(t)])];
+        const float* a1 = &attr[C * static_cast<size_t>(tris[3 * static_cast<size_t>(t) + 1])];
+        const float* a2 = &attr[C * static_cast<size_t>(tris[3 * static_cast<size_t>(t) + 2])];
+        const float* g = &grad_out[C * pixel];
+        float d0 = 0.0f, d1 = 0.0f;
+        for (size_t c = 0; c < C; ++c) {
+          d0 += g[c] * (a0[c] - a2[c]);
+          d1 += g[c] * (a1[c] - a2[c]);
+        }
+        grad_bary[2 * pixel] += d0;
+        grad_bary[2 * pixel + 1] += d1;
+      }
+    });
+  }
+
+  // Scatter to vertices serially in pixel order (deterministic), summing in double.
+  std::vector<double> sum(grad_attr.size(), 0.0);
+  for (size_t pixel = 0; pixel < num_pixels; ++pixel) {
+    const int32_t t = rast.triangle[pixel];
+    if (t < 0) continue;
+    const float b0 = rast.bary[2 * pixel], b1 = rast.bary[2 * pixel + 1];
+    const float b[3] = {b0, b1, 1.0f - b0 - b1};
+    const float* g = &grad_out[C * pixel];
+    for (int k = 0; k < 3; ++k) {
+      double* s = &sum[C * static_cast<size_t>(tris[3 * static_cast<size_t>(t) + k])];
+      for (size_t c = 0; c < C; ++c) s[c] += static_cast<double>(b[k]) * g[c];
+    }
+  }
+  for (size_t n = 0; n < sum.size(); ++n) grad_attr[n] += static_cast<float>(sum[n]);
+}
+
+}  // namespace sd::raster

@@ -1,1 +1,183 @@
 #include "geometry/visual_hull.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+#include "core/error.h"
+#include "core/parallel.h"
+#include "geometry/marching_cubes.h"
+
+// Field: at every grid node, the minimum over the views that see it of the mask's coverage of the node's
+// footprint (a box one voxel wide, projected; at least one pixel). Coverage rather than a point sample:
+// binary masks would make the field a step between two nodes, and marching cubes would put the surface at
+// the middle of the voxel whatever the silhouette says; a box average ramps linearly across the silhouette
+// edge, so the iso-crossing lands within ~0.1 voxel of it. The surface is the iso-level mask_threshold.
+//
+// Rules beyond the header's:
+//  - A node no view sees (behind every camera or outside every image) is outside: there is no evidence for it.
+//  - Nodes on the grid border are outside, so the mesh is closed (the hull is clipped to the bounds).
+//  - Only the connected component enclosing the largest volume is kept. Silhouettes are of one object, and
+//    where the bounds stick out of the views' frusta (the rig frames the unit sphere; the default bounds'
+//    corners lie outside it) nodes that only a few views see can survive as detached islands.
+
+namespace sd::geometry {
+namespace {
+
+// Per view: the mask's summed-area table, so any axis-aligned box average costs four bilinear look-ups.
+struct ViewData {
+  const SilhouetteView* view;
+  Eigen::Matrix3d R_cam_world;
+  Eigen::Vector3d t_cam_world;
+  std::vector<double> sat;  // (width + 1) x (height + 1); sat(x, y) = sum of pixels [0, x) x [0, y)
+  int width, height;
+
+  double Sat(int x, int y) const { return sat[static_cast<size_t>(y) * (width + 1) + x]; }
+  // The integral of a piecewise-constant image is bilinear inside each pixel, so bilinear interpolation of
+  // the table is exact at fractional positions.
+  double SatAt(double u, double v) const {
+    const int x = std::min(static_cast<int>(u), width - 1), y = std::min(static_cast<int>(v), height - 1);
+    const double fu = u - x, fv = v - y;
+    return (1 - fv) * ((1 - fu) * Sat(x, y) + fu * Sat(x + 1, y)) + fv * ((1 - fu) * Sat(x, y + 1) + fu * Sat(x + 1, y + 1));
+  }
+  // Mean of the mask over [u - ru, u + ru] x [v - rv, v + rv] clipped to the image.
+  double BoxMean(double u, double v, double ru, double rv) const {
+    const double u0 = std::max(0.0, u - ru), u1 = std::min<double>(width, u + ru);
+    const double v0 = std::max(0.0, v - rv), v1 = std::min<double>(height, v + rv);
+    const double area = (u1 - u0) * (v1 - v0);
+    if (!(area > 0)) return 0;
+    return (SatAt(u1, v1) - SatAt(u0, v1) - SatAt(u1, v0) + SatAt(u0, v0)) / area;
+  }
+};
+
+ViewData Prepare(const SilhouetteView& view) {
+  ViewData d;
+  d.view = &view;
+  d.R_cam_world = view.T_cam_world.Rotation();
+  d.t_cam_world = view.T_cam_world.translation;
+  d.width = view.mask.width();
+  d.height = view.mask.height();
+  d.sat.assign(static_cast<size_t>(d.width + 1) * (d.height + 1), 0.0);
+  for (int y = 0; y < d.height; ++y) {
+    double row = 0;
+    for (int x = 0; x < d.width; ++x) {
+      row += std::clamp(view.mask.at(x, y), 0.0f, 1.0f);
+      d.sat[static_cast<size_t>(y + 1) * (d.width + 1) + x + 1] = d.Sat(x + 1, y) + row;
+    }
+  }
+  return d;
+}
+
+void Validate(const std::vector<SilhouetteView>& views, const VisualHullOptions& options) {
+  if (views.empty()) throw InputError("", "VisualHull: no views given");
+  for (size_t i = 0; i < views.size(); ++i) {
+    const SilhouetteView& v = views[i];
+    if (v.camera.width <= 0 || v.camera.height <= 0 || !(v.camera.fx > 0) || !(v.camera.fy > 0))
+      throw InputError("", Msg() << "VisualHull: view " << i << " has an invalid camera (" << v.camera.width << "x"
+                                 << v.camera.height << ", fx " << v.camera.fx << ", fy " << v.camera.fy << ")");
+    if (v.mask.channels() != 1)
+      throw InputError("", Msg() << "VisualHull: view " << i << " mask has " << v.mask.channels() << " channels, expected 1");
+    if (v.mask.width() != v.camera.width || v.mask.height() != v.camera.height)
+      throw InputError("", Msg() << "VisualHull: view " << i << " mask is " << v.mask.width() << "x" << v.mask.height()
+                                 << " but its camera is " << v.camera.width << "x" << v.camera.height);
+  }
+  if (options.resolution < 2 || options.resolution > 2048)
+    throw InputError("", Msg() << "VisualHull: resolution must be in [2, 2048], got " << options.resolution);
+  if (!(options.mask_threshold > 0 && options.mask_threshold < 1))
+    throw InputError("", Msg() << "VisualHull: mask_threshold must be in (0, 1), got " << options.mask_threshold);
+  if (!options.bounds.IsEmpty() && !(options.bounds.Size().minCoeff() > 0))
+    throw InputError("", "VisualHull: bounds have zero extent along some axis");
+}
+
+// Keeps the connected component (faces linked through shared vertices) with the largest enclosed volume.
+TriangleMesh LargestComponent(const TriangleMesh& mesh) {
+  const size_t nv = mesh.NumVertices();
+  std::vector<int> parent(nv);
+  std::iota(parent.begin(), parent.end(), 0);
+  auto find = [&](int v) {
+    while (parent[v] != v) v = parent[v] = parent[parent[v]];
+    return v;
+  };
+  for (const auto& f : mesh.faces) {
+    const int a = find(f[0]), b = find(f[1]), c = find(f[2]);
+    parent[b] = a;
+    parent[find(c)] = a;
+  }
+  // Signed volume per component: tetrahedra to a reference point (any point works for closed components;
+  // one near the mesh keeps the terms small).
+  std::vector<double> volume(nv, 0.0);
+  Eigen::Vector3d ref = Eigen::Vector3d::Zero();
+  if (!mesh.positions.empty()) ref = mesh.positions[0].cast<double>();
+  for (const auto& f : mesh.faces) {
+    const Eigen::Vector3d a = mesh.positions[f[0]].cast<double>() - ref, b = mesh.positions[f[1]].cast<double>() - ref,
+                          c = mesh.positions[f[2]].cast<double>() - ref;
+    volume[find(f[0])] += a.dot(b.cross(c)) / 6;
+  }
+  int best = -1;
+  for (size_t v = 0; v < nv; ++v)
+    if (find(int(v)) == int(v) && (best < 0 || volume[v] > volume[best])) best = int(v);
+  TriangleMesh out;
+  if (best < 0) return out;
+  std::vector<int> remap(nv, -1);
+  for (const auto& f : mesh.faces) {
+    if (find(f[0]) != best) continue;
+    Eigen::Vector3i g;
+    for (int k = 0; k < 3; ++k) {
+      if (remap[f[k]] < 0) {
+        remap[f[k]] = static_cast<int>(out.positions.size());
+        out.positions.push_back(mesh.positions[f[k]]);
+      }
+      g[k] = remap[f[k]];
+    }
+    out.faces.push_back(g);
+  }
+  return out;
+}
+
+}  // namespace
+
+TriangleMesh VisualHull(const std::vector<SilhouetteView>& views, const VisualHullOptions& options) {
+  Validate(views, options);
+  AlignedBox3f bounds = options.bounds;
+  if (bounds.IsEmpty()) bounds.min = Eigen::Vector3f::Constant(-1), bounds.max = Eigen::Vector3f::Constant(1);
+
+  // Cubic voxels, `resolution` along the longest side; the node grid is centred on the bounds and has one
+  // extra layer of nodes all round, outside the bounds: those are the forced-outside border, so an object
+  // filling the bounds is clipped at most half a voxel beyond them rather than half a voxel inside.
+  ScalarGrid grid;
+  const Eigen::Vector3f size = bounds.Size();
+  grid.voxel_size = size.maxCoeff() / static_cast<float>(options.resolution);
+  for (int a = 0; a < 3; ++a) grid.dims[a] = std::max(1, static_cast<int>(std::ceil(size[a] / grid.voxel_size - 1e-3f))) + 3;
+  grid.origin = bounds.Center() - 0.5f * grid.voxel_size * (grid.dims - Eigen::Vector3i::Ones()).cast<float>();
+  grid.values.assign(static_cast<size_t>(grid.dims.x()) * grid.dims.y() * grid.dims.z(), 0.0f);
+
+  std::vector<ViewData> data(views.size());
+  ParallelFor(0, views.size(), [&](size_t i) { data[i] = Prepare(views[i]); });
+
+  const double half_voxel = 0.5 * grid.voxel_size;
+  ParallelFor(1, size_t(grid.dims.z() - 1), [&](size_t k) {
+    for (int j = 1; j + 1 < grid.dims.y(); ++j) {
+      for (int i = 1; i + 1 < grid.dims.x(); ++i) {
+        const Eigen::Vector3d p_world = grid.NodePosition(i, j, int(k)).cast<double>();
+        double value = 1;
+        bool seen = false;
+        for (const ViewData& d : data) {
+          const Eigen::Vector3d p_cam = d.R_cam_world * p_world + d.t_cam_world;
+          const auto uv = d.view->camera.Project(p_cam);
+          if (!uv || !d.view->camera.InImage(*uv)) continue;
+          seen = true;
+          // Footprint half-width: half a voxel at the node's depth, at least half a pixel (bilinear-like).
+          const double ru = std::max(0.5, half_voxel * d.view->camera.fx / p_cam.z());
+          const double rv = std::max(0.5, half_voxel * d.view->camera.fy / p_cam.z());
+          value = std::min(value, d.BoxMean(uv->x(), uv->y(), ru, rv));
+          if (value <= 0) break;
+        }
+        grid.at(i, j, int(k)) = seen ? static_cast<float>(value) : 0.0f;
+      }
+    }
+  });
+
+  return LargestComponent(MarchingCubes(grid, options.mask_threshold));
+}
+
+}  // namespace sd::geometry

@@ -24,7 +24,15 @@ struct VisualHullOptions {
   AlignedBox3f bounds;
 };
 
-// Throws InputError when no view is given or a mask's size disagrees with its camera.
+// Throws InputError when no view is given or a mask's size disagrees with its camera (also: a mask with other
+// than 1 channel, non-positive focal lengths, resolution outside [2, 2048], mask_threshold outside (0, 1),
+// bounds flat along an axis).
+// The field at a node is the mask's coverage of the node's footprint (one voxel, projected), so the surface
+// follows the silhouettes to ~0.1 voxel rather than sitting on voxel steps. A node that no view sees is
+// outside; the grid has one forced-outside node layer beyond the bounds, so the mesh is closed and clipped at
+// most half a voxel outside them. Only the connected component enclosing the largest volume is returned:
+// where the bounds leave the views' frusta, regions only a few views see cannot be carved and would otherwise
+// remain as islands. Result: watertight, manifold, outward CCW; positions and faces only.
 TriangleMesh VisualHull(const std::vector<SilhouetteView>& views, const VisualHullOptions& options);
 
 }  // namespace sd::geometry

@@ -1,0 +1,88 @@
+#pragma once
+// Multi-view sets: the normal maps and silhouettes that supervise mesh refinement, their cameras, the
+// Zero123++ v1.2 rig they default to, their folder format, and oracle rendering of a known mesh into them
+// (for evaluation and tests).
+//
+// Frames: world = the object frame the cameras are given in (for the rig: the asset's canonical axes, the
+// object normalised into the unit sphere). Normal maps are kept in memory as unit world-frame normals; on
+// disk they are 8-bit RGB PNGs with rgb = (n + 1) / 2 in the frame `normal_frame` of cameras.json names:
+// "camera" (OpenCV: x right, y down, z forward — what monocular normal estimators predict) or "world".
+//
+// Folder format (`<dir>/cameras.json`, "format": "synthdrive-views/1"):
+//   { "format": "synthdrive-views/1", "normal_frame": "camera",
+//     "views": [ { "name": "view_00", "normals": "normal_00.png", "mask": "mask_00.png",
+//                  "width": 320, "height": 320, "fx": ..., "fy": ..., "cx": ..., "cy": ...,
+//                  "T_world_cam": [[...4x4 row-major...]] }, ... ] }
+// Masks are 8-bit grey PNGs, 255 = object (soft edges allowed). All views of a set have the same size.
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "core/camera.h"
+#include "core/image.h"
+#include "core/mesh.h"
+#include "core/rigid3.h"
+
+namespace sd {
+
+struct ViewCamera {
+  std::string name;
+  PinholeCamera camera;
+  Rigid3d T_world_cam;
+};
+
+struct MultiView {
+  ViewCamera view;
+  ImageF normals;  // 3 channels, unit world-frame normals; (0, 0, 0) outside the object
+  ImageF mask;     // 1 channel, 0..1
+};
+
+using MultiViewSet = std::vector<MultiView>;
+
+// The Zero123++ v1.2 rig (DESIGN.md): 6 views at azimuth 30°, 90°, …, 330° (from +x towards +y, about +z),
+// elevation +20° / -10° alternating, 30° vertical field of view, square images, looking at the origin from
+// kRigDistance with +z up in the image. kRigDistance frames the unit sphere with a small margin
+// (asin(1/4) = 14.5° < 15°).
+constexpr double kRigDistance = 4.0;
+std::vector<ViewCamera> Zero123PlusPlusRig(int image_size = 320);
+// A camera at (azimuth, elevation) in degrees, `distance` from the origin, looking at it, +z up.
+ViewCamera OrbitCamera(const std::string& name, double azimuth_deg, double elevation_deg, double distance,
+                       double vertical_fov_deg, int width, int height);
+
+// Uniform scale + translation that puts the mesh's vertices into the sphere of `radius` about the origin
+// (centre of the bounding box to the origin; farthest vertex at `radius`). p' = scale * (p - centre).
+struct SphereNormalization {
+  Eigen::Vector3f centre = Eigen::Vector3f::Zero();
+  float scale = 1;
+  void Apply(TriangleMesh* mesh) const;
+  void Undo(TriangleMesh* mesh) const;
+};
+SphereNormalization NormalizeIntoSphere(const TriangleMesh& mesh, float radius = 1.0f);
+
+// Reads <dir>/cameras.json and the images it names. InputError naming the file for: missing files,
+// malformed JSON, unknown normal_frame, images whose size disagrees with their camera or with each other,
+// non-positive intrinsics, a non-rigid pose, or no views.
+MultiViewSet LoadViews(const std::filesystem::path& dir);
+// Writes the folder atomically (staging directory); refuses an existing `dir` unless `overwrite`.
+void SaveViews(const MultiViewSet& views, const std::filesystem::path& dir, const std::string& normal_frame,
+               bool overwrite);
+
+// Oracle views of a known mesh: exact geometric (face) normals and coverage masks, anti-aliased by
+// `supersample`² samples per pixel. Rendering can use perturbed cameras (the stored cameras stay nominal)
+// and the images can be degraded, to mimic what a learned normal estimator and segmenter deliver.
+struct OracleDegradation {
+  float blur_sigma_px = 0;        // Gaussian blur of normals and masks
+  float normal_noise = 0;         // per-pixel Gaussian noise on each normal component (then renormalised)
+  float pose_error_deg = 0;       // random rotation of each rendering camera about a random axis
+  float pose_error_translation = 0;  // random camera shift (world units)
+  uint64_t seed = 1;
+  bool Any() const { return blur_sigma_px > 0 || normal_noise > 0 || pose_error_deg > 0 || pose_error_translation > 0; }
+};
+MultiViewSet RenderOracleViews(const TriangleMesh& mesh, const std::vector<ViewCamera>& cameras, int supersample = 2,
+                               const OracleDegradation& degradation = {});
+
+// A false-colour picture of a normal map with its mask (for reports): rgb = (n + 1) / 2, grey background.
+ImageU8 NormalMapPreview(const MultiView& view);
+
+}  // namespace sd

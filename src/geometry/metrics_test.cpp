@@ -101,6 +101,18 @@ TEST(CompareMeshes, OffsetBoxesGiveTheAnalyticIou) {
   EXPECT_EQ(CompareMeshes(far, a, o).volume_iou, 0.0);
 }
 
+// At an odd resolution the middle ray of every axis runs exactly along the faces' diagonals (through the
+// shared edge of two triangles) on both cubes: each voxel must still count exactly one crossing per face.
+TEST(CompareMeshes, RaysAlongSharedEdgesCountOnce) {
+  const TriangleMesh outer = Cube(Eigen::Vector3f::Constant(-0.5f), Eigen::Vector3f::Constant(0.5f));
+  const TriangleMesh inner = Cube(Eigen::Vector3f::Constant(-0.25f), Eigen::Vector3f::Constant(0.25f));
+  GeometryMetricsOptions o;
+  o.num_samples = 1000;
+  o.iou_resolution = 127;
+  // Centres -0.5 + (j + 0.5) / 127: 63 of them inside (-0.25, 0.25) per axis, all 127 inside the outer cube.
+  EXPECT_NEAR(CompareMeshes(inner, outer, o).volume_iou, std::pow(63.0 / 127.0, 3), 1e-12);
+}
+
 TEST(CompareMeshes, MajorityParityToleratesASmallHole) {
   const TriangleMesh gt = Icosphere(4);
   TriangleMesh holed = gt;

@@ -9,6 +9,8 @@
 #include <set>
 #include <unordered_map>
 
+#include "geometry/topology.h"
+
 namespace sd::geometry {
 namespace {
 
@@ -142,6 +144,10 @@ TEST(MarchingCubes, RandomFieldsGiveClosedOrientedManifolds) {
     EXPECT_EQ(m.Validate(), "") << seed;
     const Topology t = CheckTopology(m);
     EXPECT_TRUE(t.closed_oriented_manifold) << "seed " << seed << ": " << t.problem;
+    // The module's own checker agrees.
+    const TopologyReport report = AnalyzeTopology(int(m.NumVertices()), m.faces);
+    EXPECT_TRUE(report.IsWatertight()) << "seed " << seed << ": " << report.Describe();
+    EXPECT_EQ(report.euler_characteristic, t.euler) << seed;
     EXPECT_EQ(t.euler % 2, 0) << seed;  // closed orientable surfaces: chi = 2 (components - genus)
     EXPECT_GT(SignedVolume(m), 0) << seed;
   }

@@ -1,0 +1,331 @@
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <random>
+#include <vector>
+
+#include "raster/raster.h"
+#include "raster/test_util.h"
+
+namespace sd::raster {
+namespace {
+
+// Clip coordinates (w = 1, depth 0) of a point given in pixels.
+void PushPixelVertex(std::vector<float>* clip, double u, double v, int width, int height) {
+  clip->insert(clip->end(), {static_cast<float>(2.0 * u / width - 1.0), static_cast<float>(2.0 * v / height - 1.0),
+                             0.0f, 1.0f});
+}
+
+// 1 where covered, 0 on background: the coverage mask as a colour.
+std::vector<float> CoverageMask(const RasterBuffer& rast) {
+  std::vector<float> mask(rast.NumPixels());
+  for (size_t p = 0; p < mask.size(); ++p) mask[p] = rast.triangle[p] >= 0 ? 1.0f : 0.0f;
+  return mask;
+}
+
+// Two triangles covering the axis-aligned rectangle [u0, u1] x [v0, v1] (pixels).
+struct Quad {
+  std::vector<float> clip;
+  std::vector<int32_t> tris = {0, 1, 2, 0, 2, 3};
+};
+Quad MakeQuad(double u0, double v0, double u1, double v1, int width, int height) {
+  Quad q;
+  PushPixelVertex(&q.clip, u0, v0, width, height);
+  PushPixelVertex(&q.clip, u1, v0, width, height);
+  PushPixelVertex(&q.clip, u1, v1, width, height);
+  PushPixelVertex(&q.clip, u0, v1, width, height);
+  return q;
+}
+
+std::vector<float> AntialiasedMask(const std::vector<float>& clip, const std::vector<int32_t>& tris,
+                                   const EdgeTopology& topology, int width, int height, RasterBuffer* rast,
+                                   AntialiasRecord* record) {
+  Rasterize(clip, tris, width, height, rast);
+  const std::vector<float> mask = CoverageMask(*rast);
+  std::vector<float> out(mask.size());
+  Antialias(mask, 1, *rast, clip, tris, topology, out, record);
+  return out;
+}
+
+// --- topology ----------------------------------------------------------------------------------------------
+
+TEST(BuildEdgeTopology, ClosedMeshQuadAndNonManifoldEdges) {
+  const testing::Mesh sphere = testing::Sphere(6, 9, 1.0f);
+  const EdgeTopology closed = BuildEdgeTopology(sphere.tris, sphere.NumVertices());
+  ASSERT_EQ(closed.neighbour.size(), sphere.tris.size());
+  for (size_t slot = 0; slot < closed.neighbour.size(); ++slot) {
+    const int32_t n = closed.neighbour[slot];
+    ASSERT_GE(n, 0) << "closed mesh has no boundary";
+    // Symmetric: the neighbour lists this triangle back.
+    const int32_t t = static_cast<int32_t>(slot / 3);
+    EXPECT_TRUE(closed.neighbour[3 * n] == t || closed.neighbour[3 * n + 1] == t || closed.neighbour[3 * n + 2] == t);
+  }
+  // Quad 0-1-2-3 split along 0-2: edges v2v0 of triangle 0 and v0v1 of triangle 1 are shared.
+  const EdgeTopology quad = BuildEdgeTopology(std::vector<int32_t>{0, 1, 2, 0, 2, 3}, 4);
+  EXPECT_EQ(quad.neighbour, (std::vector<int32_t>{-1, -1, 1, 0, -1, -1}));
+  // Three triangles on edge 0-1: non-manifold, all treated as boundaries.
+  const EdgeTopology fin = BuildEdgeTopology(std::vector<int32_t>{0, 1, 2, 1, 0, 3, 0, 1, 4}, 5);
+  EXPECT_EQ(fin.neighbour[0], -1);
+  EXPECT_EQ(fin.neighbour[3], -1);
+  EXPECT_EQ(fin.neighbour[6], -1);
+}
+
+// --- forward: analytic coverage ----------------------------------------------------------------------------
+
+// A vertical edge at u = e: the antialiased mask of a row must integrate to exactly e (a box filter of a
+// straight edge is exact), whether the edge lies left or right of the nearest pixel boundary.
+TEST(Antialias, VerticalEdgeRowSumEqualsEdgePosition) {
+  constexpr int kW = 32, kH = 16;
+  for (double edge : {20.0, 20.1, 20.3, 20.5, 20.7, 20.95, 21.25}) {
+    const Quad q = MakeQuad(-4.0, 2.0, edge, 14.0, kW, kH);  // left side off screen: a silhouette only at u = edge
+    const EdgeTopology topology = BuildEdgeTopology(q.tris, 4);
+    RasterBuffer rast;
+    AntialiasRecord record;
+    const std::vector<float> out = AntialiasedMask(q.clip, q.tris, topology, kW, kH, &rast, &record);
+    for (int j = 3; j < 13; ++j) {  // rows away from the top and bottom edges
+      double sum = 0;
+      for (int i = 0; i < kW; ++i) sum += out[j * kW + i];
+      EXPECT_NEAR(sum, edge, 1e-5) << "edge " << edge << " row " << j;
+    }
+  }
+}
+
+// A rotated square: the antialiased mask integrates to its area much more closely than the raw pixel count
+// (the raw count's error is a random walk along the outline; the box-filtered one's is only at corners and
+// for the ~45-degree edges, where a 1D filter along one axis is an approximation).
+TEST(Antialias, RotatedSquareMaskIntegratesToArea) {
+  constexpr int kSize = 96;
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> angle(0, 1.5), offset(-3, 3);
+  double worst_aa = 0, worst_raw = 0;
+  for (int trial = 0; trial < 10; ++trial) {
+    const double a = angle(rng), half = 25.0, cu = 48 + offset(rng), cv = 48 + offset(rng);
+    std::vector<float> clip;
+    for (int k = 0; k < 4; ++k) {
+      const double phi = a + k * 3.14159265358979 / 2;
+      PushPixelVertex(&clip, cu + half * std::sqrt(2.0) * std::cos(phi), cv + half * std::sqrt(2.0) * std::sin(phi),
+                      kSize, kSize);
+    }
+    const std::vector<int32_t> tris = {0, 1, 2, 0, 2, 3};
+    const EdgeTopology topology = BuildEdgeTopology(tris, 4);
+    RasterBuffer rast;
+    AntialiasRecord record;
+    const std::vector<float> out = AntialiasedMask(clip, tris, topology, kSize, kSize, &rast, &record);
+    double sum = 0, raw = 0;
+    for (size_t p = 0; p < out.size(); ++p) sum += out[p], raw += rast.triangle[p] >= 0;
+    const double area = 4 * half * half;
+    worst_aa = std::max(worst_aa, std::abs(sum - area)), worst_raw = std::max(worst_raw, std::abs(raw - area));
+    EXPECT_NEAR(sum, area, 0.004 * area) << "trial " << trial;
+    for (float o : out) ASSERT_TRUE(o >= 0.0f && o <= 1.0f);
+  }
+  std::printf("worst |sum - area|: antialiased %.2f px, raw count %.2f px (area 2500)\n", worst_aa, worst_raw);
+}
+
+// An internal (non-silhouette) edge between two triangles facing the same way is never blended, and pairs
+// with the same triangle are never examined: a quad filling the image is left untouched.
+TEST(Antialias, InteriorEdgesAreNotBlended) {
+  constexpr int kSize = 16;
+  const Quad q = MakeQuad(-2, -2, 18, 18, kSize, kSize);
+  const EdgeTopology topology = BuildEdgeTopology(q.tris, 4);
+  RasterBuffer rast;
+  Rasterize(q.clip, q.tris, kSize, kSize, &rast);
+  std::vector<float> color(rast.NumPixels());
+  for (size_t p = 0; p < color.size(); ++p) color[p] = static_cast<float>(rast.triangle[p]);  // differs across diagonal
+  std::vector<float> out(color.size());
+  AntialiasRecord record;
+  Antialias(color, 1, rast, q.clip, q.tris, topology, out, &record);
+  EXPECT_TRUE(record.pairs.empty());
+  EXPECT_EQ(out, color);
+}
+
+// --- backward ----------------------------------------------------------------------------------------------
+
+struct SphereView {
+  testing::Mesh mesh;
+  EdgeTopology topology;
+  std::vector<float> clip;
+  RasterBuffer rast;
+  std::vector<float> color;  // 3 channels, interpolated random vertex colours
+};
+
+SphereView MakeSphereView(int size, uint32_t seed) {
+  SphereView s;
+  s.mesh = testing::Sphere(8, 14, 1.0f, 0.2f, seed);  // bumpy: folds add silhouette edges inside the outline
+  s.topology = BuildEdgeTopology(s.mesh.tris, s.mesh.NumVertices());
+  std::mt19937 rng(seed);
+  const PinholeCamera cam = testing::SquareCamera(size, 0.8);
+  s.clip = testing::ToClip(s.mesh.positions, ClipFromWorld(cam, testing::LookAtOrigin(rng, 3.0), 0.5f, 6.f));
+  Rasterize(s.clip, s.mesh.tris, size, size, &s.rast);
+  std::uniform_real_distribution<float> unit(0, 1);
+  std::vector<float> vertex_color(3 * s.mesh.NumVertices());
+  for (float& c : vertex_color) c = unit(rng);
+  s.color.resize(3 * s.rast.NumPixels());
+  Interpolate(vertex_color, 3, s.mesh.tris, s.rast, s.color);
+  return s;
+}
+
+bool SamePairs(const AntialiasRecord& x, const AntialiasRecord& y) {
+  if (x.pairs.size() != y.pairs.size()) return false;
+  for (size_t n = 0; n < x.pairs.size(); ++n) {
+    const auto &p = x.pairs[n], &q = y.pairs[n];
+    if (p.pixel_a != q.pixel_a || p.pixel_b != q.pixel_b || p.triangle != q.triangle || p.edge != q.edge) return false;
+  }
+  return true;
+}
+
+// A pair whose crossing t is within the perturbation of 1/2: alpha = |t - 1/2| has a kink there (the
+// receiving pixel switches), where a central difference averages two different one-sided derivatives.
+bool CrossesHalf(const AntialiasRecord& base, const AntialiasRecord& plus, const AntialiasRecord& minus) {
+  for (size_t n = 0; n < base.pairs.size(); ++n) {
+    // Away from the kink the forward and backward changes agree to second order; across it they differ by
+    // up to the whole step.
+    const double a = base.pairs[n].alpha, up = plus.pairs[n].alpha - a, down = a - minus.pairs[n].alpha;
+    if (a < 1e-2 && std::abs(up - down) > 0.1 * std::max(std::abs(up), std::abs(down))) return true;
+  }
+  return false;
+}
+
+// The geometry gradient against central differences of L = sum w . out with the raster buffer and colours
+// held fixed (they are inputs of Antialias; their own derivatives are RasterizeBackward's and
+// InterpolateBackward's business). How silhouette pixels are handled: at fixed raster buffer, out is a
+// smooth function of the clip positions as long as the set of blended pairs is the same, since each alpha
+// is |t - 1/2| with t the edge's crossing of the pixel pair. A perturbation that makes an edge enter or leave
+// a pair (crossing leaving [0, 1] along either segment, or a neighbour's facing flipping) is a jump, and a
+// crossing passing t = 1/2 is a kink: such coordinates are skipped (and counted, so the test cannot pass by
+// skipping everything). Step h = 3e-4 clip units (~0.003 px), from measurements: the error (relative to
+// 1 + |fd|) was ~1e-4 at this step, ~4e-4 at 1e-4 (float rounding of the outputs, growing as 1/h) and up
+// to 1e-2 at 1e-3 (kinks and jumps not caught by the filters above). Tolerance 2e-3 * (1 + |fd|).
+TEST(AntialiasBackward, GeometryGradientMatchesFiniteDifferences) {
+  constexpr int kSize = 64;
+  for (uint32_t seed : {1u, 2u, 3u}) {
+    const SphereView s = MakeSphereView(kSize, seed);
+    std::mt19937 rng(100 + seed);
+    std::uniform_real_distribution<float> unit(-1, 1);
+    std::vector<float> weights(s.color.size());
+    for (float& w : weights) w = unit(rng);
+    auto run = [&](const std::vector<float>& clip, AntialiasRecord* record) {
+      std::vector<float> out(s.color.size());
+      Antialias(s.color, 3, s.rast, clip, s.mesh.tris, s.topology, out, record);
+      double l = 0;
+      for (size_t n = 0; n < out.size(); ++n) l += double(weights[n]) * out[n];
+      return l;
+    };
+    AntialiasRecord record;
+    run(s.clip, &record);
+    ASSERT_GT(record.pairs.size(), 100u) << "the silhouette should cross many pixel pairs";
+    std::vector<float> grad_color(s.color.size(), 0.0f), grad_clip(s.clip.size(), 0.0f);
+    AntialiasBackward(s.color, 3, s.rast, s.clip, s.mesh.tris, s.topology, record, weights, grad_color, grad_clip);
+
+    const float h = 3e-4f;
+    int checked = 0, nonzero = 0, skipped = 0;
+    double max_err = 0;
+    for (size_t n = 0; n < s.clip.size(); ++n) {
+      std::vector<float> plus = s.clip, minus = s.clip;
+      plus[n] += h, minus[n] -= h;
+      AntialiasRecord rec_plus, rec_minus;
+      const double l_plus = run(plus, &rec_plus), l_minus = run(minus, &rec_minus);
+      if (!SamePairs(rec_plus, record) || !SamePairs(rec_minus, record) || CrossesHalf(record, rec_plus, rec_minus)) {
+        ++skipped;
+        continue;
+      }
+      const double fd = (l_plus - l_minus) / (double(plus[n]) - minus[n]);
+      const double err = std::abs(grad_clip[n] - fd) / (1 + std::abs(fd));
+      max_err = std::max(max_err, err);
+      EXPECT_LE(err, 2e-3) << "seed " << seed << " coordinate " << n << " analytic " << grad_clip[n] << " fd " << fd;
+      ++checked;
+      nonzero += std::abs(fd) > 1e-3;
+    }
+    EXPECT_GT(nonzero, 20) << "too few coordinates move the silhouette";
+    EXPECT_LT(skipped, checked / 10 + 2);
+    std::printf("seed %u: %zu pairs, %d coordinates checked (%d with non-zero gradient), %d skipped, max err %.2e\n",
+                seed, record.pairs.size(), checked, nonzero, skipped, max_err);
+  }
+}
+
+// The colour gradient: out is linear in the colours at fixed geometry, so FD is exact up to float rounding.
+TEST(AntialiasBackward, ColorGradientMatchesFiniteDifferences) {
+  constexpr int kSize = 24;
+  const SphereView s = MakeSphereView(kSize, 4);
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> unit(-1, 1);
+  std::vector<float> weights(s.color.size());
+  for (float& w : weights) w = unit(rng);
+  auto loss = [&](const std::vector<float>& color) {
+    std::vector<float> out(color.size());
+    AntialiasRecord record;
+    Antialias(color, 3, s.rast, s.clip, s.mesh.tris, s.topology, out, &record);
+    double l = 0;
+    for (size_t n = 0; n < out.size(); ++n) l += double(weights[n]) * out[n];
+    return l;
+  };
+  AntialiasRecord record;
+  std::vector<float> out(s.color.size());
+  Antialias(s.color, 3, s.rast, s.clip, s.mesh.tris, s.topology, out, &record);
+  std::vector<float> grad_color(s.color.size(), 0.0f), grad_clip(s.clip.size(), 0.0f);
+  AntialiasBackward(s.color, 3, s.rast, s.clip, s.mesh.tris, s.topology, record, weights, grad_color, grad_clip);
+  const float h = 1e-2f;
+  for (size_t n = 0; n < s.color.size(); ++n) {
+    std::vector<float> plus = s.color, minus = s.color;
+    plus[n] += h, minus[n] -= h;
+    const double fd = (loss(plus) - loss(minus)) / (2.0 * h);
+    ASSERT_NEAR(grad_color[n], fd, 1e-3 * (1 + std::abs(fd))) << n;
+  }
+}
+
+// --- gradient descent: the outline moves ---------------------------------------------------------------------
+
+// A 1-channel coverage mask of a square, antialiased, L2 against the antialiased mask of the same square
+// shifted by (1.5, 1.0) px. Plain gradient descent on the 4 vertices' positions must bring the square onto
+// the target; the only gradient to the geometry is the antialiasing one (a coverage mask has no gradient
+// through the barycentrics), so this proves that the outline moves the right way.
+TEST(Antialias, GradientDescentMovesSquareOntoShiftedTarget) {
+  constexpr int kSize = 48;
+  const std::vector<int32_t> tris = {0, 1, 2, 0, 2, 3};
+  const EdgeTopology topology = BuildEdgeTopology(tris, 4);
+  const double shift_u = 1.5, shift_v = 1.0;
+  const Quad target_quad = MakeQuad(14.3 + shift_u, 12.6 + shift_v, 33.8 + shift_u, 31.2 + shift_v, kSize, kSize);
+  RasterBuffer rast;
+  AntialiasRecord record;
+  const std::vector<float> target = AntialiasedMask(target_quad.clip, tris, topology, kSize, kSize, &rast, &record);
+
+  Quad q = MakeQuad(14.3, 12.6, 33.8, 31.2, kSize, kSize);
+  auto loss_and_gradient = [&](std::vector<float>* grad_clip) {
+    const std::vector<float> out = AntialiasedMask(q.clip, tris, topology, kSize, kSize, &rast, &record);
+    std::vector<float> grad_out(out.size());
+    double loss = 0;
+    for (size_t p = 0; p < out.size(); ++p) {
+      loss += (out[p] - target[p]) * (out[p] - target[p]);
+      grad_out[p] = 2 * (out[p] - target[p]);
+    }
+    const std::vector<float> mask = CoverageMask(rast);
+    std::vector<float> grad_color(mask.size(), 0.0f);
+    grad_clip->assign(q.clip.size(), 0.0f);
+    AntialiasBackward(mask, 1, rast, q.clip, tris, topology, record, grad_out, grad_color, *grad_clip);
+    return loss;
+  };
+  std::vector<float> grad_clip;
+  const double initial_loss = loss_and_gradient(&grad_clip);
+  // Step in pixels: du = -rate * dL/du, where dL/du = dL/dx * 2/W (w = 1). Each vertex sits on two edges
+  // ~20 px long, so dL/du is ~20 x the per-row error: rate 0.02 moves ~0.4 px per step at first.
+  const double rate = 0.02, px_per_clip = kSize / 2.0;
+  double loss = initial_loss;
+  for (int step = 0; step < 60; ++step) {
+    for (int v = 0; v < 4; ++v)
+      for (int c = 0; c < 2; ++c) {
+        const double dL_dpx = grad_clip[4 * v + c] / px_per_clip;
+        q.clip[4 * v + c] -= static_cast<float>(rate * dL_dpx / px_per_clip);
+      }
+    loss = loss_and_gradient(&grad_clip);
+  }
+  std::printf("loss %.4f -> %.6f\n", initial_loss, loss);
+  EXPECT_LT(loss, 1e-3 * initial_loss);
+  for (int v = 0; v < 4; ++v) {
+    EXPECT_NEAR(q.clip[4 * v], target_quad.clip[4 * v], 0.05 / px_per_clip) << "vertex " << v << " u";
+    EXPECT_NEAR(q.clip[4 * v + 1], target_quad.clip[4 * v + 1], 0.05 / px_per_clip) << "vertex " << v << " v";
+  }
+}
+
+}  // namespace
+}  // namespace sd::raster

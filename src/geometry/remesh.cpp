@@ -1,1 +1,573 @@
 #include "geometry/remesh.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <numeric>
+
+#include <Eigen/Geometry>
+
+#include "core/error.h"
+#include "core/parallel.h"
+#include "geometry/topology.h"
+
+namespace sd::geometry {
+namespace {
+
+// Face quality floor for the results of collapses and flips: |cross| / (longest edge)^2 of a new face must
+// stay above this (equilateral: 0.87; 0.05 is a smallest angle of about 3 degrees). Keeps slivers out.
+constexpr float kMinQuality = 0.05f;
+// A face's normal may turn by at most ~75 degrees (cos 0.25) in one collapse / flip: anything more is
+// treated as a fold-over in the making.
+constexpr float kMinNormalCos = 0.25f;
+// The first steps ramp the learning rate up over 1 / (1 - beta1) steps, while the moment estimates are
+// still dominated by single gradients.
+constexpr float kRampSteps = 1.0f;
+constexpr float kEps = 1e-20f;
+
+inline int Next(int h) { return h % 3 == 2 ? h - 2 : h + 1; }
+inline int Prev(int h) { return h % 3 == 0 ? h + 2 : h - 1; }
+
+// Per-vertex data that follows vertices through remeshing.
+struct VertexData {
+  std::vector<Eigen::Vector3f>* positions;
+  std::vector<Eigen::Vector3f>* m1;
+  std::vector<float>* m2;
+  std::vector<Eigen::Vector3f>* velocity;
+  std::vector<float>* target;
+
+  int AddMidpoint(int a, int b) {
+    const int v = static_cast<int>(positions->size());
+    positions->push_back(0.5f * ((*positions)[a] + (*positions)[b]));
+    m1->push_back(0.5f * ((*m1)[a] + (*m1)[b]));
+    m2->push_back(0.5f * ((*m2)[a] + (*m2)[b]));
+    velocity->push_back(0.5f * ((*velocity)[a] + (*velocity)[b]));
+    target->push_back(0.5f * ((*target)[a] + (*target)[b]));
+    return v;
+  }
+  // b merges into a; a takes the midpoint and the average state.
+  void Merge(int a, int b, const Eigen::Vector3f& p) {
+    (*positions)[a] = p;
+    (*m1)[a] = 0.5f * ((*m1)[a] + (*m1)[b]);
+    (*m2)[a] = 0.5f * ((*m2)[a] + (*m2)[b]);
+    (*velocity)[a] = 0.5f * ((*velocity)[a] + (*velocity)[b]);
+    (*target)[a] = 0.5f * ((*target)[a] + (*target)[b]);
+  }
+};
+
+float Quality(const Eigen::Vector3f& a, const Eigen::Vector3f& b, const Eigen::Vector3f& c, Eigen::Vector3f* n) {
+  *n = (b - a).cross(c - a);
+  const float longest = std::max({(b - a).squaredNorm(), (c - b).squaredNorm(), (a - c).squaredNorm()});
+  return longest > 0 ? n->norm() / longest : 0.0f;
+}
+
+// cos(before, after) > kMinNormalCos, without square roots (this runs for every face of every relaxed vertex).
+bool NormalKept(const Eigen::Vector3f& before, const Eigen::Vector3f& after) {
+  const float dot = before.dot(after);
+  return dot > 0 && dot * dot > kMinNormalCos * kMinNormalCos * before.squaredNorm() * after.squaredNorm();
+}
+
+// Half-edge view of an oriented manifold triangle mesh: half-edge h = 3 f + k runs from corner k to
+// corner k+1 of face f; opp[h] is its twin (-1 on the boundary). Boundary edges are frozen: no operation
+// splits, collapses or flips them or moves a boundary vertex, so the boundary is kept exactly and every
+// boundary vertex keeps its one outgoing boundary half-edge, which `out` points to (ring walks start there).
+class HalfEdgeMesh {
+ public:
+  HalfEdgeMesh(std::vector<Eigen::Vector3i>* faces, VertexData data, const RemeshOptions& options)
+      : F_(*faces), data_(data), P_(*data.positions), T_(*data.target), options_(options) {
+    const int nv = static_cast<int>(P_.size());
+    const int nf = static_cast<int>(F_.size());
+    opp_.assign(3 * nf, -1);
+    out_.assign(nv, -1);
+    boundary_.assign(nv, 0);
+    valence_.assign(nv, 0);
+    face_dead_.assign(nf, 0);
+    vert_dead_.assign(nv, 0);
+    // Twins by a counting sort of half-edges on their smaller endpoint: linear, and buckets hold only the
+    // few edges of one vertex, so matching inside a bucket is cheap.
+    std::vector<int> start(nv + 1, 0);
+    for (int h = 0; h < 3 * nf; ++h) ++start[std::min(From(h), To(h)) + 1];
+    std::partial_sum(start.begin(), start.end(), start.begin());
+    std::vector<int> bucket(3 * nf), fill(start.begin(), start.end() - 1);
+    for (int h = 0; h < 3 * nf; ++h) bucket[fill[std::min(From(h), To(h))]++] = h;
+    for (int v = 0; v < nv; ++v) {
+      for (int i = start[v]; i < start[v + 1]; ++i) {
+        const int h = bucket[i];
+        if (opp_[h] >= 0) continue;
+        for (int j = i + 1; j < start[v + 1]; ++j) {
+          const int g = bucket[j];
+          if (opp_[g] < 0 && From(g) == To(h) && To(g) == From(h)) {
+            opp_[h] = g;
+            opp_[g] = h;
+            break;
+          }
+        }
+      }
+    }
+    for (int h = 0; h < 3 * nf; ++h) {
+      const int v = From(h);
+      ++valence_[v];  // faces around v for now
+      if (opp_[h] < 0) {
+        boundary_[v] = 1;
+        out_[v] = h;
+      } else if (out_[v] < 0) {
+        out_[v] = h;
+      }
+    }
+    for (int v = 0; v < nv; ++v) valence_[v] += boundary_[v];  // neighbours = faces (+1 on a boundary)
+  }
+
+  int From(int h) const { return F_[h / 3][h % 3]; }
+  int To(int h) const { return F_[h / 3][(h % 3 + 1) % 3]; }
+
+  // Calls fn(h) for each outgoing half-edge of v, in rotation order.
+  template <typename Fn>
+  void ForEachOutgoing(int v, Fn&& fn) const {
+    const int h0 = out_[v];
+    if (h0 < 0) return;
+    int h = h0;
+    do {
+      fn(h);
+      h = opp_[Prev(h)];
+    } while (h >= 0 && h != h0);
+  }
+  // Neighbour vertices of v (the extra last one on a boundary).
+  void Neighbours(int v, std::vector<int>* out) const {
+    out->clear();
+    int last = -1;
+    ForEachOutgoing(v, [&](int h) {
+      out->push_back(To(h));
+      last = h;
+    });
+    if (boundary_[v] && last >= 0) out->push_back(From(Prev(last)));
+  }
+
+  float EdgeTarget(int a, int b) const { return 0.5f * (T_[a] + T_[b]); }
+  float Length(int h) const { return (P_[To(h)] - P_[From(h)]).norm(); }
+  bool InteriorEdge(int h) const { return opp_[h] >= 0; }
+
+  // --- Collapse -------------------------------------------------------------------------------------------
+  void CollapseShortEdges() {
+    const float tol = options_.edge_length_tolerance;
+    std::vector<std::pair<float, int>> candidates;
+    for (int h = 0; h < static_cast<int>(opp_.size()); ++h) {
+      if (!InteriorEdge(h) || opp_[h] < h) continue;
+      const int a = From(h), b = To(h);
+      if (boundary_[a] || boundary_[b]) continue;
+      const float len = Length(h);
+      if (len < (1 - tol) * EdgeTarget(a, b)) candidates.emplace_back(len, h);
+    }
+    std::sort(candidates.begin(), candidates.end());
+    for (const auto& [len, h] : candidates) {
+      if (face_dead_[h / 3] || !InteriorEdge(h)) continue;
+      const int a = From(h), b = To(h);
+      if (boundary_[a] || boundary_[b]) continue;
+      // Earlier collapses may have moved the ends: re-test against the current lengths.
+      if (Length(h) >= (1 - tol) * EdgeTarget(a, b)) continue;
+      TryCollapse(h);
+    }
+  }
+
+  // Collapses half-edge h = a -> b (b merges into a, at the midpoint) when that keeps the mesh manifold,
+  // free of fold-overs and slivers, and does not create edges that would immediately be split again.
+  bool TryCollapse(int h) {
+    const int g = opp_[h];
+    const int a = From(h), b = To(h);
+    const int c = From(Prev(h)), d = From(Prev(g));  // apexes of the two faces of edge a-b
+    // Link condition: a and b may share exactly the neighbours c and d, else the collapse pinches the
+    // surface into a non-manifold edge or vertex. c and d lose one neighbour and must keep three, else
+    // two faces end up on the same three vertices (e.g. a tetrahedron collapsing into a double triangle).
+    if (c == d || valence_[c] <= 3 || valence_[d] <= 3) return false;
+    Neighbours(a, &ring_a_);
+    Neighbours(b, &ring_b_);
+    int shared = 0;
+    for (int x : ring_a_) {
+      if (std::find(ring_b_.begin(), ring_b_.end(), x) != ring_b_.end()) ++shared;
+    }
+    if (shared != 2) return false;
+    // Very high valences make needle triangles that no flip can repair in one pass.
+    if (valence_[a] + valence_[b] - 4 > 12) return false;
+
+    const Eigen::Vector3f p = 0.5f * (P_[a] + P_[b]);
+    const float t_new = 0.5f * (T_[a] + T_[b]);
+    const float max_len = 1 + options_.edge_length_tolerance;
+    const int fa = h / 3, fb = g / 3;
+    // Every face around a or b other than the two removed ones gets p for a or b.
+    bool ok = true;
+    auto check_faces_of = [&](int v) {
+      ForEachOutgoing(v, [&](int e) {
+        const int f = e / 3;
+        if (!ok || f == fa || f == fb) return;
+        const Eigen::Vector3f& q1 = P_[To(e)];
+        const Eigen::Vector3f& q2 = P_[From(Prev(e))];
+        const Eigen::Vector3f before = (q1 - P_[v]).cross(q2 - P_[v]);
+        Eigen::Vector3f after;
+        if (Quality(p, q1, q2, &after) < kMinQuality || !NormalKept(before, after)) ok = false;
+        if ((q1 - p).norm() > max_len * 0.5f * (t_new + T_[To(e)])) ok = false;
+      });
+    };
+    check_faces_of(a);
+    check_faces_of(b);
+    if (!ok) return false;
+
+    // Faces around b (except the two removed) now use a.
+    ForEachOutgoing(b, [&](int e) {
+      const int f = e / 3;
+      if (f != fa && f != fb) F_[f][e % 3] = a;
+    });
+    // Stitch the twins across each removed face: in face (a, b, c), c -> b's twin (now c -> a) pairs with
+    // a -> c's twin; likewise in (b, a, d).
+    const int hb_c = Next(h), hc_a = Prev(h);   // b->c, c->a in face fa
+    const int ha_d = Next(g), hd_b = Prev(g);   // a->d, d->b in face fb
+    const int o_cb = opp_[hb_c], o_ac = opp_[hc_a], o_da = opp_[ha_d], o_bd = opp_[hd_b];
+    Link(o_cb, o_ac);
+    Link(o_da, o_bd);
+    for (int e = 3 * fa; e < 3 * fa + 3; ++e) opp_[e] = -1;
+    for (int e = 3 * fb; e < 3 * fb + 3; ++e) opp_[e] = -1;
+    face_dead_[fa] = face_dead_[fb] = 1;
+    vert_dead_[b] = 1;
+    out_[b] = -1;
+    out_[a] = o_ac;  // a -> c
+    if (!boundary_[c]) out_[c] = o_cb;  // c -> a; a boundary c keeps its boundary half-edge (not in fa)
+    if (!boundary_[d]) out_[d] = o_da;
+    valence_[a] += valence_[b] - 4;
+    --valence_[c];
+    --valence_[d];
+    data_.Merge(a, b, p);
+    return true;
+  }
+
+  // --- Split ----------------------------------------------------------------------------------------------
+  void SplitLongEdges() {
+    const float tol = options_.edge_length_tolerance;
+    std::vector<std::pair<float, int>> candidates;
+    for (int h = 0; h < static_cast<int>(opp_.size()); ++h) {
+      if (face_dead_[h / 3] || !InteriorEdge(h) || opp_[h] < h) continue;
+      const float len = Length(h);
+      if (len > (1 + tol) * EdgeTarget(From(h), To(h))) candidates.emplace_back(-len, h);
+    }
+    std::sort(candidates.begin(), candidates.end());  // longest first
+    // One split per face and pass: the candidates' half-edge ids stay valid, and the next Remesh() call
+    // continues where this one stopped.
+    // Faces created by this pass (index >= num_faces) count as touched.
+    const int num_faces = static_cast<int>(F_.size());
+    std::vector<char> touched(num_faces, 0);
+    auto is_touched = [&](int f) { return f >= num_faces || touched[f]; };
+    for (const auto& [neg_len, h] : candidates) {
+      const int g = opp_[h];
+      if (is_touched(h / 3) || is_touched(g / 3)) continue;
+      touched[h / 3] = touched[g / 3] = 1;
+      Split(h);
+    }
+  }
+
+  // Splits interior half-edge h = a -> b at its midpoint m: faces (a, b, c), (b, a, d) become (a, m, c),
+  // (m, b, c), (b, m, d), (m, a, d). The pieces are coplanar with the faces they replace: no fold-over.
+  void Split(int h) {
+    const int g = opp_[h];
+    const int a = From(h), b = To(h), c = From(Prev(h)), d = From(Prev(g));
+    const int o_bc = opp_[Next(h)], o_ca = opp_[Prev(h)], o_ad = opp_[Next(g)], o_db = opp_[Prev(g)];
+    const int m = data_.AddMidpoint(a, b);
+    out_.push_back(-1);
+    boundary_.push_back(0);
+    valence_.push_back(4);
+    vert_dead_.push_back(0);
+    const int f0 = h / 3, f1 = g / 3;
+    const int f2 = AddFace(), f3 = AddFace();
+    F_[f0] = Eigen::Vector3i(a, m, c);
+    F_[f2] = Eigen::Vector3i(m, b, c);
+    F_[f1] = Eigen::Vector3i(b, m, d);
+    F_[f3] = Eigen::Vector3i(m, a, d);
+    Link(3 * f0 + 0, 3 * f3 + 0);  // a->m | m->a
+    Link(3 * f0 + 1, 3 * f2 + 2);  // m->c | c->m
+    Link(3 * f0 + 2, o_ca);        // c->a
+    Link(3 * f2 + 0, 3 * f1 + 0);  // m->b | b->m
+    Link(3 * f2 + 1, o_bc);        // b->c
+    Link(3 * f1 + 1, 3 * f3 + 2);  // m->d | d->m
+    Link(3 * f1 + 2, o_db);        // d->b
+    Link(3 * f3 + 1, o_ad);        // a->d
+    SetOut(a, 3 * f0 + 0);
+    SetOut(b, 3 * f2 + 1);
+    SetOut(c, 3 * f0 + 2);
+    SetOut(d, 3 * f1 + 2);
+    out_[m] = 3 * f0 + 1;
+    ++valence_[c];
+    ++valence_[d];
+  }
+
+  // --- Flip -----------------------------------------------------------------------------------------------
+  // Flips interior edges when that brings the four vertices' valences closer to 6 (4 on the boundary).
+  void FlipEdges() {
+    const int num_half_edges = static_cast<int>(opp_.size());
+    for (int h = 0; h < num_half_edges; ++h) {
+      if (face_dead_[h / 3] || !InteriorEdge(h) || opp_[h] < h) continue;
+      TryFlip(h);
+    }
+  }
+
+  bool TryFlip(int h) {
+    const int g = opp_[h];
+    const int a = From(h), b = To(h), c = From(Prev(h)), d = From(Prev(g));
+    if (c == d) return false;
+    auto ideal = [&](int v) { return boundary_[v] ? 4 : 6; };
+    auto dev = [&](int v, int delta) { return std::abs(valence_[v] + delta - ideal(v)); };
+    const int before = dev(a, 0) + dev(b, 0) + dev(c, 0) + dev(d, 0);
+    const int after = dev(a, -1) + dev(b, -1) + dev(c, 1) + dev(d, 1);
+    if (after >= before) return false;
+    // a and b lose a neighbour: an interior vertex needs 3, a boundary one 2.
+    if (valence_[a] - 1 < 3 - boundary_[a] || valence_[b] - 1 < 3 - boundary_[b]) return false;
+    // The new edge c-d must not exist yet (else the flip duplicates an edge: non-manifold).
+    bool exists = false;
+    ForEachOutgoing(c, [&](int e) { exists = exists || To(e) == d; });
+    if (!exists && boundary_[c]) {
+      int last = -1;
+      ForEachOutgoing(c, [&](int e) { last = e; });
+      exists = last >= 0 && From(Prev(last)) == d;
+    }
+    if (exists) return false;
+    // New faces (c, a, d), (d, b, c): non-degenerate, and neither folds over against the old pair.
+    const Eigen::Vector3f n_old = (P_[b] - P_[a]).cross(P_[c] - P_[a]) + (P_[a] - P_[b]).cross(P_[d] - P_[b]);
+    Eigen::Vector3f n0, n1;
+    if (Quality(P_[c], P_[a], P_[d], &n0) < kMinQuality || Quality(P_[d], P_[b], P_[c], &n1) < kMinQuality) {
+      return false;
+    }
+    if (!NormalKept(n_old, n0) || !NormalKept(n_old, n1) || n0.dot(n1) <= 0) return false;
+
+    const int o_bc = opp_[Next(h)], o_ca = opp_[Prev(h)], o_ad = opp_[Next(g)], o_db = opp_[Prev(g)];
+    const int f0 = h / 3, f1 = g / 3;
+    F_[f0] = Eigen::Vector3i(c, a, d);
+    F_[f1] = Eigen::Vector3i(d, b, c);
+    Link(3 * f0 + 0, o_ca);
+    Link(3 * f0 + 1, o_ad);
+    Link(3 * f1 + 0, o_db);
+    Link(3 * f1 + 1, o_bc);
+    Link(3 * f0 + 2, 3 * f1 + 2);  // d->c | c->d
+    SetOut(a, 3 * f0 + 1);
+    SetOut(b, 3 * f1 + 1);
+    SetOut(c, 3 * f0 + 0);
+    SetOut(d, 3 * f1 + 0);
+    --valence_[a];
+    --valence_[b];
+    ++valence_[c];
+    ++valence_[d];
+    return true;
+  }
+
+  // --- Tangential smoothing -------------------------------------------------------------------------------
+  // Moves each interior vertex a fraction `gain` towards its neighbours' centroid, within its tangent plane
+  // (the normal part would shrink the surface). A move that would turn an incident face by too much is
+  // dropped.
+  void SmoothTangentially(float gain) {
+    if (gain <= 0) return;
+    const size_t nv = P_.size();
+    std::vector<Eigen::Vector3f> moved(P_);
+    ParallelForRange(0, nv, 256, [&](size_t begin, size_t end) {
+      for (size_t vi = begin; vi < end; ++vi) {
+        const int v = static_cast<int>(vi);
+        if (vert_dead_[v] || boundary_[v] || out_[v] < 0) continue;
+        Eigen::Vector3f centroid = Eigen::Vector3f::Zero(), normal = Eigen::Vector3f::Zero();
+        int count = 0;
+        ForEachOutgoing(v, [&](int e) {
+          const Eigen::Vector3f& q1 = P_[To(e)];
+          centroid += q1;
+          normal += (q1 - P_[v]).cross(P_[From(Prev(e))] - P_[v]);
+          ++count;
+        });
+        if (count == 0 || normal.squaredNorm() <= 0) continue;
+        normal.normalize();
+        Eigen::Vector3f delta = centroid / static_cast<float>(count) - P_[v];
+        delta -= normal * normal.dot(delta);
+        const Eigen::Vector3f p = P_[v] + gain * delta;
+        bool ok = true;
+        ForEachOutgoing(v, [&](int e) {
+          const Eigen::Vector3f& q1 = P_[To(e)];
+          const Eigen::Vector3f& q2 = P_[From(Prev(e))];
+          const Eigen::Vector3f before = (q1 - P_[v]).cross(q2 - P_[v]);
+          const Eigen::Vector3f after = (q1 - p).cross(q2 - p);
+          if (!NormalKept(before, after)) ok = false;
+        });
+        if (ok) moved[v] = p;
+      }
+    });
+    P_ = std::move(moved);
+  }
+
+  // Drops dead faces and dead or unreferenced vertices; vertex data arrays are compacted alike.
+  void Compact() {
+    const int nv = static_cast<int>(P_.size());
+    std::vector<int> remap(nv, -1);
+    std::vector<char> used(nv, 0);
+    for (size_t f = 0; f < F_.size(); ++f) {
+      if (!face_dead_[f]) used[F_[f][0]] = used[F_[f][1]] = used[F_[f][2]] = 1;
+    }
+    int n = 0;
+    for (int v = 0; v < nv; ++v) {
+      if (!used[v]) continue;
+      remap[v] = n;
+      P_[n] = P_[v];
+      (*data_.m1)[n] = (*data_.m1)[v];
+      (*data_.m2)[n] = (*data_.m2)[v];
+      (*data_.velocity)[n] = (*data_.velocity)[v];
+      T_[n] = T_[v];
+      ++n;
+    }
+    P_.resize(n);
+    data_.m1->resize(n);
+    data_.m2->resize(n);
+    data_.velocity->resize(n);
+    T_.resize(n);
+    size_t nf = 0;
+    for (size_t f = 0; f < F_.size(); ++f) {
+      if (face_dead_[f]) continue;
+      F_[nf++] = Eigen::Vector3i(remap[F_[f][0]], remap[F_[f][1]], remap[F_[f][2]]);
+    }
+    F_.resize(nf);
+  }
+
+ private:
+  void Link(int x, int y) {
+    if (x >= 0) opp_[x] = y;
+    if (y >= 0) opp_[y] = x;
+    // A half-edge without twin is its start vertex's boundary half-edge: the ring walk must start there.
+    if (x >= 0 && y < 0) out_[From(x)] = x;
+  }
+  // Interior vertices may start their ring anywhere; boundary ones keep their boundary half-edge.
+  void SetOut(int v, int h) {
+    if (!boundary_[v]) out_[v] = h;
+  }
+  int AddFace() {
+    F_.emplace_back(0, 0, 0);
+    face_dead_.push_back(0);
+    opp_.insert(opp_.end(), 3, -1);
+    return static_cast<int>(F_.size()) - 1;
+  }
+
+  std::vector<Eigen::Vector3i>& F_;
+  VertexData data_;
+  std::vector<Eigen::Vector3f>& P_;
+  std::vector<float>& T_;
+  const RemeshOptions& options_;
+  std::vector<int> opp_, out_, valence_;
+  std::vector<char> boundary_, face_dead_, vert_dead_;
+  std::vector<int> ring_a_, ring_b_;
+};
+
+}  // namespace
+
+ContinuousRemesher::ContinuousRemesher(std::vector<Eigen::Vector3f> positions, std::vector<Eigen::Vector3i> faces,
+                                       const RemeshOptions& options)
+    : options_(options), positions_(std::move(positions)), faces_(std::move(faces)) {
+  if (positions_.empty() || faces_.empty()) throw InputError("", "ContinuousRemesher: empty mesh");
+  for (const Eigen::Vector3f& p : positions_) {
+    if (!p.allFinite()) throw InputError("", "ContinuousRemesher: non-finite vertex position");
+  }
+  const TopologyReport topology = AnalyzeTopology(static_cast<int>(positions_.size()), faces_);
+  if (!topology.IsManifold() || topology.inconsistent_edges > 0) {
+    throw InputError("", "ContinuousRemesher: the mesh must be manifold and consistently oriented (" +
+                             topology.Describe() + ")");
+  }
+  if (!(options_.edge_length_min > 0) || !(options_.edge_length_max >= options_.edge_length_min)) {
+    throw InputError("", Msg() << "ContinuousRemesher: bad edge length limits [" << options_.edge_length_min << ", "
+                               << options_.edge_length_max << "]");
+  }
+  if (!(options_.edge_length_tolerance > 0 && options_.edge_length_tolerance < 1)) {
+    throw InputError("", Msg() << "ContinuousRemesher: edge_length_tolerance must lie in (0, 1), got "
+                               << options_.edge_length_tolerance);
+  }
+  const size_t n = positions_.size();
+  m1_.assign(n, Eigen::Vector3f::Zero());
+  m2_.assign(n, 0.0f);
+  velocity_.assign(n, Eigen::Vector3f::Zero());
+  // Start from the mesh's own resolution (mean incident edge length): the first Remesh() then keeps the
+  // input as it is instead of jumping to a limit; the controller takes it from there.
+  std::vector<float> sum(n, 0.0f);
+  std::vector<int> count(n, 0);
+  for (const Eigen::Vector3i& f : faces_) {
+    for (int k = 0; k < 3; ++k) {
+      const float len = (positions_[f[(k + 1) % 3]] - positions_[f[k]]).norm();
+      sum[f[k]] += len;
+      sum[f[(k + 1) % 3]] += len;
+      count[f[k]] += 1;
+      count[f[(k + 1) % 3]] += 1;
+    }
+  }
+  target_length_.resize(n);
+  for (size_t v = 0; v < n; ++v) {
+    const float mean = count[v] > 0 ? sum[v] / static_cast<float>(count[v]) : options_.edge_length_max;
+    target_length_[v] = std::clamp(mean, options_.edge_length_min, options_.edge_length_max);
+  }
+}
+
+void ContinuousRemesher::Step(const std::vector<Eigen::Vector3f>& grad) {
+  SD_CHECK(grad.size() == positions_.size(),
+           << "Step: " << grad.size() << " gradients for " << positions_.size() << " vertices");
+  ++step_count_;
+  const size_t n = positions_.size();
+  const RemeshOptions& o = options_;
+
+  // Umbrella vectors (vertex minus neighbour centroid) for the smoothing term; each face edge counts once
+  // per face, so interior neighbours weigh 2 and boundary neighbours 1: close enough to uniform.
+  std::vector<Eigen::Vector3f> neighbour_sum(n, Eigen::Vector3f::Zero());
+  std::vector<float> neighbour_count(n, 0.0f);
+  if (o.smooth_gain > 0) {
+    for (const Eigen::Vector3i& f : faces_) {
+      for (int k = 0; k < 3; ++k) {
+        const int a = f[k], b = f[(k + 1) % 3];
+        neighbour_sum[a] += positions_[b];
+        neighbour_sum[b] += positions_[a];
+        neighbour_count[a] += 1;
+        neighbour_count[b] += 1;
+      }
+    }
+  }
+  const float c1 = 1.0f - std::pow(o.beta1, static_cast<float>(step_count_));
+  const float c2 = 1.0f - std::pow(o.beta2, static_cast<float>(step_count_));
+  const float lr = o.learning_rate * std::min(1.0f, static_cast<float>(step_count_) * (1 - o.beta1) / kRampSteps);
+
+  ParallelForRange(0, n, 1024, [&](size_t begin, size_t end) {
+    for (size_t v = begin; v < end; ++v) {
+      Eigen::Vector3f g = grad[v];
+      // Laplacian smoothing of the update (the paper's regulariser), made scale-free: the umbrella in units
+      // of the target edge length, times the vertex's RMS gradient, times its previous speed (fast-moving
+      // vertices are smoothed, settled ones keep their detail).
+      if (o.smooth_gain > 0 && neighbour_count[v] > 0 && step_count_ > 1) {
+        const Eigen::Vector3f umbrella = positions_[v] - neighbour_sum[v] / neighbour_count[v];
+        const float rms = std::sqrt(m2_[v] / (1.0f - std::pow(o.beta2, static_cast<float>(step_count_ - 1))));
+        g += o.smooth_gain * velocity_[v].norm() * rms / target_length_[v] * umbrella;
+      }
+      m1_[v] = o.beta1 * m1_[v] + (1 - o.beta1) * g;
+      m2_[v] = o.beta2 * m2_[v] + (1 - o.beta2) * g.squaredNorm();
+      // Adam with one second moment per vertex (not per coordinate), so the step direction is the
+      // gradient's; |velocity| is ~1 while the gradient is consistent, ~sqrt((1-b1)/(1+b1)) for noise.
+      velocity_[v] = (m1_[v] / c1) / (std::sqrt(m2_[v] / c2) + kEps);
+      positions_[v] -= lr * target_length_[v] * velocity_[v];
+      // Edge length controller (paper, Sec. 4): grow the target where the vertex still moves faster than
+      // velocity_target, shrink it where it has settled.
+      const float speed = velocity_[v].norm();
+      target_length_[v] = std::clamp(target_length_[v] * (1 + o.gain * (speed - o.velocity_target)),
+                                     o.edge_length_min, o.edge_length_max);
+    }
+  });
+}
+
+void ContinuousRemesher::Remesh() {
+  if (!options_.remesh) return;
+  for (float& t : target_length_) t = std::clamp(t, options_.edge_length_min, options_.edge_length_max);
+  HalfEdgeMesh mesh(&faces_, VertexData{&positions_, &m1_, &m2_, &velocity_, &target_length_}, options_);
+  // Collapse before split (a split right next to a short edge would otherwise be undone at once), flip for
+  // valence, then relax tangentially so the next pass sees well-shaped triangles.
+  mesh.CollapseShortEdges();
+  mesh.SplitLongEdges();
+  mesh.FlipEdges();
+  mesh.SmoothTangentially(options_.smooth_gain);
+  mesh.Compact();
+}
+
+float ContinuousRemesher::MeanTargetEdgeLength() const {
+  if (target_length_.empty()) return 0.0f;
+  double sum = 0;
+  for (float t : target_length_) sum += t;
+  return static_cast<float>(sum / static_cast<double>(target_length_.size()));
+}
+
+}  // namespace sd::geometry

@@ -14,18 +14,22 @@ struct RemeshOptions {
   float learning_rate = 0.3f;        // step relative to the vertex's target edge length
   float beta1 = 0.8f;                // momentum of the gradient
   float beta2 = 0.99f;               // momentum of the squared gradient norm
-  float smooth_gain = 0.2f;          // tangential / Laplacian smoothing of the update
+  float smooth_gain = 0.2f;          // Laplacian smoothing of the update (Step) and tangential relaxation (Remesh)
   float edge_length_min = 0.005f;    // target edge length limits (in the mesh's units)
   float edge_length_max = 0.15f;
   float edge_length_tolerance = 0.5f;  // split above (1 + tol) * target, collapse below (1 - tol) * target
   float gain = 0.2f;                 // how fast the target edge length follows the vertex velocity
-  float velocity_target = 0.015f;    // relative velocity at which the target edge length is stable
+  // Speed |m1_hat| / sqrt(m2_hat) of the Adam step at which the target edge length is stable: ~1 while the
+  // gradient points one way, ~0.3 for a vertex jittering around its optimum (beta1 = 0.8), so 0.3 grows
+  // edges while the surface travels and shrinks them (down to edge_length_min) once it has settled.
+  float velocity_target = 0.3f;
   bool remesh = true;                // false: plain adaptive optimiser, topology fixed
 };
 
 class ContinuousRemesher {
  public:
-  // Throws InputError when the mesh is empty or not manifold.
+  // Throws InputError when the mesh is empty, not manifold or not consistently oriented, or the options are
+  // out of range. Target edge lengths start at each vertex's mean edge length (clamped to the limits).
   ContinuousRemesher(std::vector<Eigen::Vector3f> positions, std::vector<Eigen::Vector3i> faces,
                      const RemeshOptions& options);
 
@@ -38,7 +42,9 @@ class ContinuousRemesher {
   void Step(const std::vector<Eigen::Vector3f>& grad);
   // One pass of split / collapse / flip / tangential smoothing towards the per-vertex target lengths.
   // Optimiser state follows the vertices (new vertices interpolate it). Keeps the mesh manifold; an edge
-  // operation that would fold a face over or create a non-manifold configuration is skipped.
+  // operation that would fold a face over or create a non-manifold configuration is skipped. Boundary edges
+  // (open meshes) are frozen: never split, collapsed or flipped, their vertices not relaxed. Vertex and face
+  // arrays are renumbered compactly (unreferenced vertices are dropped); no-op when options().remesh is false.
   void Remesh();
 
   float MeanTargetEdgeLength() const;

@@ -22,11 +22,13 @@
 //    gradient of 1 per pixel row crossed, the derivative of a box-filtered edge.
 //  - Deltas are computed from the input colours (not chained when a pixel is in several pairs) and summed,
 //    serially in pair order, so the result is deterministic.
-//  - Search: the owner's triangle first; if none of its silhouette edges crosses, its three edge neighbours
-//    (with small triangles the crossing edge often belongs to the triangle next to the owner's, which covers
-//    the segment beyond the owner's centre). The record keeps the triangle and edge found.
-// Known limit: a crossing edge further than one triangle from the owner's is missed, and the pair is left
-// unblended (forward and backward agree, so gradients stay consistent; that pair just gives no gradient).
+//  - Search: the segment is walked from the owner's centre through the owner's triangle and on across
+//    non-silhouette edges into the neighbours (same facing: the same visible surface) until it leaves by a
+//    silhouette edge (see FindSilhouette). Near an outline triangles are seen edge-on, so the crossing edge
+//    often belongs to a sliver several triangles from the one covering the owner's centre.
+// Known limits: a walk longer than kMaxWalk triangles gives up, and a silhouette edge that is not on the
+// owner's connected surface (a separate object behind is not an issue: its edges are not in front) is not
+// searched; such pairs are left unblended (forward and backward agree, the pair just gives no gradient).
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -94,14 +96,11 @@ struct Crossing {
   double dt_dalong0, dt_dacross0, dt_dalong1, dt_dacross1;
 };
 
+// Crossing of the pair segment by the edge p0-p1 (any orientation); false when they do not cross.
 bool CrossPair(const PairFrame& f, const ScreenVertex& p0, const ScreenVertex& p1, Crossing* out) {
   const double along0 = f.horizontal ? p0.u : p0.v, across0 = f.horizontal ? p0.v : p0.u;
   const double along1 = f.horizontal ? p1.u : p1.v, across1 = f.horizontal ? p1.v : p1.u;
   const double d_across = across1 - across0, d_along = along1 - along0;
-  // The edge must be at least as perpendicular to the pair as parallel (see the file comment); this also
-  // rules out d_across == 0. Vertical pairs take only strictly more horizontal edges, so ties go one way.
-  if (f.horizontal ? !(std::abs(d_across) >= std::abs(d_along)) : !(std::abs(d_across) > std::abs(d_along)))
-    return false;
   if (d_across == 0) return false;
   const double s = (f.across - across0) / d_across;  // position along the edge
   if (!(s >= 0.0 && s <= 1.0)) return false;
@@ -117,6 +116,13 @@ bool CrossPair(const PairFrame& f, const ScreenVertex& p0, const ScreenVertex& p
   out->dt_dacross0 = -f.direction * (1.0 - s) * slope;
   out->dt_dacross1 = -f.direction * s * slope;
   return true;
+}
+
+// Blending axis (see the file comment): a horizontal pair takes edges at least as vertical as horizontal, a
+// vertical pair strictly more horizontal ones, so each edge blends along exactly one axis.
+bool BlendsAlong(const PairFrame& f, const ScreenVertex& p0, const ScreenVertex& p1) {
+  const double du = std::abs(p1.u - p0.u), dv = std::abs(p1.v - p0.v);
+  return f.horizontal ? dv >= du : du > dv;
 }
 
 // Shared by the forward and the backward pass so that both see the same pairs.
@@ -138,39 +144,33 @@ PairFrame MakeFrame(int32_t owner, int32_t other, int width) {
   return f;
 }
 
+// Per-call geometry shared by all pairs: each vertex projected once, each triangle's facing once.
 struct Scene {
   const RasterBuffer& rast;
-  std::span<const float> clip_pos;
   std::span<const int32_t> tris;
   const EdgeTopology& topology;
-};
+  std::vector<ScreenVertex> screen;  // per vertex
+  std::vector<int8_t> facing;        // per triangle: ScreenFacing
 
-bool IsSilhouette(const Scene& sc, size_t t, int k, int facing) {
-  const int32_t n = sc.topology.neighbour[3 * t + k];
-  return n < 0 || ScreenFacing(sc.clip_pos, sc.tris, static_cast<size_t>(n)) != facing;
-}
-
-// Searches the owner's triangle for the silhouette edge crossing the pair nearest the owner's centre.
-bool FindSilhouetteCrossing(const Scene& sc, int32_t owner, int32_t other, int32_t triangle, int edge_hint,
-                            PairGeometry* g) {
-  const size_t t = static_cast<size_t>(triangle);
-  const int facing = ScreenFacing(sc.clip_pos, sc.tris, t);
-  const PairFrame frame = MakeFrame(owner, other, sc.rast.width);
-  bool found = false;
-  for (int k = 0; k < 3; ++k) {
-    if (edge_hint >= 0 && k != edge_hint) continue;
-    if (!IsSilhouette(sc, t, k, facing)) continue;
-    const std::array<int32_t, 2> ev = EdgeVertices(sc.tris, t, k);
-    const ScreenVertex p0 = Project(sc.clip_pos, ev[0], sc.rast.width, sc.rast.height);
-    const ScreenVertex p1 = Project(sc.clip_pos, ev[1], sc.rast.width, sc.rast.height);
-    Crossing c;
-    if (!CrossPair(frame, p0, p1, &c)) continue;
-    if (found && !(c.t < g->crossing.t)) continue;
-    found = true;
-    *g = PairGeometry{owner, other, triangle, k, c, {p0, p1}, ev};
+  Scene(const RasterBuffer& r, std::span<const float> clip_pos, std::span<const int32_t> t, const EdgeTopology& top)
+      : rast(r), tris(t), topology(top), screen(internal::NumVertices(clip_pos)), facing(t.size() / 3) {
+    ParallelForRange(0, screen.size(), 1024, [&](size_t begin, size_t end) {
+      for (size_t v = begin; v < end; ++v) screen[v] = Project(clip_pos, static_cast<int32_t>(v), r.width, r.height);
+    });
+    ParallelForRange(0, facing.size(), 1024, [&](size_t begin, size_t end) {
+      for (size_t f = begin; f < end; ++f) facing[f] = static_cast<int8_t>(ScreenFacing(clip_pos, t, f));
+    });
   }
-  return found;
-}
+
+  bool IsSilhouette(size_t t, int k) const {
+    const int32_t n = topology.neighbour[3 * t + k];
+    return n < 0 || facing[static_cast<size_t>(n)] != facing[t];
+  }
+  PairGeometry Edge(int32_t owner, int32_t other, int32_t t, int k, const Crossing& c) const {
+    const std::array<int32_t, 2> ev = EdgeVertices(tris, static_cast<size_t>(t), k);
+    return PairGeometry{owner, other, t, k, c, {screen[ev[0]], screen[ev[1]]}, ev};
+  }
+};
 
 // The owner of a pair with different triangle ids: the pixel whose surface is in front.
 int32_t OwnerOf(const RasterBuffer& rast, int32_t a, int32_t b) {
@@ -181,25 +181,62 @@ int32_t OwnerOf(const RasterBuffer& rast, int32_t a, int32_t b) {
   return ta < tb ? a : b;
 }
 
+// Walks the pair segment from the owner's centre through the mesh: in the current triangle, the segment
+// leaves by the crossed edge nearest beyond the entry point; a silhouette edge ends the walk, any other edge
+// leads into the neighbour across it (which faces the same way: the same visible surface). Near an outline
+// triangles are seen edge-on, so the pixel next to the background is often covered by a triangle several
+// slivers away from the silhouette edge; the walk finds that edge where a look at the owner's triangle
+// alone would not. Bounded by kMaxWalk triangles.
+constexpr int kMaxWalk = 16;
+
+bool FindSilhouette(const Scene& sc, int32_t owner, int32_t other, PairGeometry* g) {
+  const PairFrame frame = MakeFrame(owner, other, sc.rast.width);
+  int32_t current = sc.rast.triangle[owner];
+  int entry_edge = -1;
+  double entry_t = 0.0;
+  for (int step = 0; step < kMaxWalk; ++step) {
+    int exit_edge = -1;
+    Crossing exit{};
+    for (int k = 0; k < 3; ++k) {
+      if (k == entry_edge) continue;
+      const std::array<int32_t, 2> ev = EdgeVertices(sc.tris, static_cast<size_t>(current), k);
+      Crossing c;
+      if (!CrossPair(frame, sc.screen[ev[0]], sc.screen[ev[1]], &c) || c.t < entry_t) continue;
+      if (exit_edge < 0 || c.t < exit.t) exit_edge = k, exit = c;
+    }
+    if (exit_edge < 0) return false;  // the segment ends inside this triangle: no outline between the pixels
+    if (sc.IsSilhouette(static_cast<size_t>(current), exit_edge)) {
+      *g = sc.Edge(owner, other, current, exit_edge, exit);
+      return BlendsAlong(frame, g->ends[0], g->ends[1]);
+    }
+    const int32_t next = sc.topology.neighbour[3 * static_cast<size_t>(current) + exit_edge];
+    const std::array<int32_t, 2> ev = EdgeVertices(sc.tris, static_cast<size_t>(current), exit_edge);
+    entry_edge = -1;  // the neighbour's copy of the edge just crossed
+    for (int k = 0; k < 3; ++k) {
+      const std::array<int32_t, 2> nv = EdgeVertices(sc.tris, static_cast<size_t>(next), k);
+      if ((nv[0] == ev[0] && nv[1] == ev[1]) || (nv[0] == ev[1] && nv[1] == ev[0])) entry_edge = k;
+    }
+    current = next;
+    entry_t = exit.t;
+  }
+  return false;
+}
+
 bool ExaminePair(const Scene& sc, int32_t a, int32_t b, PairGeometry* g) {
   if (sc.rast.triangle[a] == sc.rast.triangle[b]) return false;
   const int32_t owner = OwnerOf(sc.rast, a, b);
-  const int32_t other = owner == a ? b : a;
-  const int32_t triangle = sc.rast.triangle[owner];
-  if (FindSilhouetteCrossing(sc, owner, other, triangle, -1, g)) return true;
-  // Small triangles: the silhouette edge crossing the pair often belongs to a neighbour of the owner's
-  // triangle (the owner's centre is covered by T, the crossing lies just beyond T's non-silhouette edge).
-  // Search the edge neighbours too and keep the crossing nearest the owner's centre.
-  bool found = false;
-  for (int k = 0; k < 3; ++k) {
-    const int32_t n = sc.topology.neighbour[3 * static_cast<size_t>(triangle) + k];
-    PairGeometry candidate;
-    if (n < 0 || !FindSilhouetteCrossing(sc, owner, other, n, -1, &candidate)) continue;
-    if (found && !(candidate.crossing.t < g->crossing.t)) continue;
-    *g = candidate;
-    found = true;
-  }
-  return found;
+  return FindSilhouette(sc, owner, owner == a ? b : a, g);
+}
+
+// A recorded pair's geometry, recomputed from the same inputs (for blending and for the backward pass).
+PairGeometry RecordedPair(const Scene& sc, const AntialiasRecord::PixelPair& pair) {
+  const int32_t owner = OwnerOf(sc.rast, pair.pixel_a, pair.pixel_b);
+  const int32_t other = owner == pair.pixel_a ? pair.pixel_b : pair.pixel_a;
+  const std::array<int32_t, 2> ev = EdgeVertices(sc.tris, static_cast<size_t>(pair.triangle), pair.edge);
+  Crossing c{};
+  const bool crosses = CrossPair(MakeFrame(owner, other, sc.rast.width), sc.screen[ev[0]], sc.screen[ev[1]], &c);
+  SD_CHECK(crosses, << "AntialiasRecord does not match the geometry it is used with");
+  return sc.Edge(owner, other, pair.triangle, pair.edge, c);
 }
 
 // Blend weight and which pixel receives it (see the file comment).
@@ -264,7 +301,7 @@ void Antialias(std::span<const float> color, int channels, const RasterBuffer& r
   SD_CHECK(out.size() == color.size(), << "out: " << out.size());
   SD_CHECK(out.data() != color.data(), << "Antialias cannot work in place");
   SD_CHECK(record != nullptr);
-  const Scene sc{rast, clip_pos, tris, topology};
+  const Scene sc(rast, clip_pos, tris, topology);
   const int width = rast.width, height = rast.height;
 
   // Pairs whose first pixel is in row j, found per row in parallel and concatenated in row order.
@@ -285,11 +322,7 @@ void Antialias(std::span<const float> color, int channels, const RasterBuffer& r
   std::copy(color.begin(), color.end(), out.begin());
   const size_t C = static_cast<size_t>(channels);
   for (const AntialiasRecord::PixelPair& pair : record->pairs) {
-    PairGeometry g;
-    const int32_t owner = OwnerOf(rast, pair.pixel_a, pair.pixel_b);
-    FindSilhouetteCrossing(sc, owner, owner == pair.pixel_a ? pair.pixel_b : pair.pixel_a, pair.triangle, pair.edge,
-                           &g);
-    const Blend blend = BlendOf(g);
+    const Blend blend = BlendOf(RecordedPair(sc, pair));
     for (size_t c = 0; c < C; ++c)
       out[C * blend.receiver + c] += blend.alpha * (color[C * blend.source + c] - color[C * blend.receiver + c]);
   }
@@ -303,16 +336,13 @@ void AntialiasBackward(std::span<const float> color, int channels, const RasterB
   SD_CHECK(grad_out.size() == color.size(), << "grad_out: " << grad_out.size());
   SD_CHECK(grad_color.size() == color.size(), << "grad_color: " << grad_color.size());
   SD_CHECK(grad_clip.size() == clip_pos.size(), << "grad_clip: " << grad_clip.size());
-  const Scene sc{rast, clip_pos, tris, topology};
+  const Scene sc(rast, clip_pos, tris, topology);
   const size_t C = static_cast<size_t>(channels);
 
   for (size_t n = 0; n < grad_out.size(); ++n) grad_color[n] += grad_out[n];  // out = color + deltas
   std::vector<double> dL_dclip(grad_clip.size(), 0.0);
   for (const AntialiasRecord::PixelPair& pair : record.pairs) {
-    PairGeometry g;
-    const int32_t owner = OwnerOf(rast, pair.pixel_a, pair.pixel_b);
-    const int32_t other = owner == pair.pixel_a ? pair.pixel_b : pair.pixel_a;
-    if (!FindSilhouetteCrossing(sc, owner, other, pair.triangle, pair.edge, &g)) continue;
+    const PairGeometry g = RecordedPair(sc, pair);
     const Blend blend = BlendOf(g);
     // out_r = c_r + alpha (c_s - c_r).
     double dL_dalpha = 0;
@@ -324,7 +354,7 @@ void AntialiasBackward(std::span<const float> color, int channels, const RasterB
     }
     const double dL_dt = dL_dalpha * blend.dalpha_dt;
     if (dL_dt == 0) continue;
-    const bool horizontal = MakeFrame(owner, other, rast.width).horizontal;
+    const bool horizontal = MakeFrame(g.owner_pixel, g.other_pixel, rast.width).horizontal;
     const Crossing& cr = g.crossing;
     const double dt_dalong[2] = {cr.dt_dalong0, cr.dt_dalong1}, dt_dacross[2] = {cr.dt_dacross0, cr.dt_dacross1};
     for (int e = 0; e < 2; ++e) {

@@ -6,6 +6,7 @@
 #include <random>
 #include <vector>
 
+#include "core/parallel.h"
 #include "raster/raster.h"
 #include "raster/test_util.h"
 
@@ -386,6 +387,41 @@ TEST(AntialiasBackward, WholeChainMatchesFiniteDifferencesOnWorldPositions) {
     EXPECT_GT(checked, 2 * skipped) << "too many coordinates skipped";
     std::printf("seed %u: %d coordinates checked, %d skipped, max err %.2e\n", seed, checked, skipped, max_err);
   }
+}
+
+// Deterministic whatever the thread count: forward outputs and every gradient are bitwise equal with one
+// thread and with all of them.
+TEST(AntialiasBackward, ChainIsIndependentOfThreadCount) {
+  constexpr int kSize = 160;
+  const testing::Mesh mesh = testing::Sphere(30, 60, 1.0f, 0.1f);
+  const EdgeTopology topology = BuildEdgeTopology(mesh.tris, mesh.NumVertices());
+  std::mt19937 rng(12);
+  const std::vector<float> clip = testing::ToClip(
+      mesh.positions, ClipFromWorld(testing::SquareCamera(kSize), testing::LookAtOrigin(rng, 3.0), 0.5f, 6.f));
+  std::vector<float> vertex_color(3 * mesh.NumVertices());
+  std::uniform_real_distribution<float> unit(0, 1);
+  for (float& c : vertex_color) c = unit(rng);
+  std::vector<float> grad_out(3 * static_cast<size_t>(kSize) * kSize);
+  for (float& g : grad_out) g = unit(rng) - 0.5f;
+  auto run = [&]() {
+    RasterBuffer rast;
+    Rasterize(clip, mesh.tris, kSize, kSize, &rast);
+    std::vector<float> color(3 * rast.NumPixels()), out(color.size());
+    Interpolate(vertex_color, 3, mesh.tris, rast, color);
+    AntialiasRecord record;
+    Antialias(color, 3, rast, clip, mesh.tris, topology, out, &record);
+    std::vector<float> grad_color(color.size(), 0.0f), grad_clip(clip.size(), 0.0f);
+    AntialiasBackward(color, 3, rast, clip, mesh.tris, topology, record, grad_out, grad_color, grad_clip);
+    std::vector<float> grad_attr(vertex_color.size(), 0.0f), grad_bary(2 * rast.NumPixels(), 0.0f);
+    InterpolateBackward(vertex_color, 3, mesh.tris, rast, grad_color, grad_attr, grad_bary);
+    RasterizeBackward(clip, mesh.tris, rast, grad_bary, rast.depth, grad_clip);
+    return std::vector<std::vector<float>>{out, grad_clip, grad_attr};
+  };
+  const auto all_threads = run();
+  SetMaxThreads(1);
+  const auto one_thread = run();
+  SetMaxThreads(0);
+  EXPECT_EQ(all_threads, one_thread);
 }
 
 // --- gradient descent: the outline moves ---------------------------------------------------------------------

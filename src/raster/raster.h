@@ -40,7 +40,9 @@ struct RasterBuffer {
 
 // --- rasterize.cpp -------------------------------------------------------------------------------------
 // Per pixel centre: the nearest covering triangle (smallest z/w, ties to the lower triangle index), its
-// perspective-correct barycentrics and depth.
+// perspective-correct barycentrics and depth. Pixels where a triangle's z/w falls outside [-1, 1] are not
+// drawn by it (per-pixel depth clip, as GPUs do). A pixel centre exactly on an edge shared by two triangles
+// (same vertex positions) is covered by exactly one of them (top-left rule); see rasterize.cpp.
 void Rasterize(std::span<const float> clip_pos, std::span<const int32_t> tris, int width, int height,
                RasterBuffer* out);
 // Gradients of the loss with respect to clip positions through the barycentrics (and depth, when
@@ -79,13 +81,15 @@ EdgeTopology BuildEdgeTopology(std::span<const int32_t> tris, int num_vertices);
 struct AntialiasRecord {
   struct PixelPair {
     int32_t pixel_a, pixel_b;  // pixel indices; a is left of / above b
-    int32_t triangle;          // the triangle owning the silhouette edge
+    int32_t triangle;          // the triangle owning the silhouette edge (the owner pixel's, or one reached
+                               // from it across non-silhouette edges: see antialias.cpp)
     int32_t edge;              // 0, 1, 2: which of its edges
     float alpha;               // blend weight moved across the pair
   };
   std::vector<PixelPair> pairs;
 };
-// color: `channels` per pixel (e.g. an interpolated attribute, or a 1-channel coverage mask); out: same.
+// color: `channels` per pixel (e.g. an interpolated attribute, or a 1-channel coverage mask); out: same, and
+// not the same buffer as color. `record` is overwritten.
 void Antialias(std::span<const float> color, int channels, const RasterBuffer& rast, std::span<const float> clip_pos,
                std::span<const int32_t> tris, const EdgeTopology& topology, std::span<float> out,
                AntialiasRecord* record);

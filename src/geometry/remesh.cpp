@@ -19,7 +19,7 @@ namespace {
 constexpr float kMinQuality = 0.05f;
 // A face's normal may turn by at most ~75 degrees (cos 0.25) in one collapse / flip: anything more is
 // treated as a fold-over in the making.
-constexpr float kMinNormalCos = 0.25f;
+constexpr float kMinNormalCos = 0.7f;
 // The first steps ramp the learning rate up over 1 / (1 - beta1) steps, while the moment estimates are
 // still dominated by single gradients.
 constexpr float kRampSteps = 1.0f;
@@ -68,9 +68,10 @@ bool NormalKept(const Eigen::Vector3f& before, const Eigen::Vector3f& after) {
 }
 
 // Half-edge view of an oriented manifold triangle mesh: half-edge h = 3 f + k runs from corner k to
-// corner k+1 of face f; opp[h] is its twin (-1 on the boundary). Boundary edges are frozen: no operation
-// splits, collapses or flips them or moves a boundary vertex, so the boundary is kept exactly and every
-// boundary vertex keeps its one outgoing boundary half-edge, which `out` points to (ring walks start there).
+// corner k+1 of face f; opp[h] is its twin (-1 on the boundary). The boundary keeps its shape: boundary
+// edges are only split (at their midpoints), never collapsed or flipped, and boundary vertices never move or
+// vanish, so every boundary vertex keeps one outgoing boundary half-edge, which `out` points to (ring walks
+// start there).
 class HalfEdgeMesh {
  public:
   HalfEdgeMesh(std::vector<Eigen::Vector3i>* faces, VertexData data, const RemeshOptions& options)
@@ -142,6 +143,13 @@ class HalfEdgeMesh {
     if (boundary_[v] && last >= 0) out->push_back(From(Prev(last)));
   }
 
+  // Area-weighted normal of the faces around v (unnormalised).
+  Eigen::Vector3f RingNormal(int v) const {
+    Eigen::Vector3f n = Eigen::Vector3f::Zero();
+    ForEachOutgoing(v, [&](int e) { n += (P_[To(e)] - P_[v]).cross(P_[From(Prev(e))] - P_[v]); });
+    return n;
+  }
+
   float EdgeTarget(int a, int b) const { return 0.5f * (T_[a] + T_[b]); }
   float Length(int h) const { return (P_[To(h)] - P_[From(h)]).norm(); }
   bool InteriorEdge(int h) const { return opp_[h] >= 0; }
@@ -153,7 +161,7 @@ class HalfEdgeMesh {
     for (int h = 0; h < static_cast<int>(opp_.size()); ++h) {
       if (!InteriorEdge(h) || opp_[h] < h) continue;
       const int a = From(h), b = To(h);
-      if (boundary_[a] || boundary_[b]) continue;
+      if (boundary_[a] && boundary_[b]) continue;
       const float len = Length(h);
       if (len < (1 - tol) * EdgeTarget(a, b)) candidates.emplace_back(len, h);
     }
@@ -161,19 +169,26 @@ class HalfEdgeMesh {
     for (const auto& [len, h] : candidates) {
       if (face_dead_[h / 3] || !InteriorEdge(h)) continue;
       const int a = From(h), b = To(h);
-      if (boundary_[a] || boundary_[b]) continue;
+      if (boundary_[a] && boundary_[b]) continue;
       // Earlier collapses may have moved the ends: re-test against the current lengths.
       if (Length(h) >= (1 - tol) * EdgeTarget(a, b)) continue;
-      TryCollapse(h);
+      // An interior vertex next to the boundary merges into the boundary vertex (which stays put), else
+      // interior vertices pile up along a frozen boundary as slivers.
+      TryCollapse(boundary_[b] ? opp_[h] : h);
     }
   }
 
-  // Collapses half-edge h = a -> b (b merges into a, at the midpoint) when that keeps the mesh manifold,
-  // free of fold-overs and slivers, and does not create edges that would immediately be split again.
+  // Collapses half-edge h = a -> b (b merges into a, at the midpoint, or at a if a is a boundary vertex)
+  // when that keeps the mesh manifold, free of fold-overs and slivers, and does not create edges that would
+  // immediately be split again. b must be interior.
   bool TryCollapse(int h) {
     const int g = opp_[h];
     const int a = From(h), b = To(h);
     const int c = From(Prev(h)), d = From(Prev(g));  // apexes of the two faces of edge a-b
+    SD_CHECK(!boundary_[b]);
+    // Edges a-c and a-d must be interior too (only possible otherwise when a is on the boundary): the
+    // stitching below pairs twins on both sides, and the boundary stays exactly as it is.
+    if (opp_[Prev(h)] < 0 || opp_[Next(g)] < 0) return false;
     // Link condition: a and b may share exactly the neighbours c and d, else the collapse pinches the
     // surface into a non-manifold edge or vertex. c and d lose one neighbour and must keep three, else
     // two faces end up on the same three vertices (e.g. a tetrahedron collapsing into a double triangle).
@@ -188,11 +203,14 @@ class HalfEdgeMesh {
     // Very high valences make needle triangles that no flip can repair in one pass.
     if (valence_[a] + valence_[b] - 4 > 12) return false;
 
-    const Eigen::Vector3f p = 0.5f * (P_[a] + P_[b]);
+    const Eigen::Vector3f p = boundary_[a] ? P_[a] : Eigen::Vector3f(0.5f * (P_[a] + P_[b]));
     const float t_new = 0.5f * (T_[a] + T_[b]);
     const float max_len = 1 + options_.edge_length_tolerance;
     const int fa = h / 3, fb = g / 3;
-    // Every face around a or b other than the two removed ones gets p for a or b.
+    // Every face around a or b other than the two removed ones gets p for a or b. Each must keep its own
+    // orientation and also face the same way as the surrounding surface (one-rings of a and b): the second
+    // test catches a face that is already steep on a wrinkle and would be turned just past vertical.
+    const Eigen::Vector3f ring_normal = RingNormal(a) + RingNormal(b);
     bool ok = true;
     auto check_faces_of = [&](int v) {
       ForEachOutgoing(v, [&](int e) {
@@ -202,7 +220,9 @@ class HalfEdgeMesh {
         const Eigen::Vector3f& q2 = P_[From(Prev(e))];
         const Eigen::Vector3f before = (q1 - P_[v]).cross(q2 - P_[v]);
         Eigen::Vector3f after;
-        if (Quality(p, q1, q2, &after) < kMinQuality || !NormalKept(before, after)) ok = false;
+        if (Quality(p, q1, q2, &after) < kMinQuality || !NormalKept(before, after) || after.dot(ring_normal) <= 0) {
+          ok = false;
+        }
         if ((q1 - p).norm() > max_len * 0.5f * (t_new + T_[To(e)])) ok = false;
       });
     };
@@ -227,7 +247,7 @@ class HalfEdgeMesh {
     face_dead_[fa] = face_dead_[fb] = 1;
     vert_dead_[b] = 1;
     out_[b] = -1;
-    out_[a] = o_ac;  // a -> c
+    SetOut(a, o_ac);  // a -> c (a boundary a keeps its boundary half-edge, not in fa or fb)
     if (!boundary_[c]) out_[c] = o_cb;  // c -> a; a boundary c keeps its boundary half-edge (not in fa)
     if (!boundary_[d]) out_[d] = o_da;
     valence_[a] += valence_[b] - 4;
@@ -242,7 +262,7 @@ class HalfEdgeMesh {
     const float tol = options_.edge_length_tolerance;
     std::vector<std::pair<float, int>> candidates;
     for (int h = 0; h < static_cast<int>(opp_.size()); ++h) {
-      if (face_dead_[h / 3] || !InteriorEdge(h) || opp_[h] < h) continue;
+      if (face_dead_[h / 3] || (InteriorEdge(h) && opp_[h] < h)) continue;
       const float len = Length(h);
       if (len > (1 + tol) * EdgeTarget(From(h), To(h))) candidates.emplace_back(-len, h);
     }
@@ -255,10 +275,38 @@ class HalfEdgeMesh {
     auto is_touched = [&](int f) { return f >= num_faces || touched[f]; };
     for (const auto& [neg_len, h] : candidates) {
       const int g = opp_[h];
-      if (is_touched(h / 3) || is_touched(g / 3)) continue;
-      touched[h / 3] = touched[g / 3] = 1;
-      Split(h);
+      if (is_touched(h / 3) || (g >= 0 && is_touched(g / 3))) continue;
+      touched[h / 3] = 1;
+      if (g >= 0) {
+        touched[g / 3] = 1;
+        Split(h);
+      } else {
+        SplitBoundary(h);
+      }
     }
+  }
+
+  // Splits boundary half-edge h = a -> b of face (a, b, c) at its midpoint m into (a, m, c), (m, b, c).
+  // The boundary keeps its shape (m lies on it) and gains one edge.
+  void SplitBoundary(int h) {
+    const int a = From(h), b = To(h), c = From(Prev(h));
+    const int o_bc = opp_[Next(h)], o_ca = opp_[Prev(h)];
+    const int m = data_.AddMidpoint(a, b);
+    out_.push_back(-1);
+    boundary_.push_back(1);
+    valence_.push_back(3);
+    vert_dead_.push_back(0);
+    const int f0 = h / 3, f2 = AddFace();
+    F_[f0] = Eigen::Vector3i(a, m, c);
+    F_[f2] = Eigen::Vector3i(m, b, c);
+    Link(3 * f0 + 0, -1);          // a->m: boundary, a's boundary half-edge now
+    Link(3 * f0 + 1, 3 * f2 + 2);  // m->c | c->m
+    Link(3 * f0 + 2, o_ca);        // c->a
+    Link(3 * f2 + 0, -1);          // m->b: boundary, m's boundary half-edge
+    Link(3 * f2 + 1, o_bc);        // b->c
+    SetOut(b, 3 * f2 + 1);
+    SetOut(c, 3 * f0 + 2);
+    ++valence_[c];
   }
 
   // Splits interior half-edge h = a -> b at its midpoint m: faces (a, b, c), (b, a, d) become (a, m, c),
@@ -332,6 +380,8 @@ class HalfEdgeMesh {
       return false;
     }
     if (!NormalKept(n_old, n0) || !NormalKept(n_old, n1) || n0.dot(n1) <= 0) return false;
+    const Eigen::Vector3f ring_normal = RingNormal(a) + RingNormal(b) + RingNormal(c) + RingNormal(d);
+    if (n0.dot(ring_normal) <= 0 || n1.dot(ring_normal) <= 0) return false;
 
     const int o_bc = opp_[Next(h)], o_ca = opp_[Prev(h)], o_ad = opp_[Next(g)], o_db = opp_[Prev(g)];
     const int f0 = h / 3, f1 = g / 3;
@@ -384,7 +434,7 @@ class HalfEdgeMesh {
           const Eigen::Vector3f& q2 = P_[From(Prev(e))];
           const Eigen::Vector3f before = (q1 - P_[v]).cross(q2 - P_[v]);
           const Eigen::Vector3f after = (q1 - p).cross(q2 - p);
-          if (!NormalKept(before, after)) ok = false;
+          if (!NormalKept(before, after) || after.dot(normal) <= 0) ok = false;
         });
         if (ok) moved[v] = p;
       }
@@ -505,14 +555,49 @@ void ContinuousRemesher::Step(const std::vector<Eigen::Vector3f>& grad) {
   const size_t n = positions_.size();
   const RemeshOptions& o = options_;
 
-  // Umbrella vectors (vertex minus neighbour centroid) for the smoothing term; each face edge counts once
-  // per face, so interior neighbours weigh 2 and boundary neighbours 1: close enough to uniform.
+  // Neighbour centroids for the smoothing of the update (each interior neighbour is counted once per face,
+  // i.e. twice: uniform weights). In an oriented manifold, v's outgoing half-edges end at n_1 .. n_k-1 and
+  // its incoming ones start at n_2 .. n_k, so XOR-ing all those neighbour ids leaves n_1 ^ n_k: zero exactly
+  // when the fan closes, i.e. v is interior. Boundary vertices are smoothed along the rim instead (towards
+  // the mean of their two boundary neighbours): smoothing them over the fan would shrink an open surface
+  // from its rim, not smoothing them at all lets a noisy rim wander and lengthen without bound.
   std::vector<Eigen::Vector3f> neighbour_sum(n, Eigen::Vector3f::Zero());
   std::vector<float> neighbour_count(n, 0.0f);
+  std::vector<int> fan_xor(n, 0);
   if (o.smooth_gain > 0) {
     for (const Eigen::Vector3i& f : faces_) {
       for (int k = 0; k < 3; ++k) {
         const int a = f[k], b = f[(k + 1) % 3];
+        neighbour_sum[a] += positions_[b];
+        neighbour_sum[b] += positions_[a];
+        neighbour_count[a] += 1;
+        neighbour_count[b] += 1;
+        fan_xor[a] ^= b;
+        fan_xor[b] ^= a;
+      }
+    }
+    if (std::any_of(fan_xor.begin(), fan_xor.end(), [](int x) { return x != 0; })) {
+      // Open mesh: boundary edges are those with one face (sorted undirected keys, as in AnalyzeTopology).
+      std::vector<std::pair<uint64_t, int>> keys;
+      keys.reserve(faces_.size() * 3);
+      for (size_t f = 0; f < faces_.size(); ++f) {
+        for (int k = 0; k < 3; ++k) {
+          const uint32_t a = static_cast<uint32_t>(faces_[f][k]), b = static_cast<uint32_t>(faces_[f][(k + 1) % 3]);
+          keys.emplace_back((uint64_t{std::min(a, b)} << 32) | std::max(a, b), static_cast<int>(3 * f + k));
+        }
+      }
+      std::sort(keys.begin(), keys.end());
+      for (int v = 0; v < static_cast<int>(n); ++v) {
+        if (fan_xor[v] != 0) {
+          neighbour_sum[v] = Eigen::Vector3f::Zero();
+          neighbour_count[v] = 0;
+        }
+      }
+      for (size_t i = 0; i < keys.size(); ++i) {
+        const bool single = (i == 0 || keys[i - 1].first != keys[i].first) &&
+                            (i + 1 == keys.size() || keys[i + 1].first != keys[i].first);
+        if (!single) continue;
+        const int a = static_cast<int>(keys[i].first >> 32), b = static_cast<int>(keys[i].first & 0xffffffffu);
         neighbour_sum[a] += positions_[b];
         neighbour_sum[b] += positions_[a];
         neighbour_count[a] += 1;
@@ -526,24 +611,25 @@ void ContinuousRemesher::Step(const std::vector<Eigen::Vector3f>& grad) {
 
   ParallelForRange(0, n, 1024, [&](size_t begin, size_t end) {
     for (size_t v = begin; v < end; ++v) {
-      Eigen::Vector3f g = grad[v];
-      // Laplacian smoothing of the update (the paper's regulariser), made scale-free: the umbrella in units
-      // of the target edge length, times the vertex's RMS gradient, times its previous speed (fast-moving
-      // vertices are smoothed, settled ones keep their detail).
-      if (o.smooth_gain > 0 && neighbour_count[v] > 0 && step_count_ > 1) {
-        const Eigen::Vector3f umbrella = positions_[v] - neighbour_sum[v] / neighbour_count[v];
-        const float rms = std::sqrt(m2_[v] / (1.0f - std::pow(o.beta2, static_cast<float>(step_count_ - 1))));
-        g += o.smooth_gain * velocity_[v].norm() * rms / target_length_[v] * umbrella;
-      }
+      const Eigen::Vector3f& g = grad[v];
       m1_[v] = o.beta1 * m1_[v] + (1 - o.beta1) * g;
       m2_[v] = o.beta2 * m2_[v] + (1 - o.beta2) * g.squaredNorm();
       // Adam with one second moment per vertex (not per coordinate), so the step direction is the
       // gradient's; |velocity| is ~1 while the gradient is consistent, ~sqrt((1-b1)/(1+b1)) for noise.
       velocity_[v] = (m1_[v] / c1) / (std::sqrt(m2_[v] / c2) + kEps);
+      const float speed = velocity_[v].norm();
+      const Eigen::Vector3f p = positions_[v];
       positions_[v] -= lr * target_length_[v] * velocity_[v];
+      // Laplacian smoothing of the update (the paper's regulariser): move a fraction smooth_gain * speed
+      // towards the neighbours' centroid. Adam gives every vertex a step of ~lr * target length even when its
+      // gradient is pure noise, so without this a settled surface turns jagged; scaling by the speed (not by
+      // the gradient, whose units are the caller's) keeps it scale-free, and settled vertices keep detail.
+      if (o.smooth_gain > 0 && neighbour_count[v] > 0) {
+        const Eigen::Vector3f umbrella = p - neighbour_sum[v] / neighbour_count[v];
+        positions_[v] -= std::min(1.0f, o.smooth_gain * speed) * umbrella;
+      }
       // Edge length controller (paper, Sec. 4): grow the target where the vertex still moves faster than
       // velocity_target, shrink it where it has settled.
-      const float speed = velocity_[v].norm();
       target_length_[v] = std::clamp(target_length_[v] * (1 + o.gain * (speed - o.velocity_target)),
                                      o.edge_length_min, o.edge_length_max);
     }

@@ -14,7 +14,9 @@ struct RemeshOptions {
   float learning_rate = 0.3f;        // step relative to the vertex's target edge length
   float beta1 = 0.8f;                // momentum of the gradient
   float beta2 = 0.99f;               // momentum of the squared gradient norm
-  float smooth_gain = 0.2f;          // Laplacian smoothing of the update (Step) and tangential relaxation (Remesh)
+  // Step: each interior vertex also moves smooth_gain * speed of the way to its neighbours' centroid
+  // (Laplacian smoothing of the update); Remesh: tangential relaxation by this fraction.
+  float smooth_gain = 0.2f;
   float edge_length_min = 0.005f;    // target edge length limits (in the mesh's units)
   float edge_length_max = 0.15f;
   float edge_length_tolerance = 0.5f;  // split above (1 + tol) * target, collapse below (1 - tol) * target
@@ -42,8 +44,9 @@ class ContinuousRemesher {
   void Step(const std::vector<Eigen::Vector3f>& grad);
   // One pass of split / collapse / flip / tangential smoothing towards the per-vertex target lengths.
   // Optimiser state follows the vertices (new vertices interpolate it). Keeps the mesh manifold; an edge
-  // operation that would fold a face over or create a non-manifold configuration is skipped. Boundary edges
-  // (open meshes) are frozen: never split, collapsed or flipped, their vertices not relaxed. Vertex and face
+  // operation that would fold a face over or create a non-manifold configuration is skipped. Open meshes keep
+  // their boundary curve: boundary edges are split at midpoints but never collapsed or flipped, and boundary
+  // vertices are never moved or removed by Remesh() (Step still moves them). Vertex and face
   // arrays are renumbered compactly (unreferenced vertices are dropped); no-op when options().remesh is false.
   void Remesh();
 

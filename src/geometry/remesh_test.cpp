@@ -169,6 +169,73 @@ TEST(ContinuousRemesher, NoisyGradientsNeverBreakTheMesh) {
   }
 }
 
+TEST(ContinuousRemesher, OpenSheetKeepsItsBoundary) {
+  // A 12 x 12 grid over [0, 1]^2 (edges ~0.083) pulled onto the bump z = 0.1 sin(2 pi x) sin(2 pi y): the
+  // boundary keeps its shape (boundary edges are only split at their midpoints; boundary vertices stay on the
+  // square's rim; still one disc) while everything inside is split, collapsed, flipped and relaxed. Phase 1 (exact gradient): no face may turn over (normals keep z > 0; the bump's
+  // steepest slope is 32 degrees) and the sheet must follow the bump. Phase 2 adds per-vertex noise, which
+  // under Adam jiggles every vertex by a fraction of its edge length, steep wrinkles included: there only the
+  // topology is checked.
+  const TriangleMesh grid = testing::Grid(12, 12);
+  RemeshOptions options;
+  options.edge_length_min = 0.03f;
+  options.edge_length_max = 0.2f;
+  ContinuousRemesher remesher(grid.positions, grid.faces, options);
+  const TopologyReport before = Topology(remesher);
+  std::mt19937 rng(21);
+  std::normal_distribution<float> noise(0.0f, 0.01f);
+  auto bump = [](const Eigen::Vector3f& p) {
+    return 0.1f * std::sin(2 * static_cast<float>(M_PI) * p.x()) * std::sin(2 * static_cast<float>(M_PI) * p.y());
+  };
+  auto down_faces = [&] {
+    int down = 0;
+    const auto& P = remesher.positions();
+    for (const Eigen::Vector3i& f : remesher.faces()) {
+      if ((P[f[1]] - P[f[0]]).cross(P[f[2]] - P[f[0]]).z() <= 0) ++down;
+    }
+    return down;
+  };
+  for (int round = 0; round < 200; ++round) {
+    const bool noisy = round >= 150;
+    std::vector<Eigen::Vector3f> grad(remesher.positions().size());
+    for (size_t v = 0; v < grad.size(); ++v) {
+      const Eigen::Vector3f& p = remesher.positions()[v];
+      grad[v] = Eigen::Vector3f(0, 0, p.z() - bump(p));
+      if (noisy) grad[v] += Eigen::Vector3f(noise(rng), noise(rng), noise(rng));
+    }
+    remesher.Step(grad);
+    remesher.Remesh();
+    const TopologyReport t = Topology(remesher);
+    ASSERT_TRUE(t.IsManifold()) << "round " << round << ": " << t.Describe();
+    ASSERT_EQ(t.inconsistent_edges, 0) << "round " << round << ": " << t.Describe();
+    ASSERT_GE(t.boundary_edges, before.boundary_edges) << "round " << round << ": " << t.Describe();
+    ASSERT_EQ(t.euler_characteristic, 1) << "round " << round << ": " << t.Describe();
+    ASSERT_EQ(t.components, 1);
+    if (!noisy) {
+      ASSERT_EQ(down_faces(), 0) << "round " << round;
+    }
+    // Without noise no vertex leaves the square (the rim is kept; interior vertices cannot cross it without
+    // a fold). With noise the optimiser itself moves the rim.
+    for (const Eigen::Vector3f& p : remesher.positions()) {
+      if (noisy) break;
+      ASSERT_TRUE(p.x() >= -1e-6f && p.x() <= 1 + 1e-6f && p.y() >= -1e-6f && p.y() <= 1 + 1e-6f)
+          << "round " << round << ": " << p.transpose();
+    }
+    if (round == 149) {
+      double mean_error = 0;
+      for (const Eigen::Vector3f& p : remesher.positions()) mean_error += std::abs(p.z() - bump(p));
+      mean_error /= static_cast<double>(remesher.positions().size());
+      EXPECT_LT(mean_error, 1e-3);
+      EXPECT_GT(t.num_faces, static_cast<int>(grid.faces.size()));  // settled: refined towards 0.03
+      EXPECT_GT(t.boundary_edges, before.boundary_edges);
+      std::cout << "open sheet after 150 rounds: " << t.Describe() << ", mean |z - bump| " << mean_error << "\n";
+    }
+  }
+  // The rim is smoothed along itself, so noise does not make it wander and lengthen without bound.
+  EXPECT_LT(Topology(remesher).boundary_edges, 4 * before.boundary_edges);
+  std::cout << "open sheet after 50 noisy rounds: " << Topology(remesher).Describe() << "\n";
+}
+
 TEST(ContinuousRemesher, FixedTopologyWhenRemeshIsOff) {
   const TriangleMesh sphere = testing::Icosphere(2);
   RemeshOptions options;

@@ -264,6 +264,21 @@ TEST(Rasterize, BackgroundAndUndrawableTriangles) {
                                               // bottom-right edge, excluded by the top-left rule
 }
 
+TEST(Rasterize, EmptyMeshAndEmptyImage) {
+  RasterBuffer rast;
+  Rasterize({}, {}, 8, 4, &rast);
+  EXPECT_EQ(rast.NumPixels(), 32u);
+  EXPECT_EQ(CountCovered(rast), 0);
+  for (float d : rast.depth) EXPECT_EQ(d, 1.0f);
+  std::vector<float> clip;
+  PushPixelVertex(&clip, 0, 0, 8, 8);
+  PushPixelVertex(&clip, 8, 0, 8, 8);
+  PushPixelVertex(&clip, 0, 8, 8, 8);
+  Rasterize(clip, Tris({0, 1, 2}), 0, 0, &rast);
+  EXPECT_EQ(rast.NumPixels(), 0u);
+  EXPECT_TRUE(rast.bary.empty());
+}
+
 TEST(Rasterize, ResultDoesNotDependOnThreadCount) {
   const testing::Mesh mesh = testing::Sphere(30, 60, 1.0f, 0.15f);
   std::mt19937 rng(9);

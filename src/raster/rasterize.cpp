@@ -53,7 +53,6 @@ Vec3d Homogeneous2d(std::span<const float> clip_pos, int32_t v) {
 struct TriangleSetup {
   std::array<Vec3d, 3> edge;          // e_k(p) = edge[k] . (px, py, 1), k = edge opposite vertex k, > 0 inside
   std::array<bool, 3> owns_zero;      // top-left rule: does a pixel centre with e_k == 0 belong here
-  double orientation = 0;             // +1 / -1: sign of det H (screen-space winding); 0: not drawn
   std::array<float, 3> z, w;          // per-vertex clip z and w, for the depth
   int x0 = 0, x1 = -1, y0 = 0, y1 = -1;  // inclusive pixel bounding box; empty when x0 > x1
 };
@@ -81,11 +80,11 @@ TriangleSetup SetUpTriangle(std::span<const float> clip_pos, std::span<const int
   }
   const double det = Dot(s.edge[0], h[0]);
   if (!(det != 0.0) || !std::isfinite(det)) return s;  // degenerate in screen space (or NaN input)
-  s.orientation = det > 0 ? 1.0 : -1.0;
+  const double orientation = det > 0 ? 1.0 : -1.0;  // sign of det H: the screen-space winding
   for (int k = 0; k < 3; ++k) {
     // Orient the edge functions positive inside (exact: a sign flip). Barycentrics e_k / sum(e) and the
     // depth ratio are unchanged, and a neighbour on the other side of an edge now holds exactly -edge.
-    s.edge[k] = {s.orientation * s.edge[k].x, s.orientation * s.edge[k].y, s.orientation * s.edge[k].z};
+    s.edge[k] = {orientation * s.edge[k].x, orientation * s.edge[k].y, orientation * s.edge[k].z};
     // (edge.x, edge.y) is the inward normal in NDC (x right, y down the image, as v grows with y).
     s.owns_zero[k] = s.edge[k].x > 0 || (s.edge[k].x == 0 && s.edge[k].y > 0);
   }

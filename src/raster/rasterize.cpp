@@ -293,6 +293,8 @@ void RasterizeBackward(std::span<const float> clip_pos, std::span<const int32_t>
   std::vector<PixelGrad> pixel_grad(num_pixels);
   std::vector<uint8_t> has_grad(num_pixels, 0);
   const int width = rast.width, height = rast.height;
+  std::vector<double> column_ndc(width);
+  for (int i = 0; i < width; ++i) column_ndc[i] = internal::PixelCentreNdc(i, width);
   ParallelFor(0, static_cast<size_t>(height), [&](size_t j) {
     const double py = internal::PixelCentreNdc(static_cast<int>(j), height);
     for (int i = 0; i < width; ++i) {
@@ -302,8 +304,7 @@ void RasterizeBackward(std::span<const float> clip_pos, std::span<const int32_t>
       const float gb0 = grad_bary[2 * pixel], gb1 = grad_bary[2 * pixel + 1];
       const float gd = grad_depth.empty() ? 0.0f : grad_depth[pixel];
       if (gb0 == 0.0f && gb1 == 0.0f && gd == 0.0f) continue;
-      has_grad[pixel] = PixelGradient(clip_pos, tris, t, internal::PixelCentreNdc(i, width), py, gb0, gb1, gd,
-                                      &pixel_grad[pixel]);
+      has_grad[pixel] = PixelGradient(clip_pos, tris, t, column_ndc[i], py, gb0, gb1, gd, &pixel_grad[pixel]);
     }
   });
   std::vector<double> sum(grad_clip.size(), 0.0);

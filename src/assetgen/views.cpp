@@ -72,7 +72,13 @@ MultiView RenderOne(const TriangleMesh& mesh, const std::vector<Eigen::Vector3f>
   cam.fy *= ss;
   cam.cx *= ss;
   cam.cy *= ss;
-  const Eigen::Matrix4f M = raster::ClipFromWorld(cam, T_world_cam_render.Inverse(), 0.05f, 50.0f);
+  // Depth range from the mesh's bounding sphere: any scale of object and rig renders.
+  const Eigen::Vector3f centre = mesh.Bounds().Center();
+  float radius = 0;
+  for (const auto& p : mesh.positions) radius = std::max(radius, (p - centre).norm());
+  const float dist = (T_world_cam_render.translation.cast<float>() - centre).norm();
+  const float near = std::max(1e-4f * dist, dist - 1.5f * radius), far = dist + 1.5f * radius;
+  const Eigen::Matrix4f M = raster::ClipFromWorld(cam, T_world_cam_render.Inverse(), near, far);
   std::vector<float> clip(4 * mesh.NumVertices());
   raster::TransformToClip({reinterpret_cast<const float*>(mesh.positions.data()), 3 * mesh.NumVertices()}, M, clip);
   raster::RasterBuffer rast;

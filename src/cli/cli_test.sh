@@ -78,5 +78,28 @@ else
   bad "good run failed"
 fi
 
+# Mesh refinement: oracle views of the cone, a short refinement from their visual hull, geometry metrics.
+CONE=$DATA/assets/metadrive_traffic_cone/scene.gltf
+"$BIN" -q views --mesh "$CONE" --size 64 --out "$T/views" && [ -f "$T/views/cameras.json" ] && ok || bad "views"
+if "$BIN" -q refine --views "$T/views" --out "$T/refined.glb" --steps 2 --iterations 3 --log "$T/refine_log.json"; then
+  [ -s "$T/refined.glb" ] && [ -s "$T/refine_log.json" ] && ok || bad "refine: missing outputs"
+  "$BIN" -q eval geometry --pred "$T/refined.glb" --gt "$CONE" --samples 2000 --iou-resolution 32 --out "$T/geo.json" >"$T/eval.txt" \
+    && grep -q '"chamfer"' "$T/geo.json" && grep -q 'chamfer' "$T/eval.txt" && grep -q 'protocol' "$T/eval.txt" && ok || bad "eval geometry"
+  expect_error "refine: existing output" "already exists" "" -- "$BIN" -q refine --views "$T/views" --out "$T/refined.glb"
+else
+  bad "refine good run failed"
+fi
+expect_error "refine: views folder without cameras.json" "cameras.json: missing" "$T/r1.glb" -- "$BIN" -q refine --views "$T/nowhere" --out "$T/r1.glb"
+printf 'v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 -1 0\nv 0 0 1\nf 1 2 3\nf 2 1 4\nf 1 2 5\n' > "$T/fin.obj"
+expect_error "refine: non-manifold coarse mesh" "fin.obj: the mesh is not manifold" "$T/r2.glb" -- "$BIN" -q refine --views "$T/views" --mesh "$T/fin.obj" --out "$T/r2.glb"
+: > "$T/empty.obj"
+expect_error "refine: empty coarse mesh" "empty.obj" "$T/r3.glb" -- "$BIN" -q refine --views "$T/views" --mesh "$T/empty.obj" --out "$T/r3.glb"
+cp -r "$T/views" "$T/views_bad" && cp "$T/views_bad/mask_00.png" "$T/views_bad/keep.png"
+"$BIN" -q views --mesh "$CONE" --size 32 --out "$T/views_small" && cp "$T/views_small/mask_02.png" "$T/views_bad/mask_02.png"
+expect_error "refine: mask size disagrees" "mask_02.png: image is 32x32" "$T/r4.glb" -- "$BIN" -q refine --views "$T/views_bad" --out "$T/r4.glb"
+expect_error "refine: impossible steps" "must be at least 1" "$T/r5.glb" -- "$BIN" -q refine --views "$T/views" --steps 0 --out "$T/r5.glb"
+expect_error "refine: unsupported output" "written as .glb or .ply" "" -- "$BIN" -q refine --views "$T/views" --out "$T/r6.obj"
+expect_error "eval: missing prediction" "nothing.glb: no such file" "$T/nothing.geometry.json" -- "$BIN" -q eval geometry --pred "$T/nothing.glb" --gt "$CONE"
+
 echo "$pass passed, $fail failed"
 [ $fail -eq 0 ]

@@ -16,6 +16,9 @@ Runner AddSynthCommand(CLI::App& app);
 Runner AddAssetCommand(CLI::App& app);
 Runner AddDemoCommand(CLI::App& app);
 Runner AddCategoriesCommand(CLI::App& app);
+Runner AddRefineCommand(CLI::App& app);
+Runner AddViewsCommand(CLI::App& app);
+Runner AddEvalCommand(CLI::App& app);
 
 // The repo's data/ directory: --data, $SYNTHDRIVE_DATA, <binary>/../../data, ./data (first that exists).
 std::string FindDataDir(const std::string& explicit_dir);

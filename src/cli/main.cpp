@@ -29,6 +29,11 @@ int main(int argc, char** argv) {
   add("synth", "Insert assets into a driving log (camera, LiDAR, labels) and write a derivative dataset",
       sd::cli::AddSynthCommand);
   add("asset", "Make and inspect asset folders (asset.json + mesh.glb + preview.png)", sd::cli::AddAssetCommand);
+  add("views", "Render oracle normal maps and masks of a mesh at the Zero123++ rig (for refinement and evaluation)",
+      sd::cli::AddViewsCommand);
+  add("refine", "Refine a coarse mesh against multi-view normal maps and silhouettes (differentiable rendering)",
+      sd::cli::AddRefineCommand);
+  add("eval", "Quality figures against ground truth (geometry)", sd::cli::AddEvalCommand);
   add("demo", "Run the pipeline end to end on the sample data in data/ and write a report", sd::cli::AddDemoCommand);
   add("categories", "List the object categories and their names in each dataset format", sd::cli::AddCategoriesCommand);
 

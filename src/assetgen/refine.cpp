@@ -1,0 +1,292 @@
+#include "assetgen/refine.h"
+
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <optional>
+
+#include "core/error.h"
+#include "core/log.h"
+#include "geometry/laplacian.h"
+#include "geometry/normals.h"
+#include "geometry/topology.h"
+#include "geometry/visual_hull.h"
+#include "raster/raster.h"
+
+namespace sd {
+namespace {
+
+template <typename T>
+std::span<const float> Floats(const std::vector<T>& v) {
+  return {reinterpret_cast<const float*>(v.data()), v.size() * sizeof(T) / sizeof(float)};
+}
+template <typename T>
+std::span<float> MutableFloats(std::vector<T>& v) {
+  return {reinterpret_cast<float*>(v.data()), v.size() * sizeof(T) / sizeof(float)};
+}
+
+void CheckViews(const MultiViewSet& views) {
+  if (views.empty()) throw InputError({}, "refine: no views given");
+  const int w = views[0].view.camera.width, h = views[0].view.camera.height;
+  for (size_t i = 0; i < views.size(); ++i) {
+    const MultiView& v = views[i];
+    const PinholeCamera& c = v.view.camera;
+    if (c.width != w || c.height != h)
+      throw InputError({}, Msg() << "refine: view " << v.view.name << " is " << c.width << "x" << c.height << " but view "
+                             << views[0].view.name << " is " << w << "x" << h << " (all views must have one size)");
+    if (v.normals.width() != c.width || v.normals.height() != c.height || v.normals.channels() != 3)
+      throw InputError({}, Msg() << "refine: view " << v.view.name << ": normal map is " << v.normals.width() << "x"
+                             << v.normals.height() << "x" << v.normals.channels() << ", camera is " << c.width << "x"
+                             << c.height << " (3 channels expected)");
+    if (v.mask.width() != c.width || v.mask.height() != c.height || v.mask.channels() != 1)
+      throw InputError({}, Msg() << "refine: view " << v.view.name << ": mask is " << v.mask.width() << "x" << v.mask.height()
+                             << "x" << v.mask.channels() << ", camera is " << c.width << "x" << c.height
+                             << " (1 channel expected)");
+    if (!(c.fx > 0 && c.fy > 0)) throw InputError({}, Msg() << "refine: view " << v.view.name << ": focal length must be positive");
+  }
+}
+
+void CheckOptions(const RefineOptions& o) {
+  if (o.steps < 1 || o.iterations_per_step < 1)
+    throw InputError({}, Msg() << "refine: steps (" << o.steps << ") and iterations per step (" << o.iterations_per_step
+                           << ") must be at least 1");
+  if (o.lambda_normal < 0 || o.lambda_mask < 0 || o.lambda_lap < 0)
+    throw InputError({}, "refine: loss weights must not be negative");
+  if (o.lambda_normal == 0 && o.lambda_mask == 0)
+    throw InputError({}, "refine: with both the normal and the mask weight at 0 nothing supervises the shape");
+  if (!(o.remesh.edge_length_min > 0) || o.remesh.edge_length_max < o.remesh.edge_length_min)
+    throw InputError({}, Msg() << "refine: edge length limits must satisfy 0 < min <= max (got " << o.remesh.edge_length_min
+                           << ", " << o.remesh.edge_length_max << ")");
+}
+
+// Per-view constant data and scratch buffers, reused across iterations.
+struct ViewState {
+  Eigen::Matrix4f clip_from_world;
+  size_t valid_normal_pixels = 0;
+  float mask_area = 1;  // target mask area in pixels: both terms are per object pixel
+  std::vector<float> clip, grad_clip, normal_img, grad_normal_img, grad_bary, coverage, aa, grad_aa, grad_coverage;
+  raster::RasterBuffer rast;
+  raster::AntialiasRecord aa_record;
+};
+
+struct Losses {
+  double normal = 0, mask = 0, lap = 0;
+};
+
+// One evaluation of the loss and its gradient with respect to the vertex positions.
+// What depends only on the connectivity: rebuilt after each remeshing pass, not per iteration.
+struct TopologyCache {
+  raster::EdgeTopology edges;
+  Eigen::SparseMatrix<float> laplacian;
+};
+
+Losses LossAndGradient(const std::vector<Eigen::Vector3f>& positions, const std::vector<Eigen::Vector3i>& faces,
+                       const TopologyCache& cache, const MultiViewSet& views, std::vector<ViewState>& state,
+                       const RefineOptions& o, float lap_scale, std::vector<Eigen::Vector3f>* grad) {
+  const size_t nv = positions.size();
+  grad->assign(nv, Eigen::Vector3f::Zero());
+  const std::vector<Eigen::Vector3f> vertex_normals = geometry::VertexNormals(positions, faces);
+  std::vector<Eigen::Vector3f> grad_vn(nv, Eigen::Vector3f::Zero());
+  const std::span<const int32_t> tris(reinterpret_cast<const int32_t*>(faces.data()), 3 * faces.size());
+  const raster::EdgeTopology& topology = cache.edges;
+  const float view_weight = 1.0f / static_cast<float>(views.size());
+
+  Losses losses;
+  for (size_t vi = 0; vi < views.size(); ++vi) {
+    const MultiView& view = views[vi];
+    ViewState& s = state[vi];
+    const int w = view.view.camera.width, h = view.view.camera.height;
+    const size_t np = static_cast<size_t>(w) * h;
+    s.clip.resize(4 * nv);
+    raster::TransformToClip(Floats(positions), s.clip_from_world, s.clip);
+    raster::Rasterize(s.clip, tris, w, h, &s.rast);
+
+    s.grad_clip.assign(4 * nv, 0.0f);
+    s.grad_bary.assign(2 * np, 0.0f);
+
+    // Normal term: re-normalised interpolated normals against the target where both cover the pixel.
+    if (o.lambda_normal > 0 && s.valid_normal_pixels > 0) {
+      s.normal_img.resize(3 * np);
+      raster::Interpolate(Floats(vertex_normals), 3, tris, s.rast, s.normal_img);
+      s.grad_normal_img.assign(3 * np, 0.0f);
+      const float scale = o.lambda_normal * view_weight / static_cast<float>(s.valid_normal_pixels);
+      double sum = 0;
+      for (size_t p = 0; p < np; ++p) {
+        if (s.rast.triangle[p] < 0) continue;
+        const int x = static_cast<int>(p % w), y = static_cast<int>(p / w);
+        if (view.mask.at(x, y) <= 0.5f) continue;
+        const Eigen::Vector3f target(view.normals.pixel(x, y));
+        if (target.squaredNorm() < 0.5f) continue;
+        const Eigen::Vector3f n(&s.normal_img[3 * p]);
+        const float len = n.norm();
+        if (len < 1e-8f) continue;
+        const Eigen::Vector3f nh = n / len;
+        const Eigen::Vector3f d = nh - target;
+        sum += d.squaredNorm();
+        // d/dn of |n/|n| - t|^2 = (I - nh nh^T) * 2 d / |n|.
+        const Eigen::Vector3f g = scale * 2.0f * (d - nh * nh.dot(d)) / len;
+        for (int c = 0; c < 3; ++c) s.grad_normal_img[3 * p + c] = g[c];
+      }
+      losses.normal += sum / static_cast<double>(s.valid_normal_pixels) * view_weight;
+      raster::InterpolateBackward(Floats(vertex_normals), 3, tris, s.rast, s.grad_normal_img, MutableFloats(grad_vn),
+                                  s.grad_bary);
+      raster::RasterizeBackward(s.clip, tris, s.rast, s.grad_bary, {}, s.grad_clip);
+    }
+
+    // Silhouette term: antialiased coverage against the target mask.
+    if (o.lambda_mask > 0) {
+      s.coverage.resize(np);
+      for (size_t p = 0; p < np; ++p) s.coverage[p] = s.rast.triangle[p] >= 0 ? 1.0f : 0.0f;
+      s.aa.resize(np);
+      raster::Antialias(s.coverage, 1, s.rast, s.clip, tris, topology, s.aa, &s.aa_record);
+      s.grad_aa.resize(np);
+      double sum = 0;
+      const float scale = o.lambda_mask * view_weight / s.mask_area;
+      const float* target = view.mask.data();
+      for (size_t p = 0; p < np; ++p) {
+        const float d = s.aa[p] - target[p];
+        sum += d * d;
+        s.grad_aa[p] = scale * 2.0f * d;
+      }
+      losses.mask += sum / s.mask_area * view_weight;
+      s.grad_coverage.assign(np, 0.0f);
+      raster::AntialiasBackward(s.coverage, 1, s.rast, s.clip, tris, topology, s.aa_record, s.grad_aa, s.grad_coverage,
+                                s.grad_clip);
+    }
+    raster::TransformToClipBackward(s.clip_from_world, s.grad_clip, MutableFloats(*grad));
+  }
+  geometry::VertexNormalsBackward(positions, faces, grad_vn, grad);
+  if (o.lambda_lap > 0) {
+    losses.lap = geometry::LaplacianLoss(cache.laplacian, positions, o.lambda_lap * lap_scale, grad) / (o.lambda_lap * lap_scale);
+  }
+  return losses;
+}
+
+}  // namespace
+
+geometry::RemeshOptions DefaultRemeshOptions() {
+  geometry::RemeshOptions o;
+  o.edge_length_min = 0.03f;
+  o.edge_length_max = 0.15f;
+  return o;
+}
+
+TriangleMesh CoarseMeshFromViews(const MultiViewSet& views, int resolution) {
+  CheckViews(views);
+  // The point nearest all optical axes (least squares), where the rig looks.
+  Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d b = Eigen::Vector3d::Zero();
+  for (const MultiView& v : views) {
+    const Eigen::Vector3d o = v.view.T_world_cam.translation;
+    const Eigen::Vector3d d = v.view.T_world_cam.Rotation().col(2);
+    const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - d * d.transpose();
+    A += P;
+    b += P * o;
+  }
+  const Eigen::Vector3d centre = views.size() >= 2 ? Eigen::Vector3d(A.ldlt().solve(b))
+                                                   : Eigen::Vector3d(views[0].view.T_world_cam * Eigen::Vector3d(0, 0, 4));
+  // The object is inside every view's frustum, so inside the smallest frustum cross-section at the centre.
+  double half = std::numeric_limits<double>::max();
+  for (const MultiView& v : views) {
+    const PinholeCamera& c = v.view.camera;
+    const double depth = (v.view.T_world_cam.Inverse() * centre).z();
+    if (depth <= 0) throw InputError({}, Msg() << "coarse mesh: view " << v.view.name << " looks away from the object");
+    half = std::min(half, depth * std::min(std::min(c.cx, c.width - c.cx) / c.fx, std::min(c.cy, c.height - c.cy) / c.fy));
+  }
+  std::vector<geometry::SilhouetteView> sil;
+  for (const MultiView& v : views) sil.push_back({v.view.camera, v.view.T_world_cam.Inverse(), v.mask});
+  geometry::VisualHullOptions opt;
+  opt.resolution = resolution;
+  opt.bounds.Extend((centre - Eigen::Vector3d::Constant(half)).cast<float>());
+  opt.bounds.Extend((centre + Eigen::Vector3d::Constant(half)).cast<float>());
+  TriangleMesh hull = geometry::VisualHull(sil, opt);
+  if (hull.NumFaces() == 0) throw InputError({}, "coarse mesh: the masks carve away everything (no common silhouette)");
+  return hull;
+}
+
+TriangleMesh PrepareForRefinement(const TriangleMesh& mesh, const std::string& what) {
+  if (mesh.NumFaces() == 0) throw InputError(what, Msg() << "the mesh has no triangles");
+  TriangleMesh out;
+  out.positions = mesh.positions;
+  out.faces = mesh.faces;
+  const float diag = mesh.Bounds().Size().norm();
+  geometry::WeldVertices(&out.positions, &out.faces, 1e-6f * std::max(diag, 1e-12f));
+  const geometry::TopologyReport topo = geometry::AnalyzeTopology(static_cast<int>(out.positions.size()), out.faces);
+  if (!topo.IsManifold())
+    throw InputError(what, Msg() << "the mesh is not manifold (" << topo.Describe()
+                           << "); refinement needs a manifold surface (e.g. a visual hull or a repaired mesh)");
+  return out;
+}
+
+RefineResult RefineMesh(const TriangleMesh& coarse_in, const MultiViewSet& views, const RefineOptions& options) {
+  CheckViews(views);
+  CheckOptions(options);
+  const auto t0 = std::chrono::steady_clock::now();
+  const TriangleMesh coarse = PrepareForRefinement(coarse_in, "refine: coarse mesh");
+
+  // Edge lengths and the camera depth range scale with the object.
+  const Eigen::Vector3f centre = coarse.Bounds().Center();
+  float radius = 0;
+  for (const auto& p : coarse.positions) radius = std::max(radius, (p - centre).norm());
+  geometry::RemeshOptions remesh = options.remesh;
+  remesh.edge_length_min *= radius;
+  remesh.edge_length_max *= radius;
+
+  std::vector<ViewState> state(views.size());
+  for (size_t i = 0; i < views.size(); ++i) {
+    const ViewCamera& v = views[i].view;
+    const float dist = static_cast<float>((v.T_world_cam.translation.cast<float>() - centre).norm());
+    const float near = std::max(1e-3f * dist, dist - 3.0f * radius), far = dist + 3.0f * radius;
+    state[i].clip_from_world = raster::ClipFromWorld(v.camera, v.T_world_cam.Inverse(), near, far);
+    const MultiView& mv = views[i];
+    double area = 0;
+    for (float m : mv.mask.vector()) area += m;
+    state[i].mask_area = static_cast<float>(std::max(area, 1.0));
+    for (int y = 0; y < mv.mask.height(); ++y)
+      for (int x = 0; x < mv.mask.width(); ++x)
+        if (mv.mask.at(x, y) > 0.5f && Eigen::Vector3f(mv.normals.pixel(x, y)).squaredNorm() >= 0.5f)
+          ++state[i].valid_normal_pixels;
+  }
+
+  geometry::ContinuousRemesher remesher(coarse.positions, coarse.faces, remesh);
+  RefineResult result;
+  std::optional<Progress> progress;
+  if (options.show_progress) progress.emplace("refine", static_cast<size_t>(options.steps));
+  std::vector<Eigen::Vector3f> grad;
+  for (int step = 0; step < options.steps; ++step) {
+    const auto ts = std::chrono::steady_clock::now();
+    if (step > 0) remesher.Remesh();
+    const auto& faces = remesher.faces();
+    TopologyCache cache;
+    cache.edges = raster::BuildEdgeTopology({reinterpret_cast<const int32_t*>(faces.data()), 3 * faces.size()},
+                                            static_cast<int>(remesher.positions().size()));
+    if (options.lambda_lap > 0) cache.laplacian = geometry::UniformLaplacian(static_cast<int>(remesher.positions().size()), faces);
+    Losses last;
+    for (int it = 0; it < options.iterations_per_step; ++it) {
+      // The smoothness weight is per squared edge length so that it means the same at every resolution.
+      const float edge = std::max(remesher.MeanTargetEdgeLength(), 1e-6f);
+      last = LossAndGradient(remesher.positions(), remesher.faces(), cache, views, state, options, 1.0f / (edge * edge), &grad);
+      remesher.Step(grad);
+    }
+    RefineStepLog log;
+    log.step = step;
+    log.loss_normal = last.normal;
+    log.loss_mask = last.mask;
+    log.loss_lap = last.lap;
+    log.vertices = remesher.positions().size();
+    log.faces = remesher.faces().size();
+    log.mean_target_edge = remesher.MeanTargetEdgeLength();
+    log.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - ts).count();
+    SD_LOG(Debug, "refine step " << step << ": normal " << log.loss_normal << " mask " << log.loss_mask << " lap "
+                                 << log.loss_lap << ", " << log.faces << " faces, edge " << log.mean_target_edge);
+    result.log.push_back(log);
+    if (progress) progress->Advance();
+  }
+  result.mesh.positions = remesher.positions();
+  result.mesh.faces = remesher.faces();
+  result.mesh.ComputeVertexNormals();
+  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return result;
+}
+
+}  // namespace sd

@@ -138,7 +138,7 @@ Losses LossAndGradient(const std::vector<Eigen::Vector3f>& positions, const std:
       s.coverage.resize(np);
       for (size_t p = 0; p < np; ++p) s.coverage[p] = s.rast.triangle[p] >= 0 ? 1.0f : 0.0f;
       s.aa.resize(np);
-      raster::Antialias(s.coverage, 1, s.rast, s.clip, tris, topology, s.aa, &s.aa_record);
+      raster::Antialias(s.coverage, 1, s.rast, s.clip, tris, topology, s.aa, &s.aa_record, /*color_gradient=*/false);
       s.grad_aa.resize(np);
       double sum = 0;
       const float scale = o.lambda_mask * view_weight / s.mask_area;

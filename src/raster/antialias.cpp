@@ -298,7 +298,7 @@ EdgeTopology BuildEdgeTopology(std::span<const int32_t> tris, int num_vertices) 
 
 void Antialias(std::span<const float> color, int channels, const RasterBuffer& rast, std::span<const float> clip_pos,
                std::span<const int32_t> tris, const EdgeTopology& topology, std::span<float> out,
-               AntialiasRecord* record) {
+               AntialiasRecord* record, bool color_gradient) {
   CheckAntialiasArgs(color, channels, rast, clip_pos, tris, topology);
   SD_CHECK(out.size() == color.size(), << "out: " << out.size());
   SD_CHECK(out.data() != color.data(), << "Antialias cannot work in place");
@@ -306,6 +306,12 @@ void Antialias(std::span<const float> color, int channels, const RasterBuffer& r
   const Scene sc(rast, clip_pos, tris, topology);
   const int width = rast.width, height = rast.height;
 
+  const size_t C = static_cast<size_t>(channels);
+  auto same_color = [&](int32_t a, int32_t b) {
+    for (size_t c = 0; c < C; ++c)
+      if (color[C * a + c] != color[C * b + c]) return false;
+    return true;
+  };
   // Pairs whose first pixel is in row j, found per row in parallel and concatenated in row order.
   std::vector<std::vector<AntialiasRecord::PixelPair>> rows(height);
   ParallelFor(0, static_cast<size_t>(height), [&](size_t j) {
@@ -313,7 +319,9 @@ void Antialias(std::span<const float> color, int channels, const RasterBuffer& r
       const int32_t a = static_cast<int32_t>(j * width + i);
       for (const int32_t b : {i + 1 < width ? a + 1 : -1, static_cast<int>(j) + 1 < height ? a + width : -1}) {
         PairGeometry g;
-        if (b < 0 || !ExaminePair(sc, a, b, &g)) continue;
+        if (b < 0 || rast.triangle[a] == rast.triangle[b]) continue;
+        if (!color_gradient && same_color(a, b)) continue;
+        if (!ExaminePair(sc, a, b, &g)) continue;
         rows[j].push_back({a, b, g.triangle, g.edge, BlendOf(g).alpha});
       }
     }
@@ -322,7 +330,6 @@ void Antialias(std::span<const float> color, int channels, const RasterBuffer& r
   for (const auto& row : rows) record->pairs.insert(record->pairs.end(), row.begin(), row.end());
 
   std::copy(color.begin(), color.end(), out.begin());
-  const size_t C = static_cast<size_t>(channels);
   for (const AntialiasRecord::PixelPair& pair : record->pairs) {
     const Blend blend = BlendOf(RecordedPair(sc, pair));
     for (size_t c = 0; c < C; ++c)

@@ -284,6 +284,31 @@ TEST(AntialiasBackward, GeometryGradientMatchesFiniteDifferences) {
 }
 
 // The colour gradient: out is linear in the colours at fixed geometry, so FD is exact up to float rounding.
+// Skipping equal-colour pairs (color_gradient = false) is exact for the output and the geometry gradient: on
+// a coverage mask only the outline against the background is left, and nothing else changes.
+TEST(Antialias, SkippingEqualColoursKeepsOutputAndGeometryGradient) {
+  constexpr int kSize = 96;
+  const SphereView s = MakeSphereView(kSize, 7);
+  std::vector<float> coverage(s.rast.NumPixels());
+  for (size_t p = 0; p < coverage.size(); ++p) coverage[p] = s.rast.triangle[p] >= 0 ? 1.0f : 0.0f;
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> unit(-1, 1);
+  std::vector<float> grad_out(coverage.size());
+  for (float& g : grad_out) g = unit(rng);
+  std::vector<float> out_full(coverage.size()), out_fast(coverage.size());
+  AntialiasRecord full, fast;
+  Antialias(coverage, 1, s.rast, s.clip, s.mesh.tris, s.topology, out_full, &full, true);
+  Antialias(coverage, 1, s.rast, s.clip, s.mesh.tris, s.topology, out_fast, &fast, false);
+  EXPECT_LT(fast.pairs.size(), full.pairs.size());  // the bumpy sphere has interior silhouettes
+  EXPECT_GT(fast.pairs.size(), 0u);
+  EXPECT_EQ(out_full, out_fast);
+  std::vector<float> gc_full(coverage.size()), gc_fast(coverage.size());
+  std::vector<float> gx_full(s.clip.size()), gx_fast(s.clip.size());
+  AntialiasBackward(coverage, 1, s.rast, s.clip, s.mesh.tris, s.topology, full, grad_out, gc_full, gx_full);
+  AntialiasBackward(coverage, 1, s.rast, s.clip, s.mesh.tris, s.topology, fast, grad_out, gc_fast, gx_fast);
+  for (size_t i = 0; i < gx_full.size(); ++i) EXPECT_NEAR(gx_full[i], gx_fast[i], 1e-5f * (1 + std::abs(gx_full[i]))) << i;
+}
+
 TEST(AntialiasBackward, ColorGradientMatchesFiniteDifferences) {
   constexpr int kSize = 24;
   const SphereView s = MakeSphereView(kSize, 4);

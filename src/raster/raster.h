@@ -90,9 +90,13 @@ struct AntialiasRecord {
 };
 // color: `channels` per pixel (e.g. an interpolated attribute, or a 1-channel coverage mask); out: same, and
 // not the same buffer as color. `record` is overwritten.
+// color_gradient = false promises that the caller will not use AntialiasBackward's grad_color: pairs whose
+// colours are equal are then skipped — their blend changes nothing and moves no vertex, only the colour
+// gradient needs them. For a coverage mask that leaves only the outline against the background, which
+// makes the op several times cheaper on a finely tessellated mesh; out and grad_clip are unchanged.
 void Antialias(std::span<const float> color, int channels, const RasterBuffer& rast, std::span<const float> clip_pos,
                std::span<const int32_t> tris, const EdgeTopology& topology, std::span<float> out,
-               AntialiasRecord* record);
+               AntialiasRecord* record, bool color_gradient = true);
 // grad_color: `channels` per pixel, accumulated; grad_clip: 4 per vertex, accumulated.
 void AntialiasBackward(std::span<const float> color, int channels, const RasterBuffer& rast,
                        std::span<const float> clip_pos, std::span<const int32_t> tris, const EdgeTopology& topology,

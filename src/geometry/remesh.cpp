@@ -274,6 +274,7 @@ class HalfEdgeMesh {
     std::vector<char> touched(num_faces, 0);
     auto is_touched = [&](int f) { return f >= num_faces || touched[f]; };
     for (const auto& [neg_len, h] : candidates) {
+      if (static_cast<int64_t>(P_.size()) >= options_.max_vertices) break;
       const int g = opp_[h];
       if (is_touched(h / 3) || (g >= 0 && is_touched(g / 3))) continue;
       touched[h / 3] = 1;

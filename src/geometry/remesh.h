@@ -22,10 +22,14 @@ struct RemeshOptions {
   float edge_length_tolerance = 0.5f;  // split above (1 + tol) * target, collapse below (1 - tol) * target
   float gain = 0.2f;                 // how fast the target edge length follows the vertex velocity
   // Speed |m1_hat| / sqrt(m2_hat) of the Adam step at which the target edge length is stable: ~1 while the
-  // gradient points one way, ~0.3 for a vertex jittering around its optimum (beta1 = 0.8), so 0.3 grows
-  // edges while the surface travels and shrinks them (down to edge_length_min) once it has settled.
-  float velocity_target = 0.3f;
+  // gradient points one way, ~0.33 for pure 3D noise (sqrt((1 - b1) / (1 + b1)), beta1 = 0.8) and less for a
+  // vertex oscillating around its optimum, so 0.4 grows edges while the surface travels and shrinks them
+  // (down to edge_length_min) once it has settled, noise or not.
+  float velocity_target = 0.4f;
   bool remesh = true;                // false: plain adaptive optimiser, topology fixed
+  // Splits stop at this many vertices: a safety net (the paper's reference code has one too) for gradients
+  // so noisy that the surface crumples and keeps asking for more vertices.
+  int max_vertices = 1000000;
 };
 
 class ContinuousRemesher {

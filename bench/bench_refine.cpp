@@ -26,6 +26,7 @@
 #include "assetgen/canonical.h"
 #include "assetgen/refine.h"
 #include "assetgen/views.h"
+#include "core/error.h"
 #include "core/log.h"
 #include "geometry/metrics.h"
 #include "io/files.h"
@@ -117,11 +118,26 @@ ImageU8 Thumbnail(const TriangleMesh& mesh, const std::vector<ViewCamera>& rig) 
   return out;
 }
 
+// Geometry only: some scans ship their OBJ without the texture the MTL names (the GSO chicken), which the
+// asset loader rightly refuses; the benchmark needs the surface alone, so material lines are dropped.
+TriangleMesh LoadGeometry(const fs::path& obj, const fs::path& scratch) {
+  std::ifstream in(obj);
+  if (!in) throw InputError(obj, "cannot open");
+  const fs::path copy = scratch / (obj.stem().string() + "_geometry.obj");
+  std::ofstream out(copy);
+  for (std::string line; std::getline(in, line);)
+    if (line.rfind("mtllib", 0) != 0 && line.rfind("usemtl", 0) != 0) out << line << '\n';
+  out.close();
+  TriangleMesh mesh = LoadMesh(copy);
+  fs::remove(copy);
+  return mesh;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   std::vector<std::string> only, conditions = {"clean", "degraded"};
-  int repeats = 1, hull_resolution = 48;
+  int repeats = 1, hull_resolution = 96;
   RefineOptions options;
   options.show_progress = false;
   fs::path json_out, html_out;
@@ -188,7 +204,7 @@ int main(int argc, char** argv) {
     std::vector<double> cd_c, cd_r, f_c, f_r, iou_c, iou_r, secs;
     for (const BenchObject& obj : Objects()) {
       if (!only.empty() && std::find(only.begin(), only.end(), obj.name) == only.end()) continue;
-      TriangleMesh gt = LoadMesh(assets / obj.file);
+      TriangleMesh gt = LoadGeometry(assets / obj.file, fs::temp_directory_path());
       gt.Transform(Rigid3d(AxesToCanonical(obj.up, obj.up == "+z" ? "+x" : "+z").cast<double>(), Eigen::Vector3d::Zero()));
       NormalizeIntoSphere(gt).Apply(&gt);
       gt.uvs.clear();

@@ -255,7 +255,7 @@ RefineResult RefineMesh(const TriangleMesh& coarse_in, const MultiViewSet& views
   std::vector<Eigen::Vector3f> grad;
   for (int step = 0; step < options.steps; ++step) {
     const auto ts = std::chrono::steady_clock::now();
-    if (step > 0) remesher.Remesh();
+    remesher.Remesh();
     const auto& faces = remesher.faces();
     TopologyCache cache;
     cache.edges = raster::BuildEdgeTopology({reinterpret_cast<const int32_t*>(faces.data()), 3 * faces.size()},

@@ -12,7 +12,8 @@
 //   L_lap:    uniform-Laplacian smoothness sum_i |(L x)_i|^2 / n of the positions, divided by the square of
 //             the mesh's mean target edge length so its weight does not depend on resolution.
 // Schedule (the paper's): `steps` refinement steps, each = remesh (split / collapse / flip / smooth towards
-// the per-vertex target edge lengths; the first step starts from the coarse mesh as given), then
+// the per-vertex target edge lengths; the first pass brings a finer coarse mesh, e.g. a fine visual hull,
+// to the shortest useful edge), then
 // `iterations_per_step` optimiser steps of the continuous remesher's adaptive optimiser.
 // Works in the cameras' world frame; edge lengths are relative to the coarse mesh's bounding-sphere radius.
 #include <vector>

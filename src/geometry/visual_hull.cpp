@@ -17,9 +17,12 @@
 // Rules beyond the header's:
 //  - A node no view sees (behind every camera or outside every image) is outside: there is no evidence for it.
 //  - Nodes on the grid border are outside, so the mesh is closed (the hull is clipped to the bounds).
-//  - Only the connected component enclosing the largest volume is kept. Silhouettes are of one object, and
-//    where the bounds stick out of the views' frusta (the rig frames the unit sphere; the default bounds'
-//    corners lie outside it) nodes that only a few views see can survive as detached islands.
+//  - With require_all_views (the default), a node outside any view's image is outside too: the silhouettes
+//    show the whole object, so it lies in every view's frustum. Where the bounds stick out of the frusta (the
+//    rig frames the unit sphere; the default bounds' corners lie outside it) such nodes would otherwise
+//    survive as islands only a few views could carve.
+//  - Components enclosing less than min_component_fraction of the largest one's volume are dropped (voxel
+//    noise); an object whose thin parts break at this resolution keeps all its pieces.
 
 namespace sd::geometry {
 namespace {
@@ -89,8 +92,9 @@ void Validate(const std::vector<SilhouetteView>& views, const VisualHullOptions&
     throw InputError("", "VisualHull: bounds have zero extent along some axis");
 }
 
-// Keeps the connected component (faces linked through shared vertices) with the largest enclosed volume.
-TriangleMesh LargestComponent(const TriangleMesh& mesh) {
+// Keeps the connected components (faces linked through shared vertices) enclosing at least `fraction` of
+// the largest one's volume.
+TriangleMesh SignificantComponents(const TriangleMesh& mesh, float fraction) {
   const size_t nv = mesh.NumVertices();
   std::vector<int> parent(nv);
   std::iota(parent.begin(), parent.end(), 0);
@@ -113,14 +117,14 @@ TriangleMesh LargestComponent(const TriangleMesh& mesh) {
                           c = mesh.positions[f[2]].cast<double>() - ref;
     volume[find(f[0])] += a.dot(b.cross(c)) / 6;
   }
-  int best = -1;
+  double largest = 0;
   for (size_t v = 0; v < nv; ++v)
-    if (find(int(v)) == int(v) && (best < 0 || volume[v] > volume[best])) best = int(v);
+    if (find(int(v)) == int(v)) largest = std::max(largest, volume[v]);
   TriangleMesh out;
-  if (best < 0) return out;
+  if (!(largest > 0)) return out;
   std::vector<int> remap(nv, -1);
   for (const auto& f : mesh.faces) {
-    if (find(f[0]) != best) continue;
+    if (volume[find(f[0])] < fraction * largest) continue;
     Eigen::Vector3i g;
     for (int k = 0; k < 3; ++k) {
       if (remap[f[k]] < 0) {
@@ -164,7 +168,13 @@ TriangleMesh VisualHull(const std::vector<SilhouetteView>& views, const VisualHu
         for (const ViewData& d : data) {
           const Eigen::Vector3d p_cam = d.R_cam_world * p_world + d.t_cam_world;
           const auto uv = d.view->camera.Project(p_cam);
-          if (!uv || !d.view->camera.InImage(*uv)) continue;
+          if (!uv || !d.view->camera.InImage(*uv)) {
+            if (options.require_all_views) {
+              value = 0;
+              break;
+            }
+            continue;
+          }
           seen = true;
           // Footprint half-width: half a voxel at the node's depth, at least half a pixel (bilinear-like).
           const double ru = std::max(0.5, half_voxel * d.view->camera.fx / p_cam.z());
@@ -177,7 +187,7 @@ TriangleMesh VisualHull(const std::vector<SilhouetteView>& views, const VisualHu
     }
   });
 
-  return LargestComponent(MarchingCubes(grid, options.mask_threshold));
+  return SignificantComponents(MarchingCubes(grid, options.mask_threshold), options.min_component_fraction);
 }
 
 }  // namespace sd::geometry

@@ -22,6 +22,11 @@ struct VisualHullOptions {
   float mask_threshold = 0.5f;
   // Region carved; empty = the cube [-1, 1]^3 (objects normalised into the unit sphere, as the rig does).
   AlignedBox3f bounds;
+  // The silhouettes show the whole object, so it lies in every view's frustum: nodes outside any view's
+  // image are outside. Turn off for camera sets where some views see only part of the object.
+  bool require_all_views = true;
+  // Components enclosing less than this fraction of the largest one's volume are dropped as voxel noise.
+  float min_component_fraction = 0.01f;
 };
 
 // Throws InputError when no view is given or a mask's size disagrees with its camera (also: a mask with other
@@ -30,9 +35,11 @@ struct VisualHullOptions {
 // The field at a node is the mask's coverage of the node's footprint (one voxel, projected), so the surface
 // follows the silhouettes to ~0.1 voxel rather than sitting on voxel steps. A node that no view sees is
 // outside; the grid has one forced-outside node layer beyond the bounds, so the mesh is closed and clipped at
-// most half a voxel outside them. Only the connected component enclosing the largest volume is returned:
-// where the bounds leave the views' frusta, regions only a few views see cannot be carved and would otherwise
-// remain as islands. Result: watertight, manifold, outward CCW; positions and faces only.
+// most half a voxel outside them. With require_all_views, nodes outside any view's image are outside (where
+// the bounds leave the views' frusta, regions only a few views see could not be carved and would remain as
+// islands). Components below min_component_fraction of the largest one's volume are dropped; thin parts
+// that break apart at the grid's resolution are kept. Result: watertight, manifold, outward CCW; positions
+// and faces only.
 TriangleMesh VisualHull(const std::vector<SilhouetteView>& views, const VisualHullOptions& options);
 
 }  // namespace sd::geometry

@@ -17,8 +17,9 @@ namespace {
 // Face quality floor for the results of collapses and flips: |cross| / (longest edge)^2 of a new face must
 // stay above this (equilateral: 0.87; 0.05 is a smallest angle of about 3 degrees). Keeps slivers out.
 constexpr float kMinQuality = 0.05f;
-// A face's normal may turn by at most ~75 degrees (cos 0.25) in one collapse / flip: anything more is
-// treated as a fold-over in the making.
+// A face's normal may turn by at most ~45 degrees (cos 0.7) in one collapse / flip / relaxation move:
+// anything more is treated as a fold-over in the making. (Looser bounds let a face on a steep wrinkle be
+// turned past vertical in a few moves; the ring-normal test in each operation backs this up.)
 constexpr float kMinNormalCos = 0.7f;
 // The first steps ramp the learning rate up over 1 / (1 - beta1) steps, while the moment estimates are
 // still dominated by single gradients.
@@ -45,7 +46,7 @@ struct VertexData {
     target->push_back(0.5f * ((*target)[a] + (*target)[b]));
     return v;
   }
-  // b merges into a; a takes the midpoint and the average state.
+  // b merges into a; a moves to p (the midpoint, or stays put on the boundary) and takes the average state.
   void Merge(int a, int b, const Eigen::Vector3f& p) {
     (*positions)[a] = p;
     (*m1)[a] = 0.5f * ((*m1)[a] + (*m1)[b]);

@@ -14,8 +14,9 @@ struct RemeshOptions {
   float learning_rate = 0.3f;        // step relative to the vertex's target edge length
   float beta1 = 0.8f;                // momentum of the gradient
   float beta2 = 0.99f;               // momentum of the squared gradient norm
-  // Step: each interior vertex also moves smooth_gain * speed of the way to its neighbours' centroid
-  // (Laplacian smoothing of the update); Remesh: tangential relaxation by this fraction.
+  // Step: each vertex also moves smooth_gain * speed of the way to its neighbours' centroid (Laplacian
+  // smoothing of the update; boundary vertices towards their two rim neighbours). Remesh: tangential
+  // relaxation of interior vertices by this fraction.
   float smooth_gain = 0.2f;
   float edge_length_min = 0.005f;    // target edge length limits (in the mesh's units)
   float edge_length_max = 0.15f;
@@ -50,8 +51,9 @@ class ContinuousRemesher {
   // Optimiser state follows the vertices (new vertices interpolate it). Keeps the mesh manifold; an edge
   // operation that would fold a face over or create a non-manifold configuration is skipped. Open meshes keep
   // their boundary curve: boundary edges are split at midpoints but never collapsed or flipped, and boundary
-  // vertices are never moved or removed by Remesh() (Step still moves them). Vertex and face
-  // arrays are renumbered compactly (unreferenced vertices are dropped); no-op when options().remesh is false.
+  // vertices are never moved or removed by Remesh() (Step still moves them). Vertex and face arrays are
+  // renumbered compactly (unreferenced vertices are dropped), so callers re-read positions() and faces().
+  // No-op when options().remesh is false.
   void Remesh();
 
   float MeanTargetEdgeLength() const;

@@ -9,7 +9,7 @@
 // renders of GT / coarse / refined (--html, default bench/results/refine.html).
 //
 // Usage: bench_refine [--objects name,name] [--conditions clean,degraded] [--repeats N] [--steps N] [--iters N]
-//                     [--hull N] [--lambda-lap X] [--lambda-mask X] [--lr X] [--edge-min X] [--edge-max X]
+//                     [--hull N] [--lambda-normal X] [--lambda-lap X] [--lambda-mask X] [--lr X] [--edge-min X] [--edge-max X]
 // Seconds per object are the median of --repeats runs of the refinement (visual hull and metrics excluded).
 #include <algorithm>
 #include <cstdio>
@@ -157,6 +157,7 @@ int main(int argc, char** argv) {
     else if (a == "--iters") options.iterations_per_step = std::atoi(next().c_str());
     else if (a == "--lambda-lap") options.lambda_lap = std::stof(next());
     else if (a == "--lambda-mask") options.lambda_mask = std::stof(next());
+    else if (a == "--lambda-normal") options.lambda_normal = std::stof(next());
     else if (a == "--lr") options.remesh.learning_rate = std::stof(next());
     else if (a == "--edge-min") options.remesh.edge_length_min = std::stof(next());
     else if (a == "--edge-max") options.remesh.edge_length_max = std::stof(next());

@@ -1,0 +1,1 @@
+#include "assetgen/texture.h"

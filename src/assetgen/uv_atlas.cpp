@@ -1,0 +1,1 @@
+#include "assetgen/uv_atlas.h"

@@ -99,6 +99,9 @@ cp -r "$T/views" "$T/views_bad" && cp "$T/views_bad/mask_00.png" "$T/views_bad/k
 expect_error "refine: mask size disagrees" "mask_02.png: image is 32x32" "$T/r4.glb" -- "$BIN" -q refine --views "$T/views_bad" --out "$T/r4.glb"
 expect_error "refine: impossible steps" "must be at least 1" "$T/r5.glb" -- "$BIN" -q refine --views "$T/views" --steps 0 --out "$T/r5.glb"
 expect_error "refine: unsupported output" "written as .glb or .ply" "" -- "$BIN" -q refine --views "$T/views" --out "$T/r6.obj"
+"$BIN" -q eval texture --pred "$CONE" --gt "$CONE" --size 48 --out "$T/tex.json" >"$T/tex.txt" \
+  && grep -q '"psnr": 120' "$T/tex.json" && grep -q 'SSIM' "$T/tex.txt" && ok || bad "eval texture of a mesh against itself"
+expect_error "eval texture: missing ground truth" "nogt.obj: no such file" "$T/tex2.json" -- "$BIN" -q eval texture --pred "$CONE" --gt "$T/nogt.obj" --out "$T/tex2.json"
 expect_error "eval: missing prediction" "nothing.glb: no such file" "$T/nothing.geometry.json" -- "$BIN" -q eval geometry --pred "$T/nothing.glb" --gt "$CONE"
 
 echo "$pass passed, $fail failed"

@@ -1,4 +1,5 @@
-// `synthdrive eval <what>`: quality figures against ground truth. `geometry` compares two meshes.
+// `synthdrive eval <what>`: quality figures against ground truth. `geometry` compares two meshes' shapes,
+// `texture` their appearance at held-out views.
 #include <cstdio>
 #include <filesystem>
 
@@ -8,6 +9,7 @@
 #include "cli/commands.h"
 #include "cli/mesh_files.h"
 #include "core/log.h"
+#include "assetgen/texture_eval.h"
 #include "geometry/metrics.h"
 #include "io/json.h"
 
@@ -34,7 +36,37 @@ Runner AddEvalCommand(CLI::App& app) {
   geo->add_option("--seed", a->options.seed, "Sampling seed")->default_val(a->options.seed);
   geo->add_flag("--overwrite", a->overwrite, "Replace an existing metrics file");
 
-  return [a]() {
+  struct TexArgs {
+    std::string pred, gt, out;
+    int size = 320;
+    bool overwrite = false;
+  };
+  auto t = std::make_shared<TexArgs>();
+  CLI::App* tex = app.add_subcommand("texture", "PSNR and SSIM of a textured mesh against ground truth at 8 held-out views");
+  tex->add_option("--pred", t->pred, "Predicted textured mesh (.glb/.gltf read as z-up assets, .obj as-is)")->required();
+  tex->add_option("--gt", t->gt, "Ground-truth textured mesh, in the same frame")->required();
+  tex->add_option("--out", t->out, "Metrics JSON to write (default: <pred>.texture.json beside the prediction)");
+  tex->add_option("--size", t->size, "Image size of the held-out views")->default_val(320)->check(CLI::Range(32, 4096));
+  tex->add_flag("--overwrite", t->overwrite, "Replace an existing metrics file");
+
+  return [a, t, tex]() {
+    if (tex->parsed()) {
+      std::filesystem::path out = t->out;
+      if (out.empty()) out = std::filesystem::path(t->pred).replace_extension(".texture.json");
+      RefuseExisting(out, t->overwrite);
+      const TriangleMesh pred = ReadMeshFile(t->pred);
+      const TriangleMesh gt = ReadMeshFile(t->gt);
+      const TextureMetrics m = CompareTextures(pred, gt, t->size);
+      const std::string protocol = DescribeTextureProtocol();
+      std::printf("protocol: %s\n\n%-8s %10s %8s\n", protocol.c_str(), "view", "PSNR dB", "SSIM");
+      for (size_t i = 0; i < m.psnr_per_view.size(); ++i)
+        std::printf("%-8zu %10.2f %8.4f\n", i, m.psnr_per_view[i], m.ssim_per_view[i]);
+      std::printf("%-8s %10.2f %8.4f\n", "all", m.psnr, m.ssim);
+      WriteJsonFile(out, {{"pred", t->pred}, {"gt", t->gt}, {"protocol", protocol}, {"size", t->size}, {"psnr", m.psnr},
+                          {"ssim", m.ssim}, {"psnr_per_view", m.psnr_per_view}, {"ssim_per_view", m.ssim_per_view}});
+      SD_LOG(Info, "wrote " << out.string());
+      return 0;
+    }
     std::filesystem::path out = a->out;
     if (out.empty()) out = std::filesystem::path(a->pred).replace_extension(".geometry.json");
     RefuseExisting(out, a->overwrite);

@@ -1,5 +1,7 @@
 #include "assetgen/views.h"
 
+#include "assetgen/texture_eval.h"
+
 #include <algorithm>
 #include <cmath>
 #include <random>
@@ -194,9 +196,13 @@ MultiViewSet RenderOracleViews(const TriangleMesh& mesh, const std::vector<ViewC
                                  ? PerturbPose(cameras[i].T_world_cam, degradation, rng)
                                  : cameras[i].T_world_cam;
     MultiView v = RenderOne(mesh, face_normals, cameras[i], T_render, supersample);
+    ViewCamera render_camera = cameras[i];
+    render_camera.T_world_cam = T_render;
+    v.color = RenderAlbedo(mesh, render_camera, supersample).color;
     if (degradation.blur_sigma_px > 0) {
       v.normals = GaussianBlur(v.normals, degradation.blur_sigma_px);
       v.mask = GaussianBlur(v.mask, degradation.blur_sigma_px);
+      v.color = GaussianBlur(v.color, degradation.blur_sigma_px);
     }
     if (degradation.normal_noise > 0) {
       std::normal_distribution<float> noise(0.0f, degradation.normal_noise);
@@ -264,6 +270,14 @@ MultiViewSet LoadViews(const std::filesystem::path& dir) {
                              << " but views[0] is " << views[0].view.camera.width << "x" << views[0].view.camera.height
                              << " (all views of a set must have one size)");
 
+    if (v.Has("image")) {
+      const std::filesystem::path image_file = dir / v["image"].String();
+      const ImageU8 image = ReadImage(image_file, 3);
+      if (image.width() != cam.width || image.height() != cam.height)
+        throw InputError(image_file, Msg() << "image is " << image.width() << "x" << image.height()
+                                           << " but its camera in cameras.json says " << cam.width << "x" << cam.height);
+      mv.color = ToLinear(image);
+    }
     const Eigen::Matrix3f R_world_frame = frame == "camera" ? Eigen::Matrix3f(mv.view.T_world_cam.Rotation().cast<float>())
                                                             : Eigen::Matrix3f(Eigen::Matrix3f::Identity());
     mv.normals = ImageF(cam.width, cam.height, 3);
@@ -312,8 +326,16 @@ void SaveViews(const MultiViewSet& views, const std::filesystem::path& dir, cons
     const Eigen::Matrix4d T = v.view.T_world_cam.Matrix();
     nlohmann::json rows = nlohmann::json::array();
     for (int r = 0; r < 4; ++r) rows.push_back({T(r, 0), T(r, 1), T(r, 2), T(r, 3)});
-    list.push_back({{"name", v.view.name}, {"normals", nf}, {"mask", mf}, {"width", cam.width}, {"height", cam.height},
-                    {"fx", cam.fx}, {"fy", cam.fy}, {"cx", cam.cx}, {"cy", cam.cy}, {"T_world_cam", rows}});
+    nlohmann::json entry = {{"name", v.view.name}, {"normals", nf}, {"mask", mf}, {"width", cam.width},
+                             {"height", cam.height}, {"fx", cam.fx}, {"fy", cam.fy}, {"cx", cam.cx}, {"cy", cam.cy},
+                             {"T_world_cam", rows}};
+    if (!v.color.empty()) {
+      char cf[32];
+      std::snprintf(cf, sizeof(cf), "image_%02zu.png", i);
+      WriteImage(out.path() / cf, ToSrgb8(v.color));
+      entry["image"] = cf;
+    }
+    list.push_back(entry);
   }
   WriteJsonFile(out.path() / "cameras.json", {{"format", kFormat}, {"normal_frame", normal_frame}, {"views", list}});
   out.Commit();

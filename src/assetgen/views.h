@@ -12,7 +12,8 @@
 //   { "format": "synthdrive-views/1", "normal_frame": "camera",
 //     "views": [ { "name": "view_00", "normals": "normal_00.png", "mask": "mask_00.png",
 //                  "width": 320, "height": 320, "fx": ..., "fy": ..., "cx": ..., "cy": ...,
-//                  "T_world_cam": [[...4x4 row-major...]] }, ... ] }
+//                  "T_world_cam": [[...4x4 row-major...]], "image": "image_00.png" }, ... ] }
+// "image" is optional: an sRGB colour picture of the object at that camera (what texture fusion reads).
 // Masks are 8-bit grey PNGs, 255 = object (soft edges allowed). All views of a set have the same size.
 #include <cstdint>
 #include <filesystem>
@@ -36,6 +37,7 @@ struct MultiView {
   ViewCamera view;
   ImageF normals;  // 3 channels, unit world-frame normals; (0, 0, 0) outside the object
   ImageF mask;     // 1 channel, 0..1
+  ImageF color;    // empty, or 3 channels, linear RGB (the "image" of the view)
 };
 
 using MultiViewSet = std::vector<MultiView>;
@@ -68,7 +70,8 @@ MultiViewSet LoadViews(const std::filesystem::path& dir);
 void SaveViews(const MultiViewSet& views, const std::filesystem::path& dir, const std::string& normal_frame,
                bool overwrite);
 
-// Oracle views of a known mesh: exact geometric (face) normals and coverage masks, anti-aliased by
+// Oracle views of a known mesh: exact geometric (face) normals, coverage masks and unlit base colour
+// (texture_eval.h RenderAlbedo), anti-aliased by
 // `supersample`² samples per pixel. Rendering can use perturbed cameras (the stored cameras stay nominal)
 // and the images can be degraded, to mimic what a learned normal estimator and segmenter deliver.
 struct OracleDegradation {

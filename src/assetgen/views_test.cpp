@@ -96,6 +96,12 @@ TEST(Views, SaveAndLoadRoundTripInBothNormalFrames) {
           const Eigen::Vector3f a(views[i].normals.pixel(x, y)), b(back[i].normals.pixel(x, y));
           worst_normal = std::max(worst_normal, double((a - b).norm()));
         }
+      // Colour (an untextured mesh renders white where covered) survives the sRGB PNG.
+      ASSERT_FALSE(back[i].color.empty());
+      double worst_color = 0;
+      for (size_t k = 0; k < views[i].color.size(); ++k)
+        worst_color = std::max(worst_color, double(std::abs(back[i].color.data()[k] - views[i].color.data()[k])));
+      EXPECT_LT(worst_color, 0.01) << frame;
       // 8-bit quantisation: half a step per channel (1/255 of the [-1, 1] range), then re-normalised.
       EXPECT_LT(worst_normal, 0.012) << frame;
       EXPECT_LE(worst_mask, 0.5 / 255 + 1e-6) << frame;
@@ -164,6 +170,10 @@ TEST_F(ViewsBadInput, UnknownNormalFrame) {
   json_["normal_frame"] = "object";
   Write(json_);
   ExpectError("normal_frame");
+}
+TEST_F(ViewsBadInput, ColourImageSizeDisagreesWithCamera) {
+  WriteImage(dir_ / "image_05.png", ImageU8(20, 32, 3));
+  ExpectError("image_05.png: image is 20x32");
 }
 TEST_F(ViewsBadInput, MissingImage) {
   std::filesystem::remove(dir_ / "normal_04.png");

@@ -102,6 +102,18 @@ expect_error "refine: unsupported output" "written as .glb or .ply" "" -- "$BIN"
 "$BIN" -q eval texture --pred "$CONE" --gt "$CONE" --size 48 --out "$T/tex.json" >"$T/tex.txt" \
   && grep -q '"psnr": 120' "$T/tex.json" && grep -q 'SSIM' "$T/tex.txt" && ok || bad "eval texture of a mesh against itself"
 expect_error "eval texture: missing ground truth" "nogt.obj: no such file" "$T/tex2.json" -- "$BIN" -q eval texture --pred "$CONE" --gt "$T/nogt.obj" --out "$T/tex2.json"
+# Texture: the refined cone gets the oracle views' colour, baked and as vertex colours.
+if [ -s "$T/refined.glb" ]; then
+  "$BIN" -q texture --mesh "$T/refined.glb" --views "$T/views" --texture-size 512 --out "$T/textured.glb" \
+    && [ -s "$T/textured.glb" ] && ok || bad "texture bake"
+  "$BIN" -q texture --mesh "$T/refined.glb" --views "$T/views" --mode vertex --out "$T/vertex.glb" \
+    && [ -s "$T/vertex.glb" ] && ok || bad "texture vertex"
+  "$BIN" -q eval texture --pred "$T/textured.glb" --gt "$CONE" --size 48 --out "$T/tex3.json" >/dev/null \
+    && grep -q '"ssim"' "$T/tex3.json" && ok || bad "eval texture of the baked cone"
+fi
+sed 's/"image": "image_0[0-9].png", *//; s/, *"image": "image_0[0-9].png"//' "$T/views/cameras.json" > "$T/noimg.json"
+cp -r "$T/views" "$T/views_noimg" && cp "$T/noimg.json" "$T/views_noimg/cameras.json"
+expect_error "texture: views without images" "has no \"image\"" "$T/t1.glb" -- "$BIN" -q texture --mesh "$CONE" --views "$T/views_noimg" --out "$T/t1.glb"
 expect_error "eval: missing prediction" "nothing.glb: no such file" "$T/nothing.geometry.json" -- "$BIN" -q eval geometry --pred "$T/nothing.glb" --gt "$CONE"
 
 echo "$pass passed, $fail failed"

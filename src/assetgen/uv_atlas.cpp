@@ -455,7 +455,9 @@ TriangleMesh BuildUvAtlas(const TriangleMesh& mesh, const UvAtlasOptions& option
     }
   }
 
-  // Output: one vertex per (input vertex, chart); attributes other than UVs copied.
+  // Output: one vertex per (input vertex, chart); attributes other than UVs copied. Materials are kept as
+  // they are, textures included, although those textures follow the old UVs: the caller replaces them with
+  // the baked one (BakeTexture), and only the caller knows whether the old ones are still wanted.
   TriangleMesh out;
   out.faces.resize(nf);
   out.face_material = mesh.face_material;

@@ -225,9 +225,9 @@ RefineResult RefineMesh(const TriangleMesh& coarse_in, const MultiViewSet& views
   const TriangleMesh coarse = PrepareForRefinement(coarse_in, "refine: coarse mesh");
 
   // Edge lengths and the camera depth range scale with the object.
-  const Eigen::Vector3f centre = coarse.Bounds().Center();
-  float radius = 0;
-  for (const auto& p : coarse.positions) radius = std::max(radius, (p - centre).norm());
+  const BoundingSphere sphere = BoundingSphereOf(coarse.positions);
+  const Eigen::Vector3f centre = sphere.centre;
+  const float radius = sphere.radius;
   geometry::RemeshOptions remesh = options.remesh;
   remesh.edge_length_min *= radius;
   remesh.edge_length_max *= radius;

@@ -60,20 +60,8 @@ void CheckPair(const ImageF& a, const ImageF& b, const ImageF& weight) {
 }  // namespace
 
 AlbedoRender RenderAlbedo(const TriangleMesh& mesh, const ViewCamera& view, int ss) {
-  SD_CHECK(ss >= 1, << ss);
-  PinholeCamera cam = view.camera;
-  cam.width *= ss, cam.height *= ss, cam.fx *= ss, cam.fy *= ss, cam.cx *= ss, cam.cy *= ss;
-  const Eigen::Vector3f centre = mesh.Bounds().Center();
-  float radius = 0;
-  for (const auto& p : mesh.positions) radius = std::max(radius, (p - centre).norm());
-  const float dist = (view.T_world_cam.translation.cast<float>() - centre).norm();
-  const float near = std::max(1e-4f * dist, dist - 1.5f * radius), far = dist + 1.5f * radius;
-  const Eigen::Matrix4f M = raster::ClipFromWorld(cam, view.T_world_cam.Inverse(), near, far);
-  std::vector<float> clip(4 * mesh.NumVertices());
-  raster::TransformToClip({reinterpret_cast<const float*>(mesh.positions.data()), 3 * mesh.NumVertices()}, M, clip);
-  raster::RasterBuffer rast;
-  raster::Rasterize(clip, {reinterpret_cast<const int32_t*>(mesh.faces.data()), 3 * mesh.NumFaces()}, cam.width,
-                    cam.height, &rast);
+  const PinholeCamera cam = Supersampled(view.camera, ss);
+  const raster::RasterBuffer rast = RasterizeView(mesh, cam, view.T_world_cam, BoundingSphereOf(mesh.positions));
 
   const int w = view.camera.width, h = view.camera.height;
   AlbedoRender out{ImageF(w, h, 3), ImageF(w, h, 1)};
@@ -170,12 +158,10 @@ double MaskedSsim(const ImageF& a, const ImageF& b, const ImageF& weight) {
 TextureMetrics CompareTextures(const TriangleMesh& pred, const TriangleMesh& gt, int image_size) {
   if (pred.NumFaces() == 0) throw InputError({}, "texture comparison: the predicted mesh has no triangles");
   if (gt.NumFaces() == 0) throw InputError({}, "texture comparison: the ground-truth mesh has no triangles");
-  const Eigen::Vector3f centre = gt.Bounds().Center();
-  float radius = 0;
-  for (const auto& p : gt.positions) radius = std::max(radius, (p - centre).norm());
+  const BoundingSphere sphere = BoundingSphereOf(gt.positions);
   TextureMetrics m;
   double sum_sq = 0, count = 0, ssim_sum = 0;
-  for (const ViewCamera& v : HeldOutViews(centre, radius, image_size)) {
+  for (const ViewCamera& v : HeldOutViews(sphere.centre, sphere.radius, image_size)) {
     const AlbedoRender rp = RenderAlbedo(pred, v), rg = RenderAlbedo(gt, v);
     const ImageF a = ToSrgbValues(rp.color), b = ToSrgbValues(rg.color);
     const double psnr = MaskedPsnr(a, b, rg.mask);

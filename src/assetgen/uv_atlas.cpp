@@ -570,9 +570,7 @@ ImageU8 BakeTexture(const TriangleMesh& mesh, const ColorViewSet& views, int tex
   for (size_t f = 0; f < nf; ++f) face_normal[f] = mesh.FaceNormal(f);
 
   // Per view: depth range from the mesh's bounding sphere (any object scale works), visible surface depth.
-  const Eigen::Vector3f centre = mesh.Bounds().Center();
-  float radius = 0;
-  for (const auto& p : mesh.positions) radius = std::max(radius, (p - centre).norm());
+  const BoundingSphere sphere = BoundingSphereOf(mesh.positions);
   std::vector<BakeView> bake(views.size());
   for (size_t i = 0; i < views.size(); ++i) {
     BakeView& b = bake[i];
@@ -584,9 +582,7 @@ ImageU8 BakeTexture(const TriangleMesh& mesh, const ColorViewSet& views, int tex
     b.R_cam_world = T_cam_world.Rotation().cast<float>();
     b.t_cam_world = T_cam_world.translation.cast<float>();
     b.eye = vc.T_world_cam.translation.cast<float>();
-    const float dist = (b.eye - centre).norm();
-    const float near = std::max(1e-4f * dist, dist - 1.5f * radius), far = dist + 1.5f * radius;
-    b.clip_from_world = raster::ClipFromWorld(vc.camera, T_cam_world, near, far);
+    b.clip_from_world = ClipFromWorldAround(vc.camera, vc.T_world_cam, sphere);
     std::vector<float> clip(4 * mesh.NumVertices());
     raster::TransformToClip(positions, b.clip_from_world, clip);
     raster::RasterBuffer rast;

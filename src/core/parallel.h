@@ -18,5 +18,8 @@ void ParallelFor(size_t begin, size_t end, F&& body, size_t grain = 1) {
 
 // Limits worker threads for the life of the process (0 = library default: all cores).
 void SetMaxThreads(int n);
+// The worker threads kernels may use now (the limit above, or all cores). For libraries with their own pools
+// (LibTorch's intra-op threads), so they follow --threads too.
+int MaxThreads();
 
 }  // namespace sd

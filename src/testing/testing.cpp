@@ -20,6 +20,13 @@ fs::path SharedData(const std::string& rel) {
   return fs::exists(p) ? p : fs::path();
 }
 
+fs::path TestModel(const std::string& rel) {
+  const char* dir = std::getenv("SYNTHDRIVE_TEST_MODELS");
+  if (!dir || !*dir) return {};
+  const fs::path p = fs::path(dir) / rel;
+  return fs::exists(p) ? p : fs::path();
+}
+
 TempDir::TempDir() {
   std::random_device rd;
   path_ = fs::temp_directory_path() / ("synthdrive-test-" + std::to_string(getpid()) + "-" + std::to_string(rd()));

@@ -9,6 +9,9 @@ namespace sd::testing {
 std::filesystem::path RepoData(const std::string& rel);
 // <repo>/../shared/data/<rel>, or an empty path when ../shared is absent (tests then GTEST_SKIP).
 std::filesystem::path SharedData(const std::string& rel);
+// <dir>/<rel> where dir is $SYNTHDRIVE_TEST_MODELS: the tiny TorchScript models tools/testing/make_test_models.py
+// builds before the model tests run (a CTest fixture). Empty when they could not be built (no python3-torch).
+std::filesystem::path TestModel(const std::string& rel);
 // A fresh, empty directory removed when the object dies.
 class TempDir {
  public:
@@ -27,3 +30,8 @@ class TempDir {
 #define SD_REQUIRE_SHARED(var, rel)                                                            \
   const std::filesystem::path var = ::sd::testing::SharedData(rel);                             \
   if (var.empty()) GTEST_SKIP() << "../shared/data/" << (rel) << " not present (needs the shared data beside the repo)"
+
+// Skips the current test with a clear message when the tiny test models were not built.
+#define SD_REQUIRE_TEST_MODEL(var, rel)                                                        \
+  const std::filesystem::path var = ::sd::testing::TestModel(rel);                             \
+  if (var.empty()) GTEST_SKIP() << "tiny test model " << (rel) << " not built (needs python3 with torch)"

@@ -1,0 +1,80 @@
+#!/usr/bin/python3
+"""Builds the tiny TorchScript models the C++ tests of src/models run (python3-torch; no weights needed).
+
+Each model honours (or, for the error cases, deliberately breaks) a SynthDrive stage contract, so the C++ side
+is checked end to end -- loading, contract checks, tensor layout and ranges, tiling -- without real weights.
+Usage: make_test_models.py OUT_DIR
+"""
+import json
+import os
+import sys
+
+import torch
+import torch.nn.functional as F
+
+
+def contract(stage, name, scale, radius, in_range=(0, 255)):
+    image = {"name": "image", "shape": [-1, 3, -1, -1], "dtype": "float32", "layout": "NCHW",
+             "range": list(in_range), "encoding": "srgb"}
+    return {"format": "synthdrive-model/1", "stage": stage, "name": name,
+            "source": "tools/testing/make_test_models.py", "license": "Apache-2.0",
+            "inputs": [image], "outputs": [dict(image)],
+            "params": {"scale": scale, "receptive_radius": radius}}
+
+
+class TinyUpscaler(torch.nn.Module):
+    """conv3 -> relu -> conv3 -> nearest x2 -> conv3: receptive radius 1 + 1 + 1/2 = 2.5 input pixels."""
+
+    def __init__(self):
+        super().__init__()
+        self.a = torch.nn.Conv2d(3, 8, 3, padding=1)
+        self.b = torch.nn.Conv2d(8, 8, 3, padding=1)
+        self.c = torch.nn.Conv2d(8, 3, 3, padding=1)
+
+    def forward(self, x):
+        y = self.b(F.relu(self.a(x / 255.0)))
+        y = F.interpolate(y, scale_factor=2.0, mode="nearest")
+        # Residual on the nearest-upsampled input keeps outputs near the input's range, like a real upscaler.
+        return 255.0 * (self.c(y) * 0.1) + F.interpolate(x, scale_factor=2.0, mode="nearest")
+
+
+class Identity(torch.nn.Module):
+    def forward(self, x):
+        return x
+
+
+def save(module, path, extra=None):
+    scripted = torch.jit.script(module)
+    files = {"synthdrive_contract.json": json.dumps(extra)} if extra is not None else {}
+    torch.jit.save(scripted, path, _extra_files=files)
+
+
+def write_raw(path, tensor):
+    """Little-endian float32, shape in a JSON sidecar: what the C++ test reads back."""
+    t = tensor.detach().contiguous().to(torch.float32)
+    with open(path, "wb") as f:
+        f.write(t.numpy().astype("<f4").tobytes())
+    with open(path + ".json", "w") as f:
+        json.dump({"shape": list(t.shape)}, f)
+
+
+def main():
+    out = sys.argv[1]
+    os.makedirs(out, exist_ok=True)
+    torch.manual_seed(7)
+    model = TinyUpscaler().eval()
+    save(model, os.path.join(out, "sr_tiny_x2.pt"), contract("super_resolution", "sr-tiny-x2", 2, 2.5))
+    save(Identity(), os.path.join(out, "no_contract.pt"))
+    save(model, os.path.join(out, "wrong_stage.pt"), contract("clip_image", "clip-tiny", 2, 2.5))
+    save(Identity(), os.path.join(out, "not_upscaling.pt"), contract("super_resolution", "sr-identity", 2, 0))
+    # A reference pair from the eager module on one whole image: the C++ side must reproduce it tile by tile.
+    x = torch.rand(1, 3, 45, 70) * 255.0
+    with torch.no_grad():
+        y = model(x)
+    write_raw(os.path.join(out, "sr_tiny_x2_input.f32"), x)
+    write_raw(os.path.join(out, "sr_tiny_x2_output.f32"), y)
+    print(f"make_test_models: wrote 4 models and a reference pair to {out}")
+
+
+if __name__ == "__main__":
+    main()

@@ -8,9 +8,17 @@
 // as per-vertex colours (the paper's fusion) and as a baked UV atlas (1024²). Each result is compared with the
 // ground truth at the 8 held-out views of texture_eval.h (PSNR / SSIM inside the GT silhouette). Seconds are
 // wall time of the fusion and of atlas + bake (median of --repeats runs). Objects whose textures are missing
-// are skipped with the reason. Super-resolution of the views is not in this build yet (rows say "none").
+// are skipped with the reason.
+//
+// Super-resolution (--sr, a list): each listed upscaler turns the 6 views into 640x640 ones (cameras at the new
+// resolution) before fusion — "none" fuses the 320x320 views as rendered, "bicubic" is the classical path, and
+// model names are installed TorchScript models (models/super_resolution.h; scripts/fetch_models.sh). Upscaling
+// seconds (all 6 views) are reported on their own, not inside the fusion times.
 //
 // Usage: bench_texture [--objects name,...] [--repeats N] [--texture-size N] [--no-refined]
+//                      [--sr none,bicubic,esrgan-slim,esrgan-medium] [--view-size N]
+// --view-size renders the rig views smaller than 320 (e.g. 160: views softer than the held-out renders, the
+// case super-resolution is for).
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -31,6 +39,7 @@
 #include "core/error.h"
 #include "io/json.h"
 #include "io/mesh_io.h"
+#include "models/super_resolution.h"
 
 #include "bench_objects.h"
 
@@ -52,10 +61,34 @@ double Seconds(F&& f) {
 }
 
 struct Variant {
-  std::string geometry, method;
+  std::string geometry, method, sr = "none";
   TextureMetrics metrics;
+  double seconds = 0, sr_seconds = 0;
+};
+
+// The views each --sr choice fuses, with the median seconds its upscaling of all views took.
+struct UpscaledViews {
+  std::string name;
+  ColorViewSet views;
   double seconds = 0;
 };
+
+std::vector<UpscaledViews> Upscale(const ColorViewSet& views, const std::vector<std::string>& choices, int repeats) {
+  std::vector<UpscaledViews> out;
+  for (const std::string& choice : choices) {
+    if (choice == "none") {
+      out.push_back({choice, views, 0});
+      continue;
+    }
+    const models::Upscaler upscaler = models::Upscaler::Resolve(choice, 2);
+    UpscaledViews u{choice, {}, 0};
+    std::vector<double> times;
+    for (int r = 0; r < repeats; ++r) times.push_back(Seconds([&] { u.views = SuperResolveViews(views, upscaler); }));
+    u.seconds = Median(times);
+    out.push_back(std::move(u));
+  }
+  return out;
+}
 
 // Fuses the views onto `mesh` both ways and scores each against the ground truth.
 std::vector<Variant> FuseAndScore(const std::string& geometry, const TriangleMesh& mesh, const TriangleMesh& gt,
@@ -74,7 +107,7 @@ std::vector<Variant> FuseAndScore(const std::string& geometry, const TriangleMes
       for (size_t v = 0; v < plain.NumVertices(); ++v) vertex_coloured.colors[v] << fused.colors[v], 1.0f;
     }));
   }
-  out.push_back({geometry, "vertex", CompareTextures(vertex_coloured, gt), Median(times)});
+  out.push_back({geometry, "vertex", "none", CompareTextures(vertex_coloured, gt), Median(times), 0});
 
   TriangleMesh baked;
   times.clear();
@@ -88,7 +121,7 @@ std::vector<Variant> FuseAndScore(const std::string& geometry, const TriangleMes
       baked.materials = {m};
     }));
   }
-  out.push_back({geometry, "uv bake", CompareTextures(baked, gt), Median(times)});
+  out.push_back({geometry, "uv bake", "none", CompareTextures(baked, gt), Median(times), 0});
   return out;
 }
 
@@ -96,8 +129,9 @@ std::vector<Variant> FuseAndScore(const std::string& geometry, const TriangleMes
 
 int main(int argc, char** argv) {
   std::vector<std::string> only;
-  int repeats = 1, texture_size = 1024;
+  int repeats = 1, texture_size = 1024, view_size = 320;
   bool refined = true;
+  std::vector<std::string> sr_choices{"none", "bicubic", "esrgan-slim", "esrgan-medium"};
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto next = [&]() -> std::string {
@@ -114,6 +148,12 @@ int main(int argc, char** argv) {
       repeats = std::max(1, std::atoi(next().c_str()));
     } else if (a == "--texture-size") {
       texture_size = std::atoi(next().c_str());
+    } else if (a == "--view-size") {
+      view_size = std::atoi(next().c_str());
+    } else if (a == "--sr") {
+      sr_choices.clear();
+      std::stringstream ss(next());
+      for (std::string item; std::getline(ss, item, ',');) sr_choices.push_back(item);
     } else if (a == "--no-refined") {
       refined = false;
     } else {
@@ -132,11 +172,15 @@ int main(int argc, char** argv) {
   objects.push_back({"cesium_milk_truck", "road", "truck/cesium_milk_truck/obj/cesium_milk_truck.obj", "+y"});
   objects.push_back({"torcs_155_dtm", "road", "car/torcs_155_dtm/obj/torcs_155_dtm.obj", "+y"});
 
-  std::printf("protocol: %s\nviews: 6 Zero123++ rig views, 320x320, unlit base colour; atlas %d^2; super-resolution: none\n\n",
-              DescribeTextureProtocol().c_str(), texture_size);
-  std::printf("%-26s %-8s %-8s %8s %7s %8s\n", "object", "geometry", "method", "PSNR dB", "SSIM", "seconds");
+  std::printf("protocol: %s\nviews: 6 Zero123++ rig views, %dx%d, unlit base colour; atlas %d^2\n",
+              DescribeTextureProtocol().c_str(), view_size, view_size, texture_size);
+  for (const std::string& choice : sr_choices)
+    if (choice != "none")
+      std::printf("super-resolution %s: %s\n", choice.c_str(), models::Upscaler::Resolve(choice, 2).Describe().c_str());
+  std::printf("\n%-26s %-8s %-8s %-14s %8s %7s %8s %8s\n", "object", "geometry", "method", "SR", "PSNR dB", "SSIM",
+              "seconds", "SR s");
   nlohmann::json results = nlohmann::json::array();
-  const std::vector<ViewCamera> rig = Zero123PlusPlusRig(320);
+  const std::vector<ViewCamera> rig = Zero123PlusPlusRig(view_size);
   for (const bench::BenchObject& obj : objects) {
     if (!only.empty() && std::find(only.begin(), only.end(), obj.name) == only.end()) continue;
     TriangleMesh gt;
@@ -157,24 +201,35 @@ int main(int argc, char** argv) {
     const MultiViewSet rendered = RenderOracleViews(gt, rig, 2);
     ColorViewSet views;
     for (const MultiView& v : rendered) views.push_back({v.view, v.color, v.mask});
+    const std::vector<UpscaledViews> upscaled = Upscale(views, sr_choices, repeats);
 
-    std::vector<Variant> variants = FuseAndScore("gt", gt, gt, views, texture_size, repeats);
+    std::vector<std::pair<std::string, TriangleMesh>> geometries{{"gt", gt}};
     if (refined) {
       RefineOptions ro;
       ro.show_progress = false;
-      const TriangleMesh mesh = RefineMesh(CoarseMeshFromViews(rendered, 96), rendered, ro).mesh;
-      for (Variant& v : FuseAndScore("refined", mesh, gt, views, texture_size, repeats)) variants.push_back(v);
+      geometries.emplace_back("refined", RefineMesh(CoarseMeshFromViews(rendered, 96), rendered, ro).mesh);
     }
+    std::vector<Variant> variants;
+    for (const auto& [geometry, mesh] : geometries)
+      for (const UpscaledViews& u : upscaled)
+        for (Variant& v : FuseAndScore(geometry, mesh, gt, u.views, texture_size, repeats)) {
+          v.sr = u.name;
+          v.sr_seconds = u.seconds;
+          variants.push_back(v);
+        }
     for (const Variant& v : variants) {
-      std::printf("%-26s %-8s %-8s %8.2f %7.4f %8.2f\n", obj.name.c_str(), v.geometry.c_str(), v.method.c_str(),
-                  v.metrics.psnr, v.metrics.ssim, v.seconds);
+      std::printf("%-26s %-8s %-8s %-14s %8.2f %7.4f %8.2f %8.2f\n", obj.name.c_str(), v.geometry.c_str(),
+                  v.method.c_str(), v.sr.c_str(), v.metrics.psnr, v.metrics.ssim, v.seconds, v.sr_seconds);
       results.push_back({{"object", obj.name}, {"geometry", v.geometry}, {"method", v.method}, {"psnr", v.metrics.psnr},
-                         {"ssim", v.metrics.ssim}, {"seconds", v.seconds}, {"super_resolution", "none"}});
+                         {"ssim", v.metrics.ssim}, {"seconds", v.seconds}, {"super_resolution", v.sr},
+                         {"super_resolution_seconds", v.sr_seconds}});
     }
     std::fflush(stdout);
   }
-  const fs::path json_out = root / "bench" / "results" / "texture.json";
-  WriteJsonFile(json_out, {{"protocol", DescribeTextureProtocol()}, {"texture_size", texture_size}, {"results", results}});
+  const fs::path json_out =
+      root / "bench" / "results" / (view_size == 320 ? "texture.json" : "texture_" + std::to_string(view_size) + ".json");
+  WriteJsonFile(json_out, {{"protocol", DescribeTextureProtocol()}, {"texture_size", texture_size},
+                           {"view_size", view_size}, {"results", results}});
   std::printf("\nwrote %s\n", json_out.c_str());
   return 0;
 }

@@ -27,6 +27,7 @@
 #include "core/parallel.h"
 #include "geometry/normals.h"
 #include "geometry/topology.h"
+#include "models/super_resolution.h"
 #include "raster/raster.h"
 
 namespace sd {
@@ -361,6 +362,26 @@ VertexFusionResult FuseVertexColors(const TriangleMesh& mesh, const ColorViewSet
     if (source[wv] < 0) ++result.propagated;
   }
   return result;
+}
+
+ColorViewSet SuperResolveViews(const ColorViewSet& views, const models::Upscaler& upscaler) {
+  ColorViewSet out;
+  out.reserve(views.size());
+  for (const ColorView& v : views) {
+    ColorView up;
+    up.view = v.view;
+    up.view.camera = Supersampled(v.view.camera, upscaler.scale());
+    ImageF srgb = v.color;
+    for (float& c : srgb.vector()) c = LinearToSrgb(std::clamp(c, 0.0f, 1.0f));
+    up.color = upscaler.Upscale(srgb);
+    for (float& c : up.color.vector()) c = SrgbToLinear(c);
+    if (!v.mask.empty()) {
+      up.mask = models::UpscaleBicubic(v.mask, upscaler.scale());
+      for (float& m : up.mask.vector()) m = std::clamp(m, 0.0f, 1.0f);
+    }
+    out.push_back(std::move(up));
+  }
+  return out;
 }
 
 }  // namespace sd

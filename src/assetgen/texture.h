@@ -19,6 +19,10 @@
 
 namespace sd {
 
+namespace models {
+class Upscaler;
+}
+
 // One colour image of the object with its camera. `mask` (1 channel, 0..1) may be empty: then every pixel the
 // mesh covers counts as object.
 struct ColorView {
@@ -44,5 +48,10 @@ struct VertexFusionResult {
 // InputError when the mesh has no faces, no views are given, or a view's image size disagrees with its camera.
 VertexFusionResult FuseVertexColors(const TriangleMesh& mesh, const ColorViewSet& views,
                                     const VertexFusionOptions& options = {});
+
+// The paper's "×2 super-resolution of the views" ahead of fusion: colours go through `upscaler` as sRGB-encoded
+// values (what the learned models were trained on), masks are resampled bicubically, and each camera becomes
+// the same camera at the new resolution (views.h Supersampled), so geometry and colour stay registered.
+ColorViewSet SuperResolveViews(const ColorViewSet& views, const models::Upscaler& upscaler);
 
 }  // namespace sd

@@ -8,6 +8,7 @@
 
 #include "core/error.h"
 #include "geometry/test_meshes.h"
+#include "models/super_resolution.h"
 #include "raster/raster.h"
 
 namespace sd {
@@ -369,6 +370,61 @@ TEST(FuseVertexColors, ReadsBackASmoothColourField) {
   EXPECT_LT(max_all, 0.08);
   EXPECT_LT(mean, 0.002);
   EXPECT_LT(r.propagated, static_cast<int>(sphere.NumVertices() / 10));
+}
+
+// Super-resolution ahead of fusion keeps pictures and cameras registered: the split cube's views at 160 px,
+// upscaled ×2, come with 320 px cameras of the same field of view, and fusion from them still gives the
+// vertices inside each face that face's colour.
+TEST(SuperResolveViews, KeepsViewsRegisteredWithTheirCameras) {
+  constexpr int n = 6;
+  const std::vector<Eigen::Vector3f> face_color = {{0.9f, 0.1f, 0.1f}, {0.1f, 0.8f, 0.1f}, {0.1f, 0.2f, 0.9f},
+                                                   {0.9f, 0.9f, 0.1f}, {0.1f, 0.9f, 0.9f}, {0.8f, 0.2f, 0.8f}};
+  TriangleMesh cube;
+  for (int axis = 0; axis < 3; ++axis) {
+    for (int sign = -1; sign <= 1; sign += 2) {
+      const Eigen::Vector3f normal = sign * Eigen::Vector3f::Unit(axis);
+      Eigen::Vector3f du = Eigen::Vector3f::Unit((axis + 1) % 3), dv = Eigen::Vector3f::Unit((axis + 2) % 3);
+      if (du.cross(dv).dot(normal) < 0) std::swap(du, dv);
+      AppendGrid(&cube, n, 0.5f * normal - 0.5f * du - 0.5f * dv, du, dv);
+    }
+  }
+  const int verts_per_face = (n + 1) * (n + 1), tris_per_face = 2 * n * n;
+  ColorViewSet views;
+  for (const ViewCamera& cam : Zero123PlusPlusRig(160)) {
+    views.push_back(Render(cube, cam, [&](const raster::RasterBuffer& r, size_t p) {
+      return face_color[r.triangle[p] / tris_per_face];
+    }));
+  }
+  const ColorViewSet up = SuperResolveViews(views, models::Upscaler::Classical(2));
+  ASSERT_EQ(up.size(), views.size());
+  for (size_t i = 0; i < up.size(); ++i) {
+    EXPECT_EQ(up[i].view.camera.width, 320);
+    EXPECT_EQ(up[i].color.width(), 320);
+    EXPECT_EQ(up[i].mask.height(), 320);
+    EXPECT_NEAR(up[i].view.camera.fx, 2 * views[i].view.camera.fx, 1e-9);
+    EXPECT_NEAR(up[i].view.camera.cx, 2 * views[i].view.camera.cx, 1e-9);
+    EXPECT_TRUE(up[i].view.T_world_cam.translation.isApprox(views[i].view.T_world_cam.translation));
+    for (float m : up[i].mask.vector()) ASSERT_TRUE(m >= 0.0f && m <= 1.0f);
+  }
+  VertexFusionOptions unsmoothed;
+  unsmoothed.seam_smoothing_iterations = 0;
+  const VertexFusionResult fused = FuseVertexColors(cube, up, unsmoothed);
+  // Bicubic overshoot at the silhouette reaches a vertex two steps in only at the grazing bottom views (under 2
+  // pixels there): measured 0.006 at worst, 0.0005 on average. A camera off by half a pixel would blend the
+  // neighbouring face in at ~0.4.
+  int checked = 0;
+  double sum = 0;
+  for (size_t v = 0; v < cube.NumVertices(); ++v) {
+    const int i = static_cast<int>(v) % verts_per_face % (n + 1), j = static_cast<int>(v) % verts_per_face / (n + 1);
+    if (std::min({i, j, n - i, n - j}) < 2 || fused.source_view[v] < 0) continue;
+    ++checked;
+    const float e = (fused.colors[v] - face_color[v / verts_per_face]).cwiseAbs().maxCoeff();
+    sum += e;
+    EXPECT_LT(e, 0.01f) << "vertex " << v;
+  }
+  std::printf("cube from x2 bicubic views: mean %.5f over %d vertices\n", sum / checked, checked);
+  EXPECT_GT(checked, 4 * 9);
+  EXPECT_LT(sum / checked, 1e-3);
 }
 
 TEST(FuseVertexColors, RejectsBadInput) {

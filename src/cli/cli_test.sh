@@ -111,6 +111,27 @@ if [ -s "$T/refined.glb" ]; then
   "$BIN" -q eval texture --pred "$T/textured.glb" --gt "$CONE" --size 48 --out "$T/tex3.json" >/dev/null \
     && grep -q '"ssim"' "$T/tex3.json" && ok || bad "eval texture of the baked cone"
 fi
+# Upscale: one image and a folder, bicubic and whatever "auto" finds; bad models and inputs.
+png_size() { od -An -tu1 -j16 -N8 "$1" | awk '{print $3*256+$4 "x" $7*256+$8}'; }
+IMG=$T/views/image_00.png
+"$BIN" -q upscale --in "$IMG" --out "$T/up_bicubic.png" --model bicubic \
+  && [ "$(png_size "$T/up_bicubic.png")" = "$(png_size "$IMG" | awk -Fx '{print $1*2 "x" $2*2}')" ] && ok || bad "upscale bicubic doubles the size"
+"$BIN" -q upscale --in "$IMG" --out "$T/up_auto.png" && [ -s "$T/up_auto.png" ] && ok || bad "upscale auto"
+mkdir -p "$T/imgs" && cp "$T/views/image_00.png" "$T/views/image_01.png" "$T/imgs/"
+"$BIN" -q upscale --in "$T/imgs" --out "$T/imgs_x3" --scale 3 --model bicubic && [ "$(ls "$T/imgs_x3" | wc -l)" -eq 2 ] \
+  && ok || bad "upscale a folder"
+expect_error "upscale: missing input" "nope.png: no such file" "$T/up1.png" -- "$BIN" -q upscale --in "$T/nope.png" --out "$T/up1.png"
+printf 'PK not really a zip' > "$T/corrupt.pt"
+expect_error "upscale: corrupt model file" "corrupt.pt: not a readable TorchScript archive" "$T/up2.png" -- "$BIN" -q upscale --in "$IMG" --out "$T/up2.png" --model "$T/corrupt.pt"
+expect_error "upscale: unknown model" "esrgan-nope-x2.pt: no such model file" "$T/up3.png" -- "$BIN" -q upscale --in "$IMG" --out "$T/up3.png" --model esrgan-nope
+expect_error "upscale: existing output" "up_bicubic.png: already exists" "" -- "$BIN" -q upscale --in "$IMG" --out "$T/up_bicubic.png" --model bicubic
+mkdir -p "$T/noimgs"
+expect_error "upscale: folder without images" "no .png or .jpg images" "$T/up4" -- "$BIN" -q upscale --in "$T/noimgs" --out "$T/up4"
+if [ -s "$T/refined.glb" ]; then
+  "$BIN" -q texture --mesh "$T/refined.glb" --views "$T/views" --texture-size 256 --upscale bicubic --out "$T/textured_sr.glb" \
+    && [ -s "$T/textured_sr.glb" ] && ok || bad "texture with bicubic super-resolution"
+  expect_error "texture: corrupt upscaler" "corrupt.pt: not a readable TorchScript archive" "$T/t2.glb" -- "$BIN" -q texture --mesh "$T/refined.glb" --views "$T/views" --upscale "$T/corrupt.pt" --out "$T/t2.glb"
+fi
 sed 's/"image": "image_0[0-9].png", *//; s/, *"image": "image_0[0-9].png"//' "$T/views/cameras.json" > "$T/noimg.json"
 cp -r "$T/views" "$T/views_noimg" && cp "$T/noimg.json" "$T/views_noimg/cameras.json"
 expect_error "texture: views without images" "has no \"image\"" "$T/t1.glb" -- "$BIN" -q texture --mesh "$CONE" --views "$T/views_noimg" --out "$T/t1.glb"

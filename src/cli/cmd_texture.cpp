@@ -11,12 +11,13 @@
 #include "cli/mesh_files.h"
 #include "core/error.h"
 #include "core/log.h"
+#include "models/super_resolution.h"
 
 namespace sd::cli {
 
 Runner AddTextureCommand(CLI::App& app) {
   struct Args {
-    std::string mesh, views, out, mode = "bake";
+    std::string mesh, views, out, mode = "bake", upscale = "auto";
     int texture_size = 1024;
     bool overwrite = false;
   };
@@ -27,6 +28,10 @@ Runner AddTextureCommand(CLI::App& app) {
   app.add_option("--mode", a->mode, "bake: UV atlas texture (sharp); vertex: per-vertex colours (the paper's fusion)")
       ->default_val("bake")->check(CLI::IsMember({"bake", "vertex"}));
   app.add_option("--texture-size", a->texture_size, "Atlas side in texels (bake)")->default_val(1024)->check(CLI::Range(64, 16384));
+  app.add_option("--upscale", a->upscale,
+                 "x2 super-resolution of the views before fusion: auto (installed ESRGAN-slim, else bicubic), "
+                 "none, bicubic, an installed model name (esrgan-medium) or a .pt file")
+      ->default_val("auto");
   app.add_flag("--overwrite", a->overwrite, "Replace an existing output file");
 
   return [a]() {
@@ -40,6 +45,11 @@ Runner AddTextureCommand(CLI::App& app) {
         throw InputError(std::filesystem::path(a->views) / "cameras.json",
                          Msg() << "views[" << i << "] has no \"image\" (texturing needs a colour picture per view)");
       color_views.push_back({views[i].view, views[i].color, views[i].mask});
+    }
+    if (a->upscale != "none") {
+      const models::Upscaler upscaler = models::Upscaler::Resolve(a->upscale, 2);
+      SD_LOG(Info, "super-resolution of the views: " << upscaler.Describe());
+      color_views = SuperResolveViews(color_views, upscaler);
     }
     mesh.uvs.clear();
     mesh.colors.clear();

@@ -20,6 +20,7 @@ Runner AddRefineCommand(CLI::App& app);
 Runner AddViewsCommand(CLI::App& app);
 Runner AddEvalCommand(CLI::App& app);
 Runner AddTextureCommand(CLI::App& app);
+Runner AddUpscaleCommand(CLI::App& app);
 
 // The repo's data/ directory: --data, $SYNTHDRIVE_DATA, <binary>/../../data, ./data (first that exists).
 std::string FindDataDir(const std::string& explicit_dir);

@@ -34,6 +34,8 @@ int main(int argc, char** argv) {
   add("refine", "Refine a coarse mesh against multi-view normal maps and silhouettes (differentiable rendering)",
       sd::cli::AddRefineCommand);
   add("texture", "Fuse colour views onto a mesh: a baked UV texture atlas or per-vertex colours", sd::cli::AddTextureCommand);
+  add("upscale", "Super-resolve images (learned ESRGAN through LibTorch when installed, else bicubic)",
+      sd::cli::AddUpscaleCommand);
   add("eval", "Quality figures against ground truth (geometry, texture)", sd::cli::AddEvalCommand);
   add("demo", "Run the pipeline end to end on the sample data in data/ and write a report", sd::cli::AddDemoCommand);
   add("categories", "List the object categories and their names in each dataset format", sd::cli::AddCategoriesCommand);

@@ -52,7 +52,7 @@ Asset LoadAsset(const fs::path& dir_or_json) {
   return a;
 }
 
-void SaveAsset(const Asset& asset, const fs::path& dir, bool overwrite) {
+void SaveAsset(const Asset& asset, const fs::path& dir, bool overwrite, const MultiViewSet* views) {
   StagingDirectory out(dir, overwrite);
   nlohmann::json j;
   j["id"] = asset.info.id;
@@ -69,6 +69,10 @@ void SaveAsset(const Asset& asset, const fs::path& dir, bool overwrite) {
   j["quality"] = asset.info.quality;
   SaveGlb(out.path() / "mesh.glb", asset.mesh, /*convert_z_up_to_gltf=*/true);
   WriteImage(out.path() / "preview.png", RenderPreview(asset.mesh, 320, 240));
+  if (views) {
+    SaveViews(*views, out.path() / "views", "camera", /*overwrite=*/false);
+    j["views"] = "views/cameras.json";
+  }
   WriteJsonFile(out.path() / "asset.json", j);
   out.Commit();
 }

@@ -8,6 +8,7 @@
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
 
+#include "assetgen/views.h"
 #include "core/mesh.h"
 
 namespace sd {
@@ -35,7 +36,8 @@ struct Asset {
 // not canonical (not resting on z = 0).
 Asset LoadAsset(const std::filesystem::path& dir_or_json);
 // Writes asset.json + mesh.glb + preview.png into `dir` atomically (staging directory). Refuses an
-// existing `dir` unless `overwrite`.
-void SaveAsset(const Asset& asset, const std::filesystem::path& dir, bool overwrite);
+// existing `dir` unless `overwrite`. With `views`, also <dir>/views/ (the views folder format of views.h, in the
+// views' own frame; the generate stage in asset.json records "views_to_asset", how it maps to the asset's).
+void SaveAsset(const Asset& asset, const std::filesystem::path& dir, bool overwrite, const MultiViewSet* views = nullptr);
 
 }  // namespace sd

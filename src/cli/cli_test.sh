@@ -132,9 +132,21 @@ if [ -s "$T/refined.glb" ]; then
     && [ -s "$T/textured_sr.glb" ] && ok || bad "texture with bicubic super-resolution"
   expect_error "texture: corrupt upscaler" "corrupt.pt: not a readable TorchScript archive" "$T/t2.glb" -- "$BIN" -q texture --mesh "$T/refined.glb" --views "$T/views" --upscale "$T/corrupt.pt" --out "$T/t2.glb"
 fi
+# Generate: the cone's views -> a metric asset folder that `asset show` and synth accept.
+"$BIN" -q generate --views "$T/views" --category traffic_cone --steps 3 --hull-resolution 32 --texture-size 256 \
+  --upscale bicubic --out "$T/gen_cone" && [ -f "$T/gen_cone/views/cameras.json" ] \
+  && "$BIN" -q asset show "$T/gen_cone" | grep -q "traffic_cone" && grep -q '"views_to_asset"' "$T/gen_cone/asset.json" \
+  && ok || bad "generate from views"
+printf 'not an image' > "$T/object.png"
+expect_error "generate: unreadable image" "object.png" "$T/g1" -- "$BIN" -q generate --image "$T/object.png" --category traffic_cone --out "$T/g1"
+"$BIN" -q views --mesh "$CONE" --size 32 --out "$T/views_for_image" >/dev/null
+expect_error "generate: single image without models" "needs the multi-view diffusion" "$T/g2" -- env SYNTHDRIVE_MODELS="$T/no_models" "$BIN" -q generate --image "$T/views_for_image/image_00.png" --category traffic_cone --out "$T/g2"
+expect_error "generate: unknown category" "unknown category 'ufo'" "$T/g3" -- "$BIN" -q generate --views "$T/views" --category ufo --out "$T/g3"
+expect_error "generate: existing output" "gen_cone: already exists" "" -- "$BIN" -q generate --views "$T/views" --category traffic_cone --out "$T/gen_cone"
 sed 's/"image": "image_0[0-9].png", *//; s/, *"image": "image_0[0-9].png"//' "$T/views/cameras.json" > "$T/noimg.json"
 cp -r "$T/views" "$T/views_noimg" && cp "$T/noimg.json" "$T/views_noimg/cameras.json"
 expect_error "texture: views without images" "has no \"image\"" "$T/t1.glb" -- "$BIN" -q texture --mesh "$CONE" --views "$T/views_noimg" --out "$T/t1.glb"
+expect_error "generate: views without images" "has no colour image" "$T/g4" -- "$BIN" -q generate --views "$T/views_noimg" --category traffic_cone --out "$T/g4"
 expect_error "eval: missing prediction" "nothing.glb: no such file" "$T/nothing.geometry.json" -- "$BIN" -q eval geometry --pred "$T/nothing.glb" --gt "$CONE"
 
 echo "$pass passed, $fail failed"

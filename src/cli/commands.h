@@ -21,6 +21,7 @@ Runner AddViewsCommand(CLI::App& app);
 Runner AddEvalCommand(CLI::App& app);
 Runner AddTextureCommand(CLI::App& app);
 Runner AddUpscaleCommand(CLI::App& app);
+Runner AddGenerateCommand(CLI::App& app);
 
 // The repo's data/ directory: --data, $SYNTHDRIVE_DATA, <binary>/../../data, ./data (first that exists).
 std::string FindDataDir(const std::string& explicit_dir);

@@ -34,6 +34,8 @@ int main(int argc, char** argv) {
   add("refine", "Refine a coarse mesh against multi-view normal maps and silhouettes (differentiable rendering)",
       sd::cli::AddRefineCommand);
   add("texture", "Fuse colour views onto a mesh: a baked UV texture atlas or per-vertex colours", sd::cli::AddTextureCommand);
+  add("generate", "Build a textured, metric asset folder from object views (or one image, with the learned models)",
+      sd::cli::AddGenerateCommand);
   add("upscale", "Super-resolve images (learned ESRGAN through LibTorch when installed, else bicubic)",
       sd::cli::AddUpscaleCommand);
   add("eval", "Quality figures against ground truth (geometry, texture)", sd::cli::AddEvalCommand);

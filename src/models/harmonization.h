@@ -1,0 +1,76 @@
+#pragma once
+// Image harmonisation: make an object pasted into a photograph look shot by the same camera — exposure, white
+// balance and contrast matched to its surroundings (DESIGN.md synth: "compositing, colour harmonisation").
+// The synth pipeline's lighting calibration (synth/lighting.h) already matches the light falling on the object;
+// this stage corrects what remains after compositing (tone curve, colour cast, sensor contrast).
+//
+// Contract "harmonization" (runtime.h; docs/models_stages.md):
+//   inputs "composite": [N, 3, H, W] float32, RGB, sRGB-encoded, 0..1, NCHW — the photograph with the object in
+//                       it; "mask": [N, 1, H, W] float32 0..1, the object's coverage (soft edges allowed).
+//   output "image":     [N, 3, H, W] float32, sRGB 0..1, the harmonised composite.
+//   params: "image_size" (optional): the square resolution the network runs at (e.g. 256 for iS2AM-style
+//           models). The composite and mask are resized to it, and the model's CHANGE (output - input) is
+//           resized back and added at full resolution, so the photograph's detail is never resampled.
+// Either path changes only the object: the result is composite + mask · (harmonised − composite), so pixels
+// outside the mask are returned bit for bit.
+//
+// Classical path (Reinhard et al. 2001, "Color transfer between images", here in CIELAB): the object's
+// per-channel Lab mean and standard deviation are moved towards those of a ring of background around it
+// (pixels within `ring_px` of the mask). Full transfer would also give a red car the grey of the road, so
+// lightness (which carries the exposure mismatch) and chroma (which mostly carries the object's own colour)
+// have separate strengths, and the contrast ratio is bounded.
+#include <array>
+#include <filesystem>
+#include <memory>
+#include <string>
+
+#include "core/image.h"
+#include "models/runtime.h"
+
+namespace sd::models {
+
+constexpr const char* kHarmonizationStage = "harmonization";
+constexpr const char* kHarmonizerFile = "harmonizer.pt";  // the installed default in DefaultModelDir()
+
+struct HarmonizeOptions {
+  int ring_px = 0;                 // background ring width; 0: max(4, 0.25 * sqrt(object pixel count))
+  float lightness_strength = 0.8f; // 0: keep the object's L* statistics, 1: take the ring's
+  float chroma_strength = 0.3f;    // the same for a*, b*
+  float min_ratio = 0.5f, max_ratio = 2.0f;  // bounds of the std ratio (contrast change)
+};
+
+// CIELAB (D65 white) of sRGB-encoded 0..1 values and back; L* in 0..100.
+std::array<float, 3> SrgbToLab(const std::array<float, 3>& srgb);
+std::array<float, 3> LabToSrgb(const std::array<float, 3>& lab);  // clamped to 0..1 (out-of-gamut Lab)
+
+class Harmonizer {
+ public:
+  static Harmonizer Classical(const HarmonizeOptions& options = {});
+  // InputError naming the file when it is unusable or its contract does not have the shapes above.
+  static Harmonizer FromModel(const std::filesystem::path& file, const RuntimeOptions& runtime = {});
+  // "classical"; "auto" (DefaultModelDir()/harmonizer.pt when installed, else classical, logged); a .pt path.
+  static Harmonizer Resolve(const std::string& choice, const RuntimeOptions& runtime = {},
+                            const HarmonizeOptions& options = {});
+
+  Harmonizer(Harmonizer&&) noexcept;
+  Harmonizer& operator=(Harmonizer&&) noexcept;
+  ~Harmonizer();
+
+  bool learned() const { return model_ != nullptr; }
+  std::string Describe() const;
+
+  // `composite`: sRGB 0..1, 3 channels; `mask`: 1 channel 0..1, same size. Returns the harmonised composite,
+  // clamped to 0..1, identical to `composite` wherever mask is 0.
+  ImageF Harmonize(const ImageF& composite, const ImageF& mask) const;
+
+ private:
+  Harmonizer(std::unique_ptr<Model> model, HarmonizeOptions options);
+  ImageF HarmonizeClassical(const ImageF& composite, const ImageF& mask) const;
+  ImageF HarmonizeLearned(const ImageF& composite, const ImageF& mask) const;
+
+  std::unique_ptr<Model> model_;
+  HarmonizeOptions options_;
+  int image_size_ = 0;  // learned: 0 = full resolution
+};
+
+}  // namespace sd::models

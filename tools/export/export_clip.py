@@ -1,0 +1,150 @@
+#!/usr/bin/env python3
+"""Exports a CLIP model to the SynthDrive "clip_image" / "clip_text" contracts (src/models/clip.h).
+
+NOT RUN IN THIS REPOSITORY'S CI: it needs the real weights (downloaded by open_clip or OpenAI's clip package
+from their hosts) and those packages, neither of which the build machine has. It was written against the
+published APIs of open_clip (>= 2.20: create_model_and_transforms, tokenizer.default_bpe, encode_image,
+encode_text) and OpenAI's clip package (clip.load(..., jit=False)); the contracts it writes are what the C++
+side checks, and its self-check below compares the exported modules against the eager model.
+
+Writes, into OUT_DIR:
+  clip_image.pt               image [N, 3, S, S] sRGB 0..1 -> embedding [N, D]; the model's mean / std
+                              normalisation is baked in, so C++ only resizes and crops
+  clip_text.pt                tokens [N, 77] float32 (exact integers) -> embedding [N, D]; the module casts
+                              to int64 itself because the SynthDrive runtime moves float32 tensors only
+  bpe_simple_vocab_16e6.txt   the BPE merges, uncompressed (the C++ tokenizer reads plain text)
+
+Usage:
+  export_clip.py OUT_DIR [--arch ViT-B-32] [--pretrained openai] [--backend open_clip|openai]
+  e.g. --arch ViT-L-14 --pretrained openai   (OpenAI's ViT-L/14, D = 768, S = 224)
+Licences: OpenAI CLIP weights MIT; open_clip code MIT; LAION-trained open_clip weights MIT.
+"""
+import argparse
+import gzip
+import json
+import os
+import sys
+
+import torch
+
+OPENAI_MEAN = (0.48145466, 0.4578275, 0.40821073)
+OPENAI_STD = (0.26862954, 0.26130258, 0.27577711)
+
+
+class ImageEncoder(torch.nn.Module):
+    def __init__(self, model, mean, std):
+        super().__init__()
+        self.visual = model.visual
+        self.register_buffer("mean", torch.tensor(mean, dtype=torch.float32).view(1, 3, 1, 1))
+        self.register_buffer("std", torch.tensor(std, dtype=torch.float32).view(1, 3, 1, 1))
+
+    def forward(self, image):
+        # CLIP's visual tower returns the projected embedding (encode_image == visual(x) in both packages).
+        return self.visual((image - self.mean) / self.std).float()
+
+
+class TextEncoder(torch.nn.Module):
+    """encode_text, with the float32 -> int64 cast the runtime boundary needs in front."""
+
+    def __init__(self, model):
+        super().__init__()
+        self.model = model
+
+    def forward(self, tokens):
+        return self.model.encode_text(tokens.to(torch.int64)).float()
+
+
+def load(backend, arch, pretrained):
+    if backend == "open_clip":
+        import open_clip
+        model, _, preprocess = open_clip.create_model_and_transforms(arch, pretrained=pretrained, device="cpu")
+        cfg = getattr(model.visual, "preprocess_cfg", {}) or {}
+        mean = tuple(cfg.get("mean", getattr(model.visual, "image_mean", None) or OPENAI_MEAN))
+        std = tuple(cfg.get("std", getattr(model.visual, "image_std", None) or OPENAI_STD))
+        size = model.visual.image_size
+        size = size[0] if isinstance(size, (tuple, list)) else int(size)
+        bpe = open_clip.tokenizer.default_bpe()
+        tokenize = open_clip.get_tokenizer(arch)
+        source = f"open_clip {open_clip.__version__} {arch} pretrained={pretrained}"
+    else:
+        import clip
+        model, preprocess = clip.load(arch.replace("-", "/", 1) if "/" not in arch else arch, device="cpu", jit=False)
+        mean, std = OPENAI_MEAN, OPENAI_STD
+        size = int(model.visual.input_resolution)
+        bpe = os.path.join(os.path.dirname(clip.__file__), "bpe_simple_vocab_16e6.txt.gz")
+        tokenize = clip.tokenize
+        source = f"openai/CLIP {arch}"
+    model = model.float().eval()
+    return model, mean, std, size, bpe, tokenize, source, preprocess
+
+
+def spec(name, shape, rng, layout, encoding=""):
+    return {"name": name, "shape": shape, "dtype": "float32", "layout": layout, "range": list(rng),
+            "encoding": encoding}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("out_dir")
+    ap.add_argument("--arch", default="ViT-B-32")
+    ap.add_argument("--pretrained", default="openai")
+    ap.add_argument("--backend", choices=["open_clip", "openai"], default="open_clip")
+    args = ap.parse_args()
+    os.makedirs(args.out_dir, exist_ok=True)
+
+    model, mean, std, size, bpe, tokenize, source, preprocess = load(args.backend, args.arch, args.pretrained)
+    context = int(model.context_length)
+    vocab = int(model.vocab_size)
+    with torch.no_grad():
+        dim = int(model.encode_text(tokenize(["a car"])).shape[1])
+    assert vocab < 2 ** 24, "token ids must be exact in float32"
+
+    image_enc, text_enc = ImageEncoder(model, mean, std).eval(), TextEncoder(model).eval()
+    # Tracing, not scripting: both towers are static graphs for a fixed input size, and the ViT code of both
+    # packages uses Python features TorchScript's compiler does not accept.
+    with torch.no_grad():
+        traced_image = torch.jit.trace(image_enc, torch.rand(2, 3, size, size), check_trace=True)
+        traced_text = torch.jit.trace(text_enc, tokenize(["a photo of a car", "a bus"]).float(), check_trace=True)
+
+    common = {"format": "synthdrive-model/1", "source": source, "license": "MIT",
+              "exporter": "tools/export/export_clip.py"}
+    # Self-check against the eager model: the exported image path from 0..1 pixels must equal
+    # encode_image(normalise(x)), and the text path encode_text(ids).
+    with torch.no_grad():
+        x = torch.rand(3, 3, size, size)
+        ref_i = model.encode_image((x - torch.tensor(mean).view(1, 3, 1, 1)) / torch.tensor(std).view(1, 3, 1, 1))
+        ids = tokenize(["a red car parked on the street", "a pedestrian", "traffic cone"])
+        ref_t = model.encode_text(ids)
+        err_i = float((traced_image(x) - ref_i).abs().max())
+        err_t = float((traced_text(ids.float()) - ref_t).abs().max())
+    if err_i > 1e-4 or err_t > 1e-4:
+        sys.exit(f"export_clip: exported modules differ from the eager model (image {err_i:g}, text {err_t:g})")
+
+    image_contract = dict(common, stage="clip_image", name=f"clip-{args.arch.lower()}-{args.pretrained}-image",
+                          inputs=[spec("image", [-1, 3, size, size], (0, 1), "NCHW", "srgb")],
+                          outputs=[spec("embedding", [-1, dim], (-1e4, 1e4), "NC")],
+                          params={"embed_dim": dim, "image_size": size},
+                          verification={"max_abs_diff_vs_eager": err_i})
+    text_contract = dict(common, stage="clip_text", name=f"clip-{args.arch.lower()}-{args.pretrained}-text",
+                         inputs=[spec("tokens", [-1, context], (0, vocab - 1), "NL", "token_ids")],
+                         outputs=[spec("embedding", [-1, dim], (-1e4, 1e4), "NC")],
+                         params={"embed_dim": dim, "context_length": context, "vocab_size": vocab},
+                         verification={"max_abs_diff_vs_eager": err_t})
+    torch.jit.save(traced_image, os.path.join(args.out_dir, "clip_image.pt"),
+                   _extra_files={"synthdrive_contract.json": json.dumps(image_contract)})
+    torch.jit.save(traced_text, os.path.join(args.out_dir, "clip_text.pt"),
+                   _extra_files={"synthdrive_contract.json": json.dumps(text_contract)})
+    opener = gzip.open if bpe.endswith(".gz") else open
+    with opener(bpe, "rt", encoding="utf-8") as src, \
+            open(os.path.join(args.out_dir, "bpe_simple_vocab_16e6.txt"), "w", encoding="utf-8") as dst:
+        dst.write(src.read())
+    # Token ids the C++ tokenizer must reproduce (src/models/clip_tokenizer.h), for a manual cross-check.
+    probe = ["a photo of a red car", "Ein Fahrrad, 2 Räder!", "it's a traffic-cone"]
+    with open(os.path.join(args.out_dir, "tokenizer_probe.json"), "w") as f:
+        json.dump({t: [int(i) for i in tokenize([t])[0].tolist()] for t in probe}, f, ensure_ascii=False)
+    print(f"export_clip: {source}: D={dim}, S={size}, context {context}, vocab {vocab}; "
+          f"max |diff| vs eager: image {err_i:.2e}, text {err_t:.2e} -> {args.out_dir}")
+
+
+if __name__ == "__main__":
+    main()

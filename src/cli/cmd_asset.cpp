@@ -21,8 +21,14 @@ Runner AddAssetCommand(CLI::App& app) {
   imp->add_option("--out", opt->out, "Asset folder to create")->required();
   imp->add_option("--id", opt->id, "Asset id (default: the output folder's name)");
   imp->add_option("--name", opt->name, "Human-readable name");
-  imp->add_option("--up", opt->canonical.up, "The source's up axis (+x -x +y -y +z -z); glTF files are +y")->default_val("+z");
-  imp->add_option("--front", opt->canonical.front, "The source's front axis")->default_val("+x");
+  imp->add_option("--up", opt->canonical.up,
+                  "The source's up axis (+x -x +y -y +z -z; glTF files are +y), or auto: estimated from the convex-hull "
+                  "face the object rests on stably (docs/canonical.md)")
+      ->default_val("+z");
+  imp->add_option("--front", opt->canonical.front,
+                  "The source's front axis, or auto: from the vertical mirror plane, taller end at the back "
+                  "(docs/canonical.md)")
+      ->default_val("+x");
   imp->add_option("--scale", opt->canonical.scale, "Source units -> metres (default: from --height/--size or the category)");
   imp->add_option("--height", opt->height, "Target height in metres");
   imp->add_option("--size", *size, "Target length width height in metres (best uniform fit)")->expected(3);

@@ -1,6 +1,10 @@
 #include "assetgen/generate.h"
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <deque>
 #include <memory>
 
 #include "assetgen/texture.h"
@@ -107,6 +111,172 @@ GeneratedMesh GenerateFromViews(const MultiViewSet& views, const GenerateOptions
                              << c.scale << " m per view unit");
   });
   return out;
+}
+
+namespace {
+
+// Labels the 4-connected components of `on`; returns the label of each pixel (-1 off) and the size of each.
+std::vector<int> Components(const std::vector<uint8_t>& on, int w, int h, std::vector<size_t>* sizes) {
+  std::vector<int> label(on.size(), -1);
+  std::deque<int> queue;
+  for (int start = 0; start < w * h; ++start) {
+    if (!on[start] || label[start] >= 0) continue;
+    const int id = static_cast<int>(sizes->size());
+    sizes->push_back(0);
+    label[start] = id;
+    queue.push_back(start);
+    while (!queue.empty()) {
+      const int p = queue.front();
+      queue.pop_front();
+      ++(*sizes)[id];
+      const int x = p % w, y = p / w;
+      const int nbr[4][2] = {{x - 1, y}, {x + 1, y}, {x, y - 1}, {x, y + 1}};
+      for (const auto& q : nbr) {
+        if (q[0] < 0 || q[1] < 0 || q[0] >= w || q[1] >= h) continue;
+        const int n = q[1] * w + q[0];
+        if (on[n] && label[n] < 0) {
+          label[n] = id;
+          queue.push_back(n);
+        }
+      }
+    }
+  }
+  return label;
+}
+
+// A square RGBA cut-out around `box` (a fifth of its longer side as margin on each side), alpha = the mask;
+// pixels outside the image are transparent.
+ImageU8 ObjectCutout(const ImageU8& image, const ImageF& mask, const Box2& box) {
+  const double side = 1.4 * std::max(box.x2 - box.x1, box.y2 - box.y1);
+  const int n = std::max(8, static_cast<int>(std::lround(side)));
+  const double x0 = 0.5 * (box.x1 + box.x2) - 0.5 * n, y0 = 0.5 * (box.y1 + box.y2) - 0.5 * n;
+  ImageU8 out(n, n, 4, 0);
+  for (int y = 0; y < n; ++y)
+    for (int x = 0; x < n; ++x) {
+      const int sx = static_cast<int>(std::floor(x0 + x)), sy = static_cast<int>(std::floor(y0 + y));
+      if (sx < 0 || sy < 0 || sx >= image.width() || sy >= image.height()) continue;
+      for (int c = 0; c < 3; ++c) out.at(x, y, c) = image.at(sx, sy, std::min(c, image.channels() - 1));
+      out.at(x, y, 3) = static_cast<uint8_t>(std::lround(255.0f * std::clamp(mask.at(sx, sy), 0.0f, 1.0f)));
+    }
+  return out;
+}
+
+}  // namespace
+
+ImageF MaskFromFlatBackground(const ImageU8& view, uint8_t background) {
+  // The generator's background is flat up to its decoder's noise; 12 of 255 clears that noise but keeps dim
+  // object pixels, and the component and hole clean-up below removes what slips either way.
+  constexpr int kThreshold = 12;
+  const int w = view.width(), h = view.height();
+  std::vector<uint8_t> on(static_cast<size_t>(w) * h, 0);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      int diff = 0;
+      for (int c = 0; c < std::min(3, view.channels()); ++c) diff = std::max(diff, std::abs(view.at(x, y, c) - background));
+      on[static_cast<size_t>(y) * w + x] = diff > kThreshold;
+    }
+  std::vector<size_t> sizes;
+  const std::vector<int> label = Components(on, w, h, &sizes);
+  ImageF mask(w, h, 1, 0.0f);
+  if (sizes.empty()) return mask;
+  const int keep = static_cast<int>(std::max_element(sizes.begin(), sizes.end()) - sizes.begin());
+  // Holes: background components that do not touch the border.
+  std::vector<uint8_t> off(on.size());
+  for (size_t i = 0; i < on.size(); ++i) off[i] = label[i] != keep;
+  std::vector<size_t> hole_sizes;
+  const std::vector<int> hole = Components(off, w, h, &hole_sizes);
+  std::vector<uint8_t> touches_border(hole_sizes.size(), 0);
+  for (int x = 0; x < w; ++x) {
+    for (int y : {0, h - 1})
+      if (hole[static_cast<size_t>(y) * w + x] >= 0) touches_border[hole[static_cast<size_t>(y) * w + x]] = 1;
+  }
+  for (int y = 0; y < h; ++y) {
+    for (int x : {0, w - 1})
+      if (hole[static_cast<size_t>(y) * w + x] >= 0) touches_border[hole[static_cast<size_t>(y) * w + x]] = 1;
+  }
+  for (size_t i = 0; i < on.size(); ++i)
+    if (label[i] == keep || (hole[i] >= 0 && !touches_border[hole[i]])) mask.vector()[i] = 1.0f;
+  return mask;
+}
+
+MultiViewSet ViewsFromImage(const ImageU8& image, const Box2& box_in, const ImageToViewsStages& stages,
+                            std::vector<StageReport>* reports) {
+  if (image.empty()) throw InputError({}, "empty object image");
+  Box2 box = box_in;
+  box.x1 = std::max(0.0, box.x1);
+  box.y1 = std::max(0.0, box.y1);
+  box.x2 = std::min<double>(image.width(), box.x2);
+  box.y2 = std::min<double>(image.height(), box.y2);
+  if (box.Empty())
+    throw InputError({}, Msg() << "object box (" << box_in.x1 << ", " << box_in.y1 << ", " << box_in.x2 << ", "
+                               << box_in.y2 << ") does not overlap the " << image.width() << "x" << image.height()
+                               << " image");
+  std::vector<StageReport> local;
+  StageTimer timer(reports ? reports : &local);
+  auto method = [&](size_t i, const char* fallback) {
+    return i < stages.methods.size() ? stages.methods[i] : std::string(fallback);
+  };
+
+  ImageF mask;
+  timer.Run("segmentation", [&] {
+    if (image.channels() == 4) {
+      mask = ImageF(image.width(), image.height(), 1);
+      for (int y = 0; y < image.height(); ++y)
+        for (int x = 0; x < image.width(); ++x) mask.at(x, y) = image.at(x, y, 3) / 255.0f;
+      return std::string("the image's alpha channel");
+    }
+    mask = stages.segment(image, box);
+    return method(0, "segmentation");
+  });
+  double area = 0;
+  for (float m : mask.vector()) area += m;
+  if (area < 0.01 * box.Area()) throw InputError({}, "no object found in the box (the mask covers under 1% of it)");
+  const ImageU8 cutout = ObjectCutout(image, mask, box);
+
+  std::vector<ImageU8> generated;
+  timer.Run("multiview", [&] {
+    generated = stages.generate_views(cutout);
+    return method(1, "multi-view generation");
+  });
+  if (generated.size() != 6) throw InputError({}, Msg() << "the multi-view generator returned " << generated.size() << " views, not 6");
+  const int size = generated[0].width();
+  for (const ImageU8& v : generated)
+    if (v.width() != size || v.height() != size || v.channels() < 3)
+      throw InputError({}, "the multi-view generator's views are not square RGB images of one size");
+  const std::vector<ViewCamera> rig = Zero123PlusPlusRig(size);
+
+  MultiViewSet views(6);
+  timer.Run("normals", [&] {
+    for (size_t i = 0; i < 6; ++i) {
+      MultiView& mv = views[i];
+      mv.view = rig[i];
+      mv.mask = MaskFromFlatBackground(generated[i]);
+      ImageF srgb(size, size, 3);
+      for (int y = 0; y < size; ++y)
+        for (int x = 0; x < size; ++x)
+          for (int c = 0; c < 3; ++c) srgb.at(x, y, c) = generated[i].at(x, y, c) / 255.0f;
+      mv.color = ToLinear(generated[i].channels() == 3 ? generated[i] : [&] {
+        ImageU8 rgb(size, size, 3);
+        for (int y = 0; y < size; ++y)
+          for (int x = 0; x < size; ++x)
+            for (int c = 0; c < 3; ++c) rgb.at(x, y, c) = generated[i].at(x, y, c);
+        return rgb;
+      }());
+      const ImageF n_cam = stages.estimate_normals(srgb);
+      if (n_cam.width() != size || n_cam.height() != size || n_cam.channels() != 3)
+        throw InputError({}, "the normal estimator's output does not match its view's size");
+      const Eigen::Matrix3f R = mv.view.T_world_cam.Rotation().cast<float>();
+      mv.normals = ImageF(size, size, 3, 0.0f);
+      for (int y = 0; y < size; ++y)
+        for (int x = 0; x < size; ++x) {
+          if (mv.mask.at(x, y) < 0.5f) continue;
+          const Eigen::Vector3f n = R * Eigen::Vector3f(n_cam.at(x, y, 0), n_cam.at(x, y, 1), n_cam.at(x, y, 2));
+          for (int c = 0; c < 3; ++c) mv.normals.at(x, y, c) = n[c];
+        }
+    }
+    return method(2, "normal estimation");
+  });
+  return views;
 }
 
 }  // namespace sd

@@ -12,6 +12,7 @@
 // +x unless CanonicalizeOptions say otherwise. The scale comes from the caller: a log's 3D box, a category's size
 // prior, or an explicit height. Every stage's method and wall time are reported, so an asset records how it was
 // made (asset.json "stages") and benchmarks can report seconds per stage.
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -20,6 +21,8 @@
 #include "assetgen/canonical.h"
 #include "assetgen/refine.h"
 #include "assetgen/views.h"
+#include "core/box3.h"
+#include "core/image.h"
 #include "core/mesh.h"
 
 namespace sd {
@@ -51,5 +54,28 @@ struct GeneratedMesh {
 
 // InputError when a view has no colour image, or from any stage (refine.h, texture.h, canonical.h list them).
 GeneratedMesh GenerateFromViews(const MultiViewSet& views, const GenerateOptions& options);
+
+// The learned front of the pipeline, one object image → the views GenerateFromViews takes:
+//   segment the object in its box (skipped when the image has an alpha channel: it is the mask) → RGBA cut-out
+//   → multi-view generation at the Zero123++ rig → per view: the object mask (the generator paints a flat grey
+//   background, kViewBackground) and camera-frame normals from the estimator, rotated into the rig's world frame.
+// The stages are functions so any model set (models/multiview_diffusion.h, models/normal_estimation.h,
+// models/segmentation.h) — or, in tests, oracle renders — can fill them.
+struct ImageToViewsStages {
+  // image + object box → object probability 0..1, image size, 1 channel
+  std::function<ImageF(const ImageU8& image, const Box2& box)> segment;
+  std::function<std::vector<ImageU8>(const ImageU8& object_rgba)> generate_views;  // 6 views, rig order
+  std::function<ImageF(const ImageF& view_srgb)> estimate_normals;                 // OpenCV camera-frame normals
+  std::vector<std::string> methods;  // one line per stage, for asset.json and logs
+};
+constexpr uint8_t kViewBackground = 127;  // Zero123++'s grey
+
+// InputError for an empty image, a box outside it, no object found, or a generator that does not return 6
+// square views of one size. `reports` receives one StageReport per stage.
+MultiViewSet ViewsFromImage(const ImageU8& image, const Box2& box, const ImageToViewsStages& stages,
+                            std::vector<StageReport>* reports);
+// The object mask of a generated view: pixels that differ from the flat background, cleaned to the largest
+// connected component with its holes filled (hard 0 / 1 edges).
+ImageF MaskFromFlatBackground(const ImageU8& view, uint8_t background = kViewBackground);
 
 }  // namespace sd

@@ -87,5 +87,137 @@ TEST(GenerateFromViews, RejectsViewsWithoutColourAndUnknownModes) {
   EXPECT_THROW(GenerateFromViews({}, SmallOptions()), InputError);
 }
 
+// Oracle stages: the generator "returns" renders of the true object on the grey background, the estimator its
+// exact camera-frame normals, the segmenter the true mask of the photo. What ViewsFromImage adds — masks from the
+// flat background, normals rotated into the rig frame, the cut-out, the checks — is then measurable exactly.
+struct OracleStages {
+  MultiViewSet truth_views;
+  ImageF photo_mask;
+  int segment_calls = 0, normal_calls = 0;
+  Box2 seen_box;
+
+  ImageToViewsStages Stages() {
+    ImageToViewsStages s;
+    s.segment = [this](const ImageU8&, const Box2& box) {
+      ++segment_calls;
+      seen_box = box;
+      return photo_mask;
+    };
+    s.generate_views = [this](const ImageU8& cutout) {
+      EXPECT_EQ(cutout.channels(), 4);
+      std::vector<ImageU8> out;
+      for (const MultiView& v : truth_views) {
+        const ImageU8 srgb = ToSrgb8(v.color);
+        ImageU8 view(srgb.width(), srgb.height(), 3);
+        for (int y = 0; y < view.height(); ++y)
+          for (int x = 0; x < view.width(); ++x)
+            for (int c = 0; c < 3; ++c) {
+              const float a = v.mask.at(x, y);
+              view.at(x, y, c) = static_cast<uint8_t>(std::lround(a * srgb.at(x, y, c) + (1 - a) * kViewBackground));
+            }
+        out.push_back(view);
+      }
+      return out;
+    };
+    s.estimate_normals = [this](const ImageF&) {
+      const MultiView& v = truth_views[static_cast<size_t>(normal_calls++)];
+      const Eigen::Matrix3f R_cam_world = v.view.T_world_cam.Rotation().transpose().cast<float>();
+      ImageF n(v.normals.width(), v.normals.height(), 3);
+      for (int y = 0; y < n.height(); ++y)
+        for (int x = 0; x < n.width(); ++x) {
+          const Eigen::Vector3f c = R_cam_world * Eigen::Vector3f(v.normals.at(x, y, 0), v.normals.at(x, y, 1), v.normals.at(x, y, 2));
+          for (int k = 0; k < 3; ++k) n.at(x, y, k) = c[k];
+        }
+      return n;
+    };
+    s.methods = {"oracle mask", "oracle renders", "oracle normals"};
+    return s;
+  }
+};
+
+TEST(ViewsFromImage, TurnsOneImageIntoRegisteredViewsThatGenerateAnAsset) {
+  const TriangleMesh truth = ColouredEllipsoid();
+  OracleStages oracle;
+  oracle.truth_views = RenderOracleViews(truth, Zero123PlusPlusRig(96), 2);
+  // The "photo": the object at another camera, on a mid-grey-free background.
+  const MultiView photo = RenderOracleViews(truth, {OrbitCamera("photo", 10, 5, kRigDistance, 30, 160, 120)}, 2)[0];
+  ImageU8 image = ToSrgb8(photo.color);
+  oracle.photo_mask = photo.mask;
+  const Box2 box{40, 10, 120, 110};
+
+  std::vector<StageReport> reports;
+  const MultiViewSet views = ViewsFromImage(image, box, oracle.Stages(), &reports);
+  EXPECT_EQ(oracle.segment_calls, 1);
+  EXPECT_EQ(oracle.normal_calls, 6);
+  EXPECT_DOUBLE_EQ(oracle.seen_box.x2, 120);
+  ASSERT_EQ(reports.size(), 3u);
+  EXPECT_EQ(reports[0].method, "oracle mask");
+  ASSERT_EQ(views.size(), 6u);
+
+  double inter = 0, uni = 0, worst_normal = 0;
+  for (size_t i = 0; i < 6; ++i) {
+    EXPECT_EQ(views[i].view.name, oracle.truth_views[i].view.name);
+    for (int y = 0; y < 96; ++y)
+      for (int x = 0; x < 96; ++x) {
+        const bool a = views[i].mask.at(x, y) > 0.5f, b = oracle.truth_views[i].mask.at(x, y) > 0.5f;
+        inter += a && b;
+        uni += a || b;
+        if (a && oracle.truth_views[i].mask.at(x, y) == 1.0f) {
+          for (int c = 0; c < 3; ++c)
+            worst_normal = std::max(worst_normal, double(std::abs(views[i].normals.at(x, y, c) - oracle.truth_views[i].normals.at(x, y, c))));
+        }
+      }
+  }
+  std::printf("masks from the grey background: IoU %.4f; normals back in the rig frame: worst %.2g\n", inter / uni, worst_normal);
+  EXPECT_GT(inter / uni, 0.97);
+  EXPECT_LT(worst_normal, 1e-5);
+
+  const GeneratedMesh g = GenerateFromViews(views, SmallOptions());
+  const geometry::GeometryMetrics m = geometry::CompareMeshes(g.mesh, ToAssetFrame(truth, g), {});
+  EXPECT_LT(m.chamfer, 0.01);
+
+  // An RGBA image is its own mask: no segmentation call; an empty mask is "no object".
+  ImageU8 rgba(image.width(), image.height(), 4);
+  for (int y = 0; y < image.height(); ++y)
+    for (int x = 0; x < image.width(); ++x) {
+      for (int c = 0; c < 3; ++c) rgba.at(x, y, c) = image.at(x, y, c);
+      rgba.at(x, y, 3) = static_cast<uint8_t>(std::lround(255 * photo.mask.at(x, y)));
+    }
+  OracleStages second;
+  second.truth_views = oracle.truth_views;
+  ViewsFromImage(rgba, box, second.Stages(), nullptr);
+  EXPECT_EQ(second.segment_calls, 0);
+  OracleStages empty;
+  empty.truth_views = oracle.truth_views;
+  empty.photo_mask = ImageF(image.width(), image.height(), 1, 0.0f);
+  try {
+    ViewsFromImage(image, box, empty.Stages(), nullptr);
+    FAIL() << "an empty mask passed";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("no object found"), std::string::npos);
+  }
+  EXPECT_THROW(ViewsFromImage(image, Box2{500, 500, 600, 600}, oracle.Stages(), nullptr), InputError);
+}
+
+TEST(MaskFromFlatBackground, KeepsTheLargestComponentAndFillsItsHoles) {
+  ImageU8 view(20, 20, 3, kViewBackground);
+  for (int y = 4; y < 16; ++y)
+    for (int x = 4; x < 16; ++x)
+      for (int c = 0; c < 3; ++c) view.at(x, y, c) = 200;
+  for (int c = 0; c < 3; ++c) {
+    view.at(9, 9, c) = kViewBackground;  // a hole inside the object (e.g. a grey patch on it)
+    view.at(1, 1, c) = 10;               // a speck of noise away from it
+    view.at(7, 8, c) = kViewBackground + 5;  // decoder noise on the object is not background
+  }
+  const ImageF mask = MaskFromFlatBackground(view);
+  EXPECT_EQ(mask.at(9, 9), 1.0f);
+  EXPECT_EQ(mask.at(1, 1), 0.0f);
+  EXPECT_EQ(mask.at(4, 4), 1.0f);
+  EXPECT_EQ(mask.at(3, 4), 0.0f);
+  double area = 0;
+  for (float m : mask.vector()) area += m;
+  EXPECT_EQ(area, 144.0);
+}
+
 }  // namespace
 }  // namespace sd

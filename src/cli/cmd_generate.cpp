@@ -15,7 +15,10 @@
 #include "core/log.h"
 #include "datasets/categories.h"
 #include "io/image_io.h"
+#include "models/multiview_diffusion.h"
+#include "models/normal_estimation.h"
 #include "models/runtime.h"
+#include "models/segmentation.h"
 
 namespace sd::cli {
 
@@ -23,21 +26,49 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// The model files single-image generation needs (docs/models.md); the first missing ones are named in the error.
-const std::vector<std::string> kSingleImageModels = {"zero123plus_image_encoder.pt", "zero123plus_unet.pt", "zero123plus_vae_decoder.pt",
-                                                     "normal_estimator.pt"};
+// The model files single-image generation needs (docs/models.md): checked up front, so a user learns every
+// missing file in one line instead of one per run.
+const std::vector<std::string> kSingleImageModels = {models::kMvImageEncoderFile, models::kMvUnetFile,
+                                                     models::kMvVaeDecoderFile, models::kNormalEstimatorFile};
 
-[[noreturn]] void RefuseSingleImage(const fs::path& image, const fs::path& model_dir) {
+void RequireSingleImageModels(const fs::path& image, const fs::path& model_dir) {
   std::string missing;
   for (const std::string& f : kSingleImageModels)
     if (!fs::exists(model_dir / f)) missing += (missing.empty() ? "" : ", ") + f;
+  if (missing.empty()) return;
   throw InputError(image, Msg() << "generating from a single image needs the multi-view diffusion and normal "
                                 << "estimation models (missing in " << model_dir.string() << ": " << missing
                                 << "; see docs/models.md), or pass --views with multi-view images and cameras");
 }
 
-nlohmann::json StagesJson(const GeneratedMesh& g, const std::string& source) {
+// The learned front end: segmenter (classical unless --segmenter names a model), Zero123++ and the normal
+// estimator, each loaded once.
+MultiViewSet ViewsFromImageFile(const fs::path& file, const std::vector<double>& box_px, const fs::path& model_dir,
+                                const std::string& segmenter_choice, int steps, float guidance, uint64_t seed,
+                                std::vector<StageReport>* reports) {
+  const ImageU8 image = ReadImage(file);
+  RequireSingleImageModels(file, model_dir);
+  const Box2 box = box_px.empty() ? Box2{0, 0, double(image.width()), double(image.height())}
+                                  : Box2{box_px[0], box_px[1], box_px[2], box_px[3]};
+  const models::Segmenter segmenter = models::Segmenter::Resolve(segmenter_choice);
+  const models::MultiViewGenerator generator = models::MultiViewGenerator::Load(model_dir);
+  const models::NormalEstimator normals = models::NormalEstimator::FromModel(model_dir / models::kNormalEstimatorFile);
+  ImageToViewsStages stages;
+  stages.segment = [&](const ImageU8& img, const Box2& b) { return segmenter.Segment(img, b).mask; };
+  stages.generate_views = [&](const ImageU8& cutout) { return generator.Generate(cutout, steps, guidance, seed); };
+  stages.estimate_normals = [&](const ImageF& view) { return normals.Estimate(view); };
+  stages.methods = {segmenter.Describe(), generator.Describe(), normals.Describe()};
+  try {
+    return ViewsFromImage(image, box, stages, reports);
+  } catch (const InputError& e) {
+    throw InputError(file, e.what());
+  }
+}
+
+nlohmann::json StagesJson(const std::vector<StageReport>& front, const GeneratedMesh& g, const std::string& source) {
   nlohmann::json stages = nlohmann::json::array();
+  for (const StageReport& s : front)
+    stages.push_back({{"stage", s.stage}, {"method", s.method}, {"seconds", s.seconds}});
   for (const StageReport& s : g.stages)
     stages.push_back({{"stage", s.stage}, {"method", s.method}, {"seconds", s.seconds}});
   nlohmann::json rotation = nlohmann::json::array();
@@ -58,7 +89,11 @@ nlohmann::json StagesJson(const GeneratedMesh& g, const std::string& source) {
 Runner AddGenerateCommand(CLI::App& app) {
   struct Args {
     std::string views, image, out, category, id, name, licence, source, attribution, model_dir;
-    std::vector<double> size;
+    std::string segmenter = "classical";
+    std::vector<double> size, box;
+    int diffusion_steps = models::kZero123PlusDefaultSteps;
+    float guidance = models::kZero123PlusDefaultGuidance;
+    uint64_t seed = 0;
     double height = 0;
     bool overwrite = false;
     GenerateOptions options;
@@ -90,6 +125,15 @@ Runner AddGenerateCommand(CLI::App& app) {
       ->check(CLI::Range(1, 1000));
   app.add_option("--hull-resolution", a->options.hull_resolution, "Voxels along the visual hull's cube")
       ->default_val(96)->check(CLI::Range(16, 512));
+  app.add_option("--box", a->box, "The object's box in --image: x1 y1 x2 y2 pixels (default: the whole image)")
+      ->expected(4);
+  app.add_option("--segmenter", a->segmenter, "classical (GrabCut from the box), auto (installed ISNet if any) or a .pt")
+      ->default_val("classical");
+  app.add_option("--diffusion-steps", a->diffusion_steps, "Denoising steps of the multi-view generator")
+      ->default_val(a->diffusion_steps)->check(CLI::Range(1, 1000));
+  app.add_option("--guidance", a->guidance, "Classifier-free guidance scale of the multi-view generator")
+      ->default_val(a->guidance)->check(CLI::NonNegativeNumber);
+  app.add_option("--seed", a->seed, "Seed of the multi-view generator's noise")->default_val(0);
   app.add_option("--models", a->model_dir, "Folder of installed models (default: $SYNTHDRIVE_MODELS or ~/.cache/synthdrive/models)");
   app.add_flag("--overwrite", a->overwrite, "Replace an existing asset folder");
 
@@ -97,11 +141,13 @@ Runner AddGenerateCommand(CLI::App& app) {
     RefuseExisting(a->out, a->overwrite);
     const auto category = FindCategory(a->category);
     if (!category) throw InputError({}, "unknown category '" + a->category + "' (see `synthdrive categories`)");
-    if (!a->image.empty()) {
-      ReadImage(a->image);  // an unreadable image is reported as such before the missing models
-      RefuseSingleImage(a->image, a->model_dir.empty() ? models::DefaultModelDir() : fs::path(a->model_dir));
-    }
-    const MultiViewSet views = LoadViews(a->views);
+    std::vector<StageReport> front;
+    const fs::path model_dir = a->model_dir.empty() ? models::DefaultModelDir() : fs::path(a->model_dir);
+    const MultiViewSet views = a->image.empty()
+                                   ? LoadViews(a->views)
+                                   : ViewsFromImageFile(a->image, a->box, model_dir, a->segmenter, a->diffusion_steps,
+                                                        a->guidance, a->seed, &front);
+    const std::string source = a->image.empty() ? a->views : a->image;
     GenerateOptions options = a->options;
     options.refine.show_progress = GetLogLevel() <= LogLevel::kInfo;
     options.canonical.up = "+z";
@@ -112,7 +158,7 @@ Runner AddGenerateCommand(CLI::App& app) {
     try {
       g = GenerateFromViews(views, options);
     } catch (const InputError& e) {
-      throw InputError(fs::path(a->views) / "cameras.json", e.what());
+      throw InputError(a->image.empty() ? fs::path(a->views) / "cameras.json" : fs::path(a->image), e.what());
     }
     Asset asset;
     asset.mesh = std::move(g.mesh);
@@ -122,14 +168,15 @@ Runner AddGenerateCommand(CLI::App& app) {
     asset.info.category = category->name;
     asset.info.extent = g.extent;
     asset.info.licence = a->licence;
-    asset.info.source = a->source.empty() ? a->views : a->source;
+    asset.info.source = a->source.empty() ? source : a->source;
     asset.info.attribution = a->attribution;
-    asset.info.stages = StagesJson(g, a->views);
+    asset.info.stages = StagesJson(front, g, source);
     asset.info.quality = {{"refine_final_loss_normal", g.last_refine_step.loss_normal},
                           {"refine_final_loss_mask", g.last_refine_step.loss_mask},
                           {"views", views.size()}};
     SaveAsset(asset, a->out, a->overwrite, &views);
     double total = 0;
+    for (const StageReport& s : front) total += s.seconds;
     for (const StageReport& s : g.stages) total += s.seconds;
     SD_LOG(Info, "asset " << asset.info.id << " (" << asset.info.category << "), " << g.extent.x() << " x "
                           << g.extent.y() << " x " << g.extent.z() << " m, " << asset.mesh.NumFaces()

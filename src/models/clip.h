@@ -7,7 +7,7 @@
 //   clip_text.pt                contract "clip_text"
 //   bpe_simple_vocab_16e6.txt   the BPE merges (clip_tokenizer.h), uncompressed
 //
-// Contract "clip_image" (runtime.h; docs/models_stages.md):
+// Contract "clip_image" (runtime.h; docs/models.md):
 //   input  "image":     [N, 3, S, S] float32, RGB, sRGB-encoded, 0..1, NCHW. S = params.image_size (224 for
 //                       ViT-B/32 and ViT-L/14). The model's own mean / std normalisation is INSIDE the exported
 //                       module, so the C++ side never needs to know the training statistics of a checkpoint.

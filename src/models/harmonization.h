@@ -4,7 +4,7 @@
 // The synth pipeline's lighting calibration (synth/lighting.h) already matches the light falling on the object;
 // this stage corrects what remains after compositing (tone curve, colour cast, sensor contrast).
 //
-// Contract "harmonization" (runtime.h; docs/models_stages.md):
+// Contract "harmonization" (runtime.h; docs/models.md):
 //   inputs "composite": [N, 3, H, W] float32, RGB, sRGB-encoded, 0..1, NCHW — the photograph with the object in
 //                       it; "mask": [N, 1, H, W] float32 0..1, the object's coverage (soft edges allowed).
 //   output "image":     [N, 3, H, W] float32, sRGB 0..1, the harmonised composite.

@@ -5,7 +5,7 @@
 //
 // A model is two TorchScript files (tools/export/export_lrm.py), so the encoder runs once per object and the
 // decoder many times on bounded chunks of points:
-// Contract "lrm_encoder" (runtime.h; docs/models_stages.md):
+// Contract "lrm_encoder" (runtime.h; docs/models.md):
 //   input  "image":    [1, 3, S, S] float32, RGB, sRGB-encoded, 0..1, NCHW; S = params.image_size. The object
 //                      centred on a plain background (params.background, grey level 0..1, default 1 = white).
 //                      Camera conditioning the network needs is a constant inside the exported module.

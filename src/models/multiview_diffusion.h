@@ -2,7 +2,7 @@
 // The multi-view diffusion stage (DESIGN.md generate): one object image → 6 views at the Zero123++ v1.2 rig,
 // 320×320 each. The denoising loop, the sampler (models/scheduler.h) and Zero123++'s latent/image scaling run
 // here in C++; the networks are three TorchScript modules, each carrying its contract (runtime.h), exported
-// from the diffusers pipeline by tools/export/export_zero123plus.py. docs/models_diffusion.md has the details.
+// from the diffusers pipeline by tools/export/export_zero123plus.py. docs/models.md has the details.
 //
 // Files, in one directory (MultiViewGenerator::Load):
 //   zero123plus_image_encoder.pt   stage "mv_image_encoder"

@@ -2,7 +2,7 @@
 // Monocular normal estimation: a camera-frame normal per pixel from one colour image, what refinement is
 // supervised with (assetgen/views.h, normal_frame "camera") when the views come from a generator, not a mesh.
 //
-// Contract "normal_estimation" (runtime.h; docs/models_stages.md):
+// Contract "normal_estimation" (runtime.h; docs/models.md):
 //   input  "image":   [N, 3, H, W] float32, RGB, sRGB-encoded, 0..1, NCHW; H and W multiples of
 //                     params.multiple (8 for convolutional U-Nets, 14 for DINOv2-patch models). Any
 //                     normalisation the network needs is inside the exported module.

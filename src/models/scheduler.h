@@ -3,7 +3,7 @@
 // v-prediction and classifier-free guidance — what Zero123++ v1.2 samples with. Pure C++ over float vectors, so
 // it is tested on its own against an independent numpy implementation (tools/testing/scheduler_reference.py).
 //
-// Facts, as found in public sources (docs/models_diffusion.md has the full list):
+// Facts, as found in public sources (docs/models.md has the full list):
 //  - The Zero123++ custom pipeline (SUDO-AI-3D/zero123plus, diffusers-support/pipeline.py) runs diffusers'
 //    StableDiffusionPipeline loop; its README and every published usage replace the scheduler with
 //    `EulerAncestralDiscreteScheduler.from_config(pipeline.scheduler.config, timestep_spacing='trailing')`.

@@ -1,7 +1,7 @@
 #pragma once
 // The segmentation stage (DESIGN.md generate: "segment the object out of the crop"), learned or classical.
 //
-// Contract "segmentation" (runtime.h; docs/models_segmentation.md):
+// Contract "segmentation" (runtime.h; docs/models.md):
 //   input  "image": [1, 3, S, S] float32, RGB, sRGB-encoded, range [0, 1], NCHW. S = params "input_size",
 //                   fixed (1024 for ISNet). Any normalisation the network needs (mean/std) is inside the module.
 //   output "mask":  [1, 1, S, S] float32, object probability, in the contract's output range (normally [0, 1])

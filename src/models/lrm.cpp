@@ -4,7 +4,7 @@
 #include <cmath>
 
 #include "core/error.h"
-#include "models/clip.h"  // ResizeBicubic
+#include "models/resample.h"
 
 namespace sd::models {
 

@@ -11,36 +11,6 @@ namespace sd::models {
 
 namespace {
 
-// Taps of an antialiased tent filter for one axis: output o samples input around (o + 0.5) · in/out − 0.5.
-struct AxisTaps {
-  std::vector<int> first;      // per output: first tap's offset into index/weight
-  std::vector<int> index;      // input coordinates (clamped)
-  std::vector<float> weight;   // normalised weights
-};
-
-AxisTaps TentTaps(int in_size, int out_size) {
-  AxisTaps t;
-  const double scale = static_cast<double>(in_size) / out_size;
-  const double support = std::max(1.0, scale);  // tent half-width in input pixels
-  for (int o = 0; o < out_size; ++o) {
-    t.first.push_back(static_cast<int>(t.index.size()));
-    const double centre = (o + 0.5) * scale - 0.5;
-    const int lo = static_cast<int>(std::floor(centre - support)), hi = static_cast<int>(std::ceil(centre + support));
-    double total = 0;
-    const size_t start = t.weight.size();
-    for (int i = lo; i <= hi; ++i) {
-      const double wgt = std::max(0.0, 1.0 - std::fabs(i - centre) / support);
-      if (wgt <= 0) continue;
-      t.index.push_back(std::clamp(i, 0, in_size - 1));
-      t.weight.push_back(static_cast<float>(wgt));
-      total += wgt;
-    }
-    for (size_t k = start; k < t.weight.size(); ++k) t.weight[k] = static_cast<float>(t.weight[k] / total);
-  }
-  t.first.push_back(static_cast<int>(t.index.size()));
-  return t;
-}
-
 // The box grown by the margin, as pixel bounds.
 PixelRect GrownBox(const Box2& box, int w, int h) {
   const double margin = std::max<double>(kBoxMarginPixels,
@@ -49,34 +19,6 @@ PixelRect GrownBox(const Box2& box, int w, int h) {
 }
 
 }  // namespace
-
-ImageF ResizeLinear(const ImageF& image, int width, int height) {
-  SD_CHECK(width > 0 && height > 0 && !image.empty(), << width << "x" << height);
-  if (width == image.width() && height == image.height()) return image;
-  const int ch = image.channels();
-  const AxisTaps tx = TentTaps(image.width(), width), ty = TentTaps(image.height(), height);
-  ImageF wide(width, image.height(), ch);
-  ParallelFor(0, static_cast<size_t>(image.height()), [&](size_t y) {
-    for (int x = 0; x < width; ++x)
-      for (int c = 0; c < ch; ++c) {
-        float v = 0;
-        for (int k = tx.first[static_cast<size_t>(x)]; k < tx.first[static_cast<size_t>(x) + 1]; ++k)
-          v += tx.weight[static_cast<size_t>(k)] * image.at(tx.index[static_cast<size_t>(k)], static_cast<int>(y), c);
-        wide.at(x, static_cast<int>(y), c) = v;
-      }
-  });
-  ImageF out(width, height, ch);
-  ParallelFor(0, static_cast<size_t>(height), [&](size_t y) {
-    for (int x = 0; x < width; ++x)
-      for (int c = 0; c < ch; ++c) {
-        float v = 0;
-        for (int k = ty.first[y]; k < ty.first[y + 1]; ++k)
-          v += ty.weight[static_cast<size_t>(k)] * wide.at(x, ty.index[static_cast<size_t>(k)], c);
-        out.at(x, static_cast<int>(y), c) = v;
-      }
-  });
-  return out;
-}
 
 Segmenter::Segmenter(GrabCutOptions options, std::unique_ptr<Model> model, int input_size)
     : grabcut_(options), model_(std::move(model)), input_size_(input_size) {}

@@ -24,6 +24,7 @@
 #include "core/box3.h"
 #include "core/image.h"
 #include "models/grabcut.h"
+#include "models/resample.h"
 #include "models/runtime.h"
 
 namespace sd::models {
@@ -72,9 +73,5 @@ class Segmenter {
   std::unique_ptr<Model> model_;
   int input_size_ = 0;
 };
-
-// Antialiased linear resampling (a tent filter widened by the reduction factor when shrinking, so every input
-// pixel contributes), pixel centres at +0.5, edges clamped. Same size returns the image unchanged.
-ImageF ResizeLinear(const ImageF& image, int width, int height);
 
 }  // namespace sd::models

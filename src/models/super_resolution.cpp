@@ -12,35 +12,6 @@ namespace sd::models {
 
 namespace {
 
-// Keys' cubic convolution kernel with a = -0.5 (Catmull-Rom): interpolating, C1, the usual "bicubic".
-float KeysCubic(float x) {
-  constexpr float a = -0.5f;
-  x = std::fabs(x);
-  if (x <= 1) return ((a + 2) * x - (a + 3)) * x * x + 1;
-  if (x < 2) return ((a * x - 5 * a) * x + 8 * a) * x - 4 * a;
-  return 0;
-}
-
-// For each output coordinate along one axis: the 4 input taps (clamped at the edges) and their weights.
-struct Taps {
-  std::array<int, 4> index;
-  std::array<float, 4> weight;
-};
-
-std::vector<Taps> CubicTaps(int in_size, int scale) {
-  std::vector<Taps> taps(static_cast<size_t>(in_size) * scale);
-  for (size_t o = 0; o < taps.size(); ++o) {
-    const float centre = (static_cast<float>(o) + 0.5f) / static_cast<float>(scale) - 0.5f;
-    const int base = static_cast<int>(std::floor(centre));
-    for (int k = 0; k < 4; ++k) {
-      const int i = base - 1 + k;
-      taps[o].index[k] = std::clamp(i, 0, in_size - 1);
-      taps[o].weight[k] = KeysCubic(centre - static_cast<float>(i));
-    }
-  }
-  return taps;
-}
-
 ImageF Channels(const ImageF& image, int first, int count) {
   ImageF out(image.width(), image.height(), count);
   for (int y = 0; y < image.height(); ++y)
@@ -58,34 +29,6 @@ std::filesystem::path InstalledModel(const std::string& name, int scale) {
 }
 
 }  // namespace
-
-ImageF UpscaleBicubic(const ImageF& image, int scale) {
-  SD_CHECK(scale >= 1, << scale);
-  const int w = image.width(), h = image.height(), ch = image.channels();
-  if (image.empty()) return ImageF(w * scale, h * scale, ch);
-  const std::vector<Taps> tx = CubicTaps(w, scale), ty = CubicTaps(h, scale);
-  // Horizontal pass first on the input rows, then vertical: 2 × 4 taps instead of 16 per output pixel.
-  ImageF wide(w * scale, h, ch);
-  ParallelFor(0, static_cast<size_t>(h), [&](size_t y) {
-    for (int xo = 0; xo < w * scale; ++xo)
-      for (int c = 0; c < ch; ++c) {
-        float v = 0;
-        for (int k = 0; k < 4; ++k) v += tx[xo].weight[k] * image.at(tx[xo].index[k], static_cast<int>(y), c);
-        wide.at(xo, static_cast<int>(y), c) = v;
-      }
-  });
-  ImageF out(w * scale, h * scale, ch);
-  ParallelFor(0, static_cast<size_t>(h) * scale, [&](size_t yo) {
-    const Taps& t = ty[yo];
-    for (int xo = 0; xo < w * scale; ++xo)
-      for (int c = 0; c < ch; ++c) {
-        float v = 0;
-        for (int k = 0; k < 4; ++k) v += t.weight[k] * wide.at(xo, t.index[k], c);
-        out.at(xo, static_cast<int>(yo), c) = v;
-      }
-  });
-  return out;
-}
 
 Upscaler::Upscaler(int scale, std::unique_ptr<Model> model, UpscaleOptions options)
     : scale_(scale), model_(std::move(model)), options_(options) {}

@@ -17,6 +17,7 @@
 #include <string>
 
 #include "core/image.h"
+#include "models/resample.h"
 #include "models/runtime.h"
 
 namespace sd::models {
@@ -67,8 +68,5 @@ class Upscaler {
   UpscaleOptions options_;
   int margin_ = 0;  // tile overlap, input pixels
 };
-
-// Bicubic (Keys, a = −0.5) resampling by an integer factor; pixel centres at +0.5, edges clamped.
-ImageF UpscaleBicubic(const ImageF& image, int scale);
 
 }  // namespace sd::models

@@ -15,19 +15,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::vector<float> ReadFloats(const fs::path& file, std::vector<int64_t>* shape) {
-  std::ifstream meta(file.string() + ".json");
-  const nlohmann::json j = nlohmann::json::parse(meta);
-  size_t n = 1;
-  for (const auto& d : j["shape"]) {
-    shape->push_back(d.get<int64_t>());
-    n *= static_cast<size_t>(d.get<int64_t>());
-  }
-  std::vector<float> v(n);
-  std::ifstream in(file, std::ios::binary);
-  in.read(reinterpret_cast<char*>(v.data()), static_cast<std::streamsize>(n * sizeof(float)));
-  return v;
-}
 
 ImageF RandomImage(int w, int h, int ch, unsigned seed) {
   std::mt19937 rng(seed);
@@ -117,8 +104,8 @@ TEST_F(ClipEncoderTest, LoadsTheFolderAndReadsItsContracts) {
 
 TEST_F(ClipEncoderTest, ImageEmbeddingMatchesTheEagerReference) {
   std::vector<int64_t> shape, eshape;
-  const std::vector<float> nchw = ReadFloats(testing::TestModel("clip_image_input.f32"), &shape);
-  const std::vector<float> expected = ReadFloats(testing::TestModel("clip_image_embedding.f32"), &eshape);
+  const std::vector<float> nchw = testing::ReadRawFloats(testing::TestModel("clip_image_input.f32"), &shape);
+  const std::vector<float> expected = testing::ReadRawFloats(testing::TestModel("clip_image_embedding.f32"), &eshape);
   const int s = static_cast<int>(shape[2]);
   ImageF img(s, s, 3);
   for (int c = 0; c < 3; ++c)
@@ -134,7 +121,7 @@ TEST_F(ClipEncoderTest, TextEmbeddingGoesThroughTheTokenizerExactly) {
   // The reference was computed in Python from the hand-worked ids of "hello world"; "Hello,   World"
   // must tokenise differently (the comma) and " HELLO  world " identically.
   std::vector<int64_t> shape;
-  const std::vector<float> expected = ReadFloats(testing::TestModel("clip_text_hello_world.f32"), &shape);
+  const std::vector<float> expected = testing::ReadRawFloats(testing::TestModel("clip_text_hello_world.f32"), &shape);
   const ClipEncoder clip = ClipEncoder::Load(dir_);
   const std::vector<Embedding> e = clip.EmbedTexts({"hello world", " HELLO  world ", "hello, world"});
   ASSERT_EQ(e.size(), 3u);

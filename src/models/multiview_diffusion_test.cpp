@@ -195,21 +195,6 @@ TEST(MultiViewGenerator, RejectsBadArguments) {
   EXPECT_NE(error(2, 4.0f, ImageU8()).find("empty object image"), std::string::npos);
 }
 
-// The raw little-endian float32 tensors make_diffusion_test_models.py writes, with their shape sidecar.
-std::vector<float> ReadRaw(const fs::path& file, std::vector<int64_t>* shape) {
-  std::ifstream meta(file.string() + ".json");
-  const nlohmann::json j = nlohmann::json::parse(meta);
-  size_t n = 1;
-  for (const auto& d : j["shape"]) {
-    shape->push_back(d.get<int64_t>());
-    n *= d.get<size_t>();
-  }
-  std::vector<float> values(n);
-  std::ifstream in(file, std::ios::binary);
-  in.read(reinterpret_cast<char*>(values.data()), static_cast<std::streamsize>(n * sizeof(float)));
-  EXPECT_TRUE(in.good()) << file;
-  return values;
-}
 
 // The whole loop against make_diffusion_test_models.py's Python replay of the documented contracts (noise
 // order, reference-latent noising and scaling, CFG row order, scaling), on the same tiny modules.
@@ -218,7 +203,7 @@ TEST(MultiViewGenerator, MatchesAPythonReplayOfTheContracts) {
   SD_REQUIRE_TEST_MODEL(dir, "diffusion");
   SD_REQUIRE_TEST_MODEL(ref_file, "reference_grid.f32");
   std::vector<int64_t> shape;
-  const std::vector<float> expected = ReadRaw(ref_file, &shape);
+  const std::vector<float> expected = testing::ReadRawFloats(ref_file, &shape);
   ASSERT_EQ(shape, (std::vector<int64_t>{1, 3, 960, 640}));
   ImageU8 object(96, 80, 3);  // reference_object() in the script
   for (int y = 0; y < 80; ++y)

@@ -13,16 +13,9 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// The raw little-endian float32 tensors make_test_models.py writes, with their shape sidecar.
 Tensor ReadRaw(const fs::path& file) {
   Tensor t;
-  std::ifstream meta(file.string() + ".json");
-  const nlohmann::json j = nlohmann::json::parse(meta);
-  for (const auto& d : j["shape"]) t.shape.push_back(d.get<int64_t>());
-  t.values.resize(static_cast<size_t>(t.numel()));
-  std::ifstream in(file, std::ios::binary);
-  in.read(reinterpret_cast<char*>(t.values.data()), static_cast<std::streamsize>(t.values.size() * sizeof(float)));
-  EXPECT_TRUE(in.good()) << file;
+  t.values = testing::ReadRawFloats(file, &t.shape);
   return t;
 }
 

@@ -34,21 +34,6 @@ std::string ErrorOf(const std::function<void()>& f) {
   return "";
 }
 
-class ScopedEnv {
- public:
-  ScopedEnv(const char* name, const std::string& value) : name_(name) {
-    if (const char* old = std::getenv(name)) old_ = old;
-    setenv(name, value.c_str(), 1);
-  }
-  ~ScopedEnv() {
-    if (old_) setenv(name_, old_->c_str(), 1);
-    else unsetenv(name_);
-  }
-
- private:
-  const char* name_;
-  std::optional<std::string> old_;
-};
 
 // IoU of (a ≥ 0.5) and (b ≥ 0.5).
 double MaskIoU(const ImageF& a, const ImageF& b) {
@@ -415,21 +400,6 @@ TEST(Segmenter, InstalledIsnetOnRealComposites) {
 // ---------------------------------------------------------------------------------------------------------------
 // Learned path with the tiny models of tools/testing/make_segmentation_test_models.py.
 
-template <typename T>
-std::vector<T> ReadRaw(const fs::path& file, std::vector<int64_t>* shape) {
-  std::ifstream meta(file.string() + ".json");
-  const nlohmann::json j = nlohmann::json::parse(meta);
-  size_t n = 1;
-  for (const auto& d : j["shape"]) {
-    shape->push_back(d.get<int64_t>());
-    n *= static_cast<size_t>(d.get<int64_t>());
-  }
-  std::vector<T> v(n);
-  std::ifstream in(file, std::ios::binary);
-  in.read(reinterpret_cast<char*>(v.data()), static_cast<std::streamsize>(n * sizeof(T)));
-  EXPECT_TRUE(in.good()) << file;
-  return v;
-}
 
 TEST(Segmenter, LearnedPathReproducesTheModuleOnAnInputSizeImage) {
   SD_REQUIRE_TEST_MODEL(file, "seg_tiny.pt");
@@ -438,8 +408,8 @@ TEST(Segmenter, LearnedPathReproducesTheModuleOnAnInputSizeImage) {
   EXPECT_EQ(seg.input_size(), 64);
   EXPECT_NE(seg.Describe().find("seg-tiny"), std::string::npos);
   std::vector<int64_t> in_shape, out_shape;
-  const auto pixels = ReadRaw<uint8_t>(testing::TestModel("seg_ref_input.u8"), &in_shape);
-  const auto expected = ReadRaw<float>(testing::TestModel("seg_ref_mask.f32"), &out_shape);
+  const auto pixels = testing::ReadRawBytes(testing::TestModel("seg_ref_input.u8"), &in_shape);
+  const auto expected = testing::ReadRawFloats(testing::TestModel("seg_ref_mask.f32"), &out_shape);
   ASSERT_EQ(in_shape, (std::vector<int64_t>{64, 64, 3}));
   ImageU8 image(64, 64, 3);
   image.vector() = pixels;
@@ -521,7 +491,7 @@ TEST(Segmenter, LearnedPathErrors) {
 
 TEST(Segmenter, ResolveTakesClassicalAutoOrAModelPath) {
   testing::TempDir dir;
-  const ScopedEnv models("SYNTHDRIVE_MODELS", dir.path().string());
+  const testing::ScopedEnv models("SYNTHDRIVE_MODELS", dir.path().string());
   EXPECT_FALSE(Segmenter::Resolve("classical").learned());
   EXPECT_FALSE(Segmenter::Resolve("auto").learned());  // nothing installed: GrabCut, with a warning
   SD_REQUIRE_TEST_MODEL(tiny, "seg_tiny.pt");

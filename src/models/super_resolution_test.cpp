@@ -16,21 +16,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// The reference pair make_test_models.py wrote: a 0..255 NCHW input and the eager module's whole-image output.
-std::vector<float> ReadFloats(const fs::path& file, std::vector<int64_t>* shape) {
-  std::ifstream meta(file.string() + ".json");
-  size_t n = 1;
-  const nlohmann::json j = nlohmann::json::parse(meta);
-  for (const auto& d : j["shape"]) {
-    shape->push_back(d.get<int64_t>());
-    n *= static_cast<size_t>(d.get<int64_t>());
-  }
-  std::vector<float> v(n);
-  std::ifstream in(file, std::ios::binary);
-  in.read(reinterpret_cast<char*>(v.data()), static_cast<std::streamsize>(n * sizeof(float)));
-  return v;
-}
-
 // NCHW 0..255 (batch 1) -> interleaved 0..1.
 ImageF ToImage(const std::vector<float>& nchw, const std::vector<int64_t>& shape) {
   const int c = static_cast<int>(shape[1]), h = static_cast<int>(shape[2]), w = static_cast<int>(shape[3]);
@@ -40,22 +25,6 @@ ImageF ToImage(const std::vector<float>& nchw, const std::vector<int64_t>& shape
       for (int x = 0; x < w; ++x) img.at(x, y, k) = nchw[(static_cast<size_t>(k) * h + y) * w + x] / 255.0f;
   return img;
 }
-
-class ScopedEnv {
- public:
-  ScopedEnv(const char* name, const std::string& value) : name_(name) {
-    if (const char* old = std::getenv(name)) old_ = old;
-    setenv(name, value.c_str(), 1);
-  }
-  ~ScopedEnv() {
-    if (old_) setenv(name_, old_->c_str(), 1);
-    else unsetenv(name_);
-  }
-
- private:
-  const char* name_;
-  std::optional<std::string> old_;
-};
 
 TEST(UpscaleBicubic, KeepsConstantsAndReproducesLinearRamps) {
   ImageF img(12, 9, 2);
@@ -96,8 +65,8 @@ TEST(Upscaler, ClassicalPathSaysSoAndKeepsChannels) {
 TEST(Upscaler, TiledLearnedPassEqualsTheWholeImageReference) {
   SD_REQUIRE_TEST_MODEL(file, "sr_tiny_x2.pt");
   std::vector<int64_t> in_shape, out_shape;
-  const ImageF input = ToImage(ReadFloats(testing::TestModel("sr_tiny_x2_input.f32"), &in_shape), in_shape);
-  const ImageF expected = ToImage(ReadFloats(testing::TestModel("sr_tiny_x2_output.f32"), &out_shape), out_shape);
+  const ImageF input = ToImage(testing::ReadRawFloats(testing::TestModel("sr_tiny_x2_input.f32"), &in_shape), in_shape);
+  const ImageF expected = ToImage(testing::ReadRawFloats(testing::TestModel("sr_tiny_x2_output.f32"), &out_shape), out_shape);
   // 16-pixel tiles cut the 70x45 image into 5x3 tiles with interior seams; a tile margin smaller than the
   // model's receptive radius would show there.
   UpscaleOptions options;
@@ -147,7 +116,7 @@ TEST(Upscaler, ModelThatDoesNotUpscaleIsReported) {
 
 TEST(Upscaler, AutoFallsBackToBicubicWithoutWeightsAndNamedModelsMustExist) {
   testing::TempDir empty;
-  const ScopedEnv env("SYNTHDRIVE_MODELS", empty.path().string());
+  const testing::ScopedEnv env("SYNTHDRIVE_MODELS", empty.path().string());
   const Upscaler up = Upscaler::Resolve("auto", 2);
   EXPECT_FALSE(up.learned());
   try {

@@ -3,7 +3,11 @@
 #include <unistd.h>
 
 #include <cstdlib>
+#include <fstream>
 #include <random>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 namespace sd::testing {
 namespace fs = std::filesystem;
@@ -25,6 +29,41 @@ fs::path TestModel(const std::string& rel) {
   if (!dir || !*dir) return {};
   const fs::path p = fs::path(dir) / rel;
   return fs::exists(p) ? p : fs::path();
+}
+
+namespace {
+
+template <typename T>
+std::vector<T> ReadRaw(const fs::path& file, std::vector<int64_t>* shape) {
+  std::ifstream meta(file.string() + ".json");
+  const nlohmann::json j = nlohmann::json::parse(meta);
+  size_t n = 1;
+  for (const auto& d : j["shape"]) {
+    shape->push_back(d.get<int64_t>());
+    n *= static_cast<size_t>(d.get<int64_t>());
+  }
+  std::vector<T> values(n);
+  std::ifstream in(file, std::ios::binary);
+  in.read(reinterpret_cast<char*>(values.data()), static_cast<std::streamsize>(n * sizeof(T)));
+  EXPECT_TRUE(in.good()) << file << " holds fewer than " << n << " values";
+  return values;
+}
+
+}  // namespace
+
+std::vector<float> ReadRawFloats(const fs::path& file, std::vector<int64_t>* shape) { return ReadRaw<float>(file, shape); }
+std::vector<uint8_t> ReadRawBytes(const fs::path& file, std::vector<int64_t>* shape) {
+  return ReadRaw<uint8_t>(file, shape);
+}
+
+ScopedEnv::ScopedEnv(const char* name, const std::string& value) : name_(name) {
+  if (const char* old = std::getenv(name)) old_ = old;
+  setenv(name, value.c_str(), 1);
+}
+
+ScopedEnv::~ScopedEnv() {
+  if (old_) setenv(name_, old_->c_str(), 1);
+  else unsetenv(name_);
 }
 
 TempDir::TempDir() {

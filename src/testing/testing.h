@@ -1,7 +1,10 @@
 #pragma once
 // Test support: where the repo's data/ and the optional ../shared/data are, and temporary directories.
+#include <cstdint>
 #include <filesystem>
+#include <optional>
 #include <string>
+#include <vector>
 
 namespace sd::testing {
 
@@ -12,6 +15,24 @@ std::filesystem::path SharedData(const std::string& rel);
 // <dir>/<rel> where dir is $SYNTHDRIVE_TEST_MODELS: the tiny TorchScript models tools/testing/make_test_models.py
 // builds before the model tests run (a CTest fixture). Empty when they could not be built (no python3-torch).
 std::filesystem::path TestModel(const std::string& rel);
+// The raw little-endian tensors the tiny-model generators under tools/testing/ write: `file` holds the values,
+// `file`.json {"shape": [...]}. The shape is appended to `shape`; a short file fails the test.
+std::vector<float> ReadRawFloats(const std::filesystem::path& file, std::vector<int64_t>* shape);
+std::vector<uint8_t> ReadRawBytes(const std::filesystem::path& file, std::vector<int64_t>* shape);
+
+// Sets an environment variable for the life of the object, then restores it.
+class ScopedEnv {
+ public:
+  ScopedEnv(const char* name, const std::string& value);
+  ~ScopedEnv();
+  ScopedEnv(const ScopedEnv&) = delete;
+  ScopedEnv& operator=(const ScopedEnv&) = delete;
+
+ private:
+  const char* name_;
+  std::optional<std::string> old_;
+};
+
 // A fresh, empty directory removed when the object dies.
 class TempDir {
  public:

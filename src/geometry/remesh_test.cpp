@@ -2,7 +2,6 @@
 
 #include <gtest/gtest.h>
 
-#include <chrono>
 #include <cmath>
 #include <random>
 
@@ -334,44 +333,6 @@ TEST(ContinuousRemesher, RealAssetTrafficCone) {
   EXPECT_LT(remesher.faces().size(), 20000u);
   std::cout << "after 60 rounds: " << Topology(remesher).Describe() << ", mean plane distance " << mean_distance
             << ", mean target edge length " << remesher.MeanTargetEdgeLength() << "\n";
-}
-
-// Timing at about 10k faces (reported, loosely bounded so that a loaded machine does not fail it).
-TEST(ContinuousRemesher, RemeshTimingAt10kFaces) {
-  // Icosphere(5) (20480 faces, edges ~0.038) coarsened to targets of 0.062: about 10k faces at steady state.
-  const TriangleMesh sphere = testing::Icosphere(5);
-  RemeshOptions options;
-  options.edge_length_min = 0.062f;
-  options.edge_length_max = 0.062f;
-  ContinuousRemesher remesher(sphere.positions, sphere.faces, options);
-  for (int round = 0; round < 20; ++round) remesher.Remesh();
-  std::mt19937 rng(9);
-  std::normal_distribution<float> noise(0.0f, 1.0f);
-  double total_ms = 0, step_ms = 0;
-  size_t faces = 0;
-  const int rounds = 30;
-  for (int round = 0; round < rounds; ++round) {
-    std::vector<Eigen::Vector3f> grad(remesher.positions().size());
-    for (size_t v = 0; v < grad.size(); ++v) {
-      grad[v] = remesher.positions()[v] - remesher.positions()[v].normalized() +
-                0.01f * Eigen::Vector3f(noise(rng), noise(rng), noise(rng));
-    }
-    const auto s0 = std::chrono::steady_clock::now();
-    remesher.Step(grad);
-    step_ms += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - s0).count();
-    faces += remesher.faces().size();
-    const auto t0 = std::chrono::steady_clock::now();
-    remesher.Remesh();
-    total_ms += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-  }
-  const double ms = total_ms / rounds;
-  std::cout << "Remesh(): " << ms << " ms per call at " << faces / rounds << " faces (Step(): " << step_ms / rounds
-            << " ms)\n";
-  RecordProperty("remesh_ms", std::to_string(ms));
-  EXPECT_TRUE(Topology(remesher).IsWatertight());
-#if !defined(__SANITIZE_ADDRESS__)  // sanitizer builds run ~20x slower
-  EXPECT_LT(ms, 50.0);
-#endif
 }
 
 }  // namespace

@@ -395,17 +395,22 @@ PixelRect PixelsOf(const Box2& box, int width, int height) {
   return r;
 }
 
-ImageF GrabCut(const ImageU8& image, const Box2& box, const ImageF* prior, const GrabCutOptions& options) {
+void CheckSegmentationInput(const ImageU8& image, const Box2& box, const ImageF* prior) {
   const int w = image.width(), h = image.height(), ch = image.channels();
   if (image.empty()) throw InputError({}, "segmentation: empty image");
   if (ch != 1 && ch != 3 && ch != 4) throw InputError({}, Msg() << "segmentation: " << ch << "-channel image");
-  const PixelRect r = PixelsOf(box, w, h);
-  if (r.Empty())
+  if (PixelsOf(box, w, h).Empty())
     throw InputError({}, Msg() << "segmentation: the box (" << box.x1 << ", " << box.y1 << ") - (" << box.x2 << ", "
                                << box.y2 << ") holds no pixel of the " << w << "x" << h << " image");
   if (prior != nullptr && (prior->width() != w || prior->height() != h || prior->channels() != 1))
     throw InputError({}, Msg() << "segmentation: the prior mask is " << prior->width() << "x" << prior->height() << "x"
                                << prior->channels() << ", the image " << w << "x" << h << " (1 channel expected)");
+}
+
+ImageF GrabCut(const ImageU8& image, const Box2& box, const ImageF* prior, const GrabCutOptions& options) {
+  CheckSegmentationInput(image, box, prior);
+  const int w = image.width(), h = image.height(), ch = image.channels();
+  const PixelRect r = PixelsOf(box, w, h);
   SD_CHECK(options.components >= 1 && options.components <= 16 && options.iterations >= 1, << options.components);
   const size_t n = static_cast<size_t>(w) * static_cast<size_t>(h);
   // Colours as floats 0..255.

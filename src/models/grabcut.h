@@ -85,6 +85,10 @@ struct PixelRect {
 };
 PixelRect PixelsOf(const Box2& box, int width, int height);
 
+// InputError for an empty image, a channel count other than 1, 3 or 4, a box holding no pixel of the image, or
+// a prior that is not a 1-channel mask of the image's size: the checks every segmentation path makes first.
+void CheckSegmentationInput(const ImageU8& image, const Box2& box, const ImageF* prior);
+
 // Foreground mask (1 channel, image size, 0 or 1). `box` is the object's pixel box, clipped to the image;
 // `prior` (optional, 1 channel, image size, 0..1) marks sure foreground. InputError when the box has no pixels
 // inside the image. The caller checks the result's area.

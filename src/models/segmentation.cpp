@@ -115,16 +115,9 @@ ImageF Segmenter::SegmentLearned(const ImageU8& image) const {
 }
 
 SegmentationResult Segmenter::Segment(const ImageU8& image, const Box2& box, const ImageF* prior) const {
-  if (image.empty()) throw InputError({}, "segmentation: empty image");
-  const int w = image.width(), h = image.height(), ch = image.channels();
-  if (ch != 1 && ch != 3 && ch != 4) throw InputError({}, Msg() << "segmentation: " << ch << "-channel image");
+  CheckSegmentationInput(image, box, prior);
+  const int w = image.width(), h = image.height();
   const PixelRect r = PixelsOf(box, w, h);
-  if (r.Empty())
-    throw InputError({}, Msg() << "segmentation: the box (" << box.x1 << ", " << box.y1 << ") - (" << box.x2 << ", "
-                               << box.y2 << ") holds no pixel of the " << w << "x" << h << " image");
-  if (prior != nullptr && (prior->width() != w || prior->height() != h || prior->channels() != 1))
-    throw InputError({}, Msg() << "segmentation: the prior mask is " << prior->width() << "x" << prior->height() << "x"
-                               << prior->channels() << ", the image " << w << "x" << h << " (1 channel expected)");
   SegmentationResult result;
   if (model_) {
     result.mask = SegmentLearned(image);

@@ -21,6 +21,8 @@ import sys
 
 import numpy as np
 import torch
+
+from raw_tensors import write_raw  # noqa: E402  (beside this script)
 import torch.nn.functional as F
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
@@ -167,14 +169,6 @@ def reference_generate(encoder, unet, decoder, obj, steps, guidance, seed):
     with torch.no_grad():
         raw = decoder(z).double()
     return (raw / 0.5 * 0.8 / 2 + 0.5).clamp(0, 1).float()
-
-
-def write_raw(path, tensor):
-    t = tensor.detach().contiguous().to(torch.float32)
-    with open(path, "wb") as f:
-        f.write(t.numpy().astype("<f4").tobytes())
-    with open(path + ".json", "w") as f:
-        json.dump({"shape": list(t.shape)}, f)
 
 
 def save(module, path, extra):

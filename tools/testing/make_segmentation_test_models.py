@@ -13,6 +13,8 @@ import sys
 
 import torch
 
+from raw_tensors import write_raw  # noqa: E402  (beside this script)
+
 SIZE = 64
 
 
@@ -46,13 +48,6 @@ class Empty(torch.nn.Module):
 
 def save(module, path, extra):
     torch.jit.save(torch.jit.script(module), path, _extra_files={"synthdrive_contract.json": json.dumps(extra)})
-
-
-def write_raw(path, array, dtype):
-    with open(path, "wb") as f:
-        f.write(array.astype(dtype).tobytes())
-    with open(path + ".json", "w") as f:
-        json.dump({"shape": list(array.shape)}, f)
 
 
 def main():

@@ -13,6 +13,8 @@ import re
 import sys
 
 import torch
+
+from raw_tensors import write_raw  # noqa: E402  (beside this script)
 import torch.nn.functional as F
 
 SOURCE = "tools/testing/make_stage_test_models.py"
@@ -36,15 +38,6 @@ def contract(stage, name, inputs, outputs, params):
 
 def save(module, path, extra):
     torch.jit.save(torch.jit.script(module), path, _extra_files={"synthdrive_contract.json": json.dumps(extra)})
-
-
-def write_raw(path, tensor):
-    """Little-endian float32, shape in a JSON sidecar: what the C++ tests read back."""
-    t = tensor.detach().contiguous().to(torch.float32)
-    with open(path, "wb") as f:
-        f.write(t.numpy().astype("<f4").tobytes())
-    with open(path + ".json", "w") as f:
-        json.dump({"shape": list(t.shape)}, f)
 
 
 # --- CLIP -------------------------------------------------------------------------------------------------

@@ -10,6 +10,8 @@ import os
 import sys
 
 import torch
+
+from raw_tensors import write_raw  # noqa: E402  (beside this script)
 import torch.nn.functional as F
 
 
@@ -47,15 +49,6 @@ def save(module, path, extra=None):
     scripted = torch.jit.script(module)
     files = {"synthdrive_contract.json": json.dumps(extra)} if extra is not None else {}
     torch.jit.save(scripted, path, _extra_files=files)
-
-
-def write_raw(path, tensor):
-    """Little-endian float32, shape in a JSON sidecar: what the C++ test reads back."""
-    t = tensor.detach().contiguous().to(torch.float32)
-    with open(path, "wb") as f:
-        f.write(t.numpy().astype("<f4").tobytes())
-    with open(path + ".json", "w") as f:
-        json.dump({"shape": list(t.shape)}, f)
 
 
 def main():

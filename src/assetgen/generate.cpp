@@ -107,8 +107,11 @@ GeneratedMesh GenerateFromViews(const MultiViewSet& views, const GenerateOptions
     out.translation = c.mesh.positions.front().cast<double>() - c.scale * (c.rotation * before.cast<double>());
     out.extent = c.extent;
     out.mesh = std::move(c.mesh);
-    return std::string(Msg() << "up " << options.canonical.up << ", front " << options.canonical.front << ", scale "
-                             << c.scale << " m per view unit");
+    Msg method;
+    method << "up " << options.canonical.up << ", front " << options.canonical.front;
+    if (c.frame) method << " (" << c.frame->front_method << ")";
+    method << ", scale " << c.scale << " m per view unit";
+    return method.str();
   });
   return out;
 }

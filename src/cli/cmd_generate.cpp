@@ -109,7 +109,9 @@ Runner AddGenerateCommand(CLI::App& app) {
   app.add_option("--out", a->out, "Asset folder to create")->required();
   app.add_option("--height", a->height, "Real height in metres (default: the category's)")->check(CLI::PositiveNumber);
   app.add_option("--size", a->size, "Real length width height in metres (best uniform fit)")->expected(3);
-  app.add_option("--front", a->options.canonical.front, "The views' axis that is the object's front")->default_val("+x");
+  app.add_option("--front", a->options.canonical.front,
+                 "The views' axis that is the object's front (+x, -y, ...), or auto (from mirror symmetry)")
+      ->default_val("+x");
   app.add_option("--id", a->id, "Asset id (default: the output folder's name)");
   app.add_option("--name", a->name, "Human-readable name");
   app.add_option("--licence", a->licence, "Licence of the source images");

@@ -35,6 +35,10 @@ Asset ImportAsset(const ImportRequest& r) {
                                           {"up", opt.up},
                                           {"front", opt.front},
                                           {"scale_to_metres", c.scale}}});
+  if (c.frame) {  // estimated axes: say how, so a wrong guess can be traced and overridden with --up / --front
+    a.info.stages[0]["up_method"] = c.frame->up_method;
+    a.info.stages[0]["front_method"] = c.frame->front_method;
+  }
   SaveAsset(a, r.out, r.overwrite);
   a.dir = r.out;
   return a;

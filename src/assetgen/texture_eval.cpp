@@ -69,33 +69,27 @@ AlbedoRender RenderAlbedo(const TriangleMesh& mesh, const ViewCamera& view, int 
     const int y = static_cast<int>(yy);
     for (int x = 0; x < w; ++x) {
       Eigen::Vector3f sum = Eigen::Vector3f::Zero();
-      int covered = 0;
-      for (int sy = 0; sy < ss; ++sy) {
-        for (int sx = 0; sx < ss; ++sx) {
-          const size_t p = static_cast<size_t>(y * ss + sy) * cam.width + (x * ss + sx);
-          const int32_t t = rast.triangle[p];
-          if (t < 0) continue;
-          ++covered;
-          const Eigen::Vector3i& f = mesh.faces[t];
-          const float b0 = rast.bary[2 * p], b1 = rast.bary[2 * p + 1], b2 = 1 - b0 - b1;
-          Eigen::Vector3f c = Eigen::Vector3f::Ones();
-          const int mi = mesh.MaterialOf(t);
-          if (mi >= 0 && mi < static_cast<int>(mesh.materials.size())) {
-            const Material& m = mesh.materials[mi];
-            c = m.base_color_factor.head<3>();
-            if (m.base_color_texture && !mesh.uvs.empty()) {
-              const Eigen::Vector2f uv = b0 * mesh.uvs[f[0]] + b1 * mesh.uvs[f[1]] + b2 * mesh.uvs[f[2]];
-              const ImageU8& tex = *m.base_color_texture;
-              float s[4] = {0, 0, 0, 0};
-              SampleBilinear(tex, Wrap(uv.x()) * tex.width(), Wrap(uv.y()) * tex.height(), s);
-              for (int k = 0; k < 3; ++k) c[k] *= SrgbToLinear(s[tex.channels() >= 3 ? k : 0] / 255.0f);
-            }
+      const int covered = VisitCoveredSamples(rast, cam.width, x, y, ss, [&](size_t p) {
+        const int32_t t = rast.triangle[p];
+        const Eigen::Vector3i& f = mesh.faces[t];
+        const float b0 = rast.bary[2 * p], b1 = rast.bary[2 * p + 1], b2 = 1 - b0 - b1;
+        Eigen::Vector3f c = Eigen::Vector3f::Ones();
+        const int mi = mesh.MaterialOf(t);
+        if (mi >= 0 && mi < static_cast<int>(mesh.materials.size())) {
+          const Material& m = mesh.materials[mi];
+          c = m.base_color_factor.head<3>();
+          if (m.base_color_texture && !mesh.uvs.empty()) {
+            const Eigen::Vector2f uv = b0 * mesh.uvs[f[0]] + b1 * mesh.uvs[f[1]] + b2 * mesh.uvs[f[2]];
+            const ImageU8& tex = *m.base_color_texture;
+            float s[4] = {0, 0, 0, 0};
+            SampleBilinear(tex, Wrap(uv.x()) * tex.width(), Wrap(uv.y()) * tex.height(), s);
+            for (int k = 0; k < 3; ++k) c[k] *= SrgbToLinear(s[tex.channels() >= 3 ? k : 0] / 255.0f);
           }
-          if (!mesh.colors.empty())
-            c = c.cwiseProduct((b0 * mesh.colors[f[0]] + b1 * mesh.colors[f[1]] + b2 * mesh.colors[f[2]]).head<3>());
-          sum += c;
         }
-      }
+        if (!mesh.colors.empty())
+          c = c.cwiseProduct((b0 * mesh.colors[f[0]] + b1 * mesh.colors[f[1]] + b2 * mesh.colors[f[2]]).head<3>());
+        sum += c;
+      });
       out.mask.at(x, y) = static_cast<float>(covered) / (ss * ss);
       // Pixels are averaged over their samples, background counting as black (what a renderer composites).
       for (int k = 0; k < 3; ++k) out.color.at(x, y, k) = sum[k] / (ss * ss);

@@ -79,21 +79,15 @@ MultiView RenderOne(const TriangleMesh& mesh, const BoundingSphere& sphere, cons
   for (int y = 0; y < h; ++y) {
     for (int x = 0; x < w; ++x) {
       Eigen::Vector3f n_sum = Eigen::Vector3f::Zero();
-      int covered = 0;
-      for (int sy = 0; sy < ss; ++sy) {
-        for (int sx = 0; sx < ss; ++sx) {
-          const size_t p = static_cast<size_t>(y * ss + sy) * cam.width + (x * ss + sx);
-          const int32_t t = rast.triangle[p];
-          if (t < 0) continue;
-          ++covered;
-          Eigen::Vector3f n = face_normals[t];
-          // What an estimator sees is the side facing the camera: open or inconsistently wound scans
-          // show back faces, whose stored normal points away.
-          const Eigen::Vector3i& f = mesh.faces[t];
-          if (n.dot(mesh.positions[f[0]] - eye) > 0) n = -n;
-          n_sum += n;
-        }
-      }
+      const int covered = VisitCoveredSamples(rast, cam.width, x, y, ss, [&](size_t p) {
+        const int32_t t = rast.triangle[p];
+        Eigen::Vector3f n = face_normals[t];
+        // What an estimator sees is the side facing the camera: open or inconsistently wound scans
+        // show back faces, whose stored normal points away.
+        const Eigen::Vector3i& f = mesh.faces[t];
+        if (n.dot(mesh.positions[f[0]] - eye) > 0) n = -n;
+        n_sum += n;
+      });
       out.mask.at(x, y) = static_cast<float>(covered) / (ss * ss);
       if (covered > 0 && n_sum.norm() > 1e-6f) {
         const Eigen::Vector3f n = n_sum.normalized();

@@ -65,6 +65,22 @@ BoundingSphere BoundingSphereOf(const std::vector<Eigen::Vector3f>& positions);
 Eigen::Matrix4f ClipFromWorldAround(const PinholeCamera& camera, const Rigid3d& T_world_cam, const BoundingSphere& sphere);
 // The camera at `factor` times the resolution: same field of view, pixel centres still at +0.5.
 PinholeCamera Supersampled(const PinholeCamera& camera, int factor);
+// Output pixel (x, y) of a raster made at Supersampled(camera, ss) (`raster_width` = ss · camera.width): calls
+// visit(p) for each of its ss² samples that a triangle covers (p indexes the raster's arrays) and returns how
+// many did. The one box-filter resolve of every supersampled render in assetgen.
+template <typename Visit>
+int VisitCoveredSamples(const raster::RasterBuffer& rast, int raster_width, int x, int y, int ss, Visit&& visit) {
+  int covered = 0;
+  for (int sy = 0; sy < ss; ++sy) {
+    for (int sx = 0; sx < ss; ++sx) {
+      const size_t p = static_cast<size_t>(y * ss + sy) * raster_width + (x * ss + sx);
+      if (rast.triangle[p] < 0) continue;
+      ++covered;
+      visit(p);
+    }
+  }
+  return covered;
+}
 // The mesh rasterised at `camera` with ClipFromWorldAround(camera, T_world_cam, sphere).
 raster::RasterBuffer RasterizeView(const TriangleMesh& mesh, const PinholeCamera& camera, const Rigid3d& T_world_cam,
                                    const BoundingSphere& sphere);

@@ -48,13 +48,6 @@ double PeakResidentMegabytes() {
   return 0;
 }
 
-TriangleMesh ToAssetFrame(TriangleMesh mesh, const GeneratedMesh& g) {
-  for (auto& p : mesh.positions)
-    p = (g.scale * (g.rotation * p.cast<double>()) + g.translation).cast<float>();
-  mesh.normals.clear();
-  return mesh;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -134,7 +127,7 @@ int main(int argc, char** argv) {
       std::printf("%-26s failed: %s\n", obj.name.c_str(), e.what());
       continue;
     }
-    const TriangleMesh gt_asset = ToAssetFrame(gt, g);
+    const TriangleMesh gt_asset = g.ToAssetFrame(gt);
     const geometry::GeometryMetrics m = geometry::CompareMeshes(g.mesh, gt_asset, metric_options);
     TextureMetrics t;
     if (textured) t = CompareTextures(g.mesh, gt_asset);

@@ -46,6 +46,13 @@ ColorViewSet ColorViewsOf(const MultiViewSet& views) {
 
 }  // namespace
 
+TriangleMesh GeneratedMesh::ToAssetFrame(TriangleMesh m) const {
+  for (auto& p : m.positions) p = (scale * (rotation * p.cast<double>()) + translation).cast<float>();
+  const Eigen::Matrix3f R = rotation.cast<float>();
+  for (auto& n : m.normals) n = R * n;
+  return m;
+}
+
 GeneratedMesh GenerateFromViews(const MultiViewSet& views, const GenerateOptions& options) {
   if (views.empty()) throw InputError({}, "no views to generate from");
   if (options.texture != "bake" && options.texture != "vertex")
@@ -255,16 +262,13 @@ MultiViewSet ViewsFromImage(const ImageU8& image, const Box2& box_in, const Imag
       mv.view = rig[i];
       mv.mask = MaskFromFlatBackground(generated[i]);
       ImageF srgb(size, size, 3);
+      mv.color = ImageF(size, size, 3);
       for (int y = 0; y < size; ++y)
         for (int x = 0; x < size; ++x)
-          for (int c = 0; c < 3; ++c) srgb.at(x, y, c) = generated[i].at(x, y, c) / 255.0f;
-      mv.color = ToLinear(generated[i].channels() == 3 ? generated[i] : [&] {
-        ImageU8 rgb(size, size, 3);
-        for (int y = 0; y < size; ++y)
-          for (int x = 0; x < size; ++x)
-            for (int c = 0; c < 3; ++c) rgb.at(x, y, c) = generated[i].at(x, y, c);
-        return rgb;
-      }());
+          for (int c = 0; c < 3; ++c) {
+            srgb.at(x, y, c) = generated[i].at(x, y, c) / 255.0f;
+            mv.color.at(x, y, c) = SrgbToLinear(srgb.at(x, y, c));
+          }
       const ImageF n_cam = stages.estimate_normals(srgb);
       if (n_cam.width() != size || n_cam.height() != size || n_cam.channels() != 3)
         throw InputError({}, "the normal estimator's output does not match its view's size");

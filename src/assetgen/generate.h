@@ -50,6 +50,10 @@ struct GeneratedMesh {
   Eigen::Vector3d translation;  // canonical = scale · (rotation · world) + translation
   std::vector<StageReport> stages;
   RefineStepLog last_refine_step;
+
+  // Anything given in the views' world frame (a ground-truth mesh, say) moved into the asset's frame, as the
+  // asset was: positions by scale · rotation + translation, normals by the rotation.
+  TriangleMesh ToAssetFrame(TriangleMesh mesh) const;
 };
 
 // InputError when a view has no colour image, or from any stage (refine.h, texture.h, canonical.h list them).

@@ -22,11 +22,6 @@ TriangleMesh ColouredEllipsoid() {
   return mesh;
 }
 
-TriangleMesh ToAssetFrame(TriangleMesh mesh, const GeneratedMesh& g) {
-  for (auto& p : mesh.positions) p = (g.scale * (g.rotation * p.cast<double>()) + g.translation).cast<float>();
-  return mesh;
-}
-
 GenerateOptions SmallOptions() {
   GenerateOptions o;
   o.hull_resolution = 48;
@@ -60,7 +55,7 @@ TEST(GenerateFromViews, BuildsAMetricCanonicalTexturedMeshCloseToTheTruth) {
   EXPECT_NEAR(g.scale, 0.7 / 1.8, 0.03 * 0.7 / 1.8);
 
   // Close to the truth mapped with the asset's own transform (Chamfer in metres on a 0.7 m object).
-  const TriangleMesh truth_asset = ToAssetFrame(truth, g);
+  const TriangleMesh truth_asset = g.ToAssetFrame(truth);
   const geometry::GeometryMetrics m = geometry::CompareMeshes(g.mesh, truth_asset, {});
   std::printf("generated ellipsoid: CD %.5f m, F %.3f, IoU %.3f\n", m.chamfer, m.fscore, m.volume_iou);
   EXPECT_LT(m.chamfer, 0.01);
@@ -173,7 +168,7 @@ TEST(ViewsFromImage, TurnsOneImageIntoRegisteredViewsThatGenerateAnAsset) {
   EXPECT_LT(worst_normal, 1e-5);
 
   const GeneratedMesh g = GenerateFromViews(views, SmallOptions());
-  const geometry::GeometryMetrics m = geometry::CompareMeshes(g.mesh, ToAssetFrame(truth, g), {});
+  const geometry::GeometryMetrics m = geometry::CompareMeshes(g.mesh, g.ToAssetFrame(truth), {});
   EXPECT_LT(m.chamfer, 0.01);
 
   // An RGBA image is its own mask: no segmentation call; an empty mask is "no object".

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <limits>
 
 #include <stb/stb_image.h>
 #include <stb/stb_image_write.h>
@@ -24,17 +25,24 @@ void AppendToString(void* context, void* data, int size) {
 
 }  // namespace
 
-ImageU8 ReadImage(const std::filesystem::path& path, int channels) {
-  const std::string bytes = ReadFileToString(path);
+ImageU8 DecodeImage(std::string_view bytes, const std::string& what, int channels) {
+  SD_CHECK(channels >= 0 && channels <= 4, << "channels " << channels);
+  // stb_image takes an int length; anything larger is not an image we can hold anyway.
+  if (bytes.size() > static_cast<size_t>(std::numeric_limits<int>::max()))
+    throw InputError(what, Msg() << "cannot decode image: " << bytes.size() << " bytes is too large");
   int w = 0, h = 0, n = 0;
   unsigned char* pixels = stbi_load_from_memory(reinterpret_cast<const stbi_uc*>(bytes.data()),
                                                 static_cast<int>(bytes.size()), &w, &h, &n, channels);
-  if (!pixels) throw InputError(path, std::string("cannot decode image: ") + stbi_failure_reason());
+  if (!pixels) throw InputError(what, std::string("cannot decode image: ") + stbi_failure_reason());
   const int nc = channels ? channels : n;
   ImageU8 img(w, h, nc);
   std::copy(pixels, pixels + static_cast<size_t>(w) * h * nc, img.data());
   stbi_image_free(pixels);
   return img;
+}
+
+ImageU8 ReadImage(const std::filesystem::path& path, int channels) {
+  return DecodeImage(ReadFileToString(path), path.string(), channels);
 }
 
 std::string EncodeImage(const ImageU8& image, const std::string& format, int jpeg_quality) {

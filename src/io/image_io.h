@@ -2,6 +2,7 @@
 // PNG and JPEG files <-> ImageU8 (sRGB). Format chosen by extension on write (.png, .jpg/.jpeg).
 #include <filesystem>
 #include <string>
+#include <string_view>
 
 #include "core/image.h"
 
@@ -10,6 +11,9 @@ namespace sd {
 // Reads PNG/JPEG (and anything stb_image decodes). `channels` 0 keeps the file's channel count, else forces
 // 1, 3 or 4. InputError names the file when it is missing or not a decodable image.
 ImageU8 ReadImage(const std::filesystem::path& path, int channels = 0);
+// Decodes an encoded image held in memory (e.g. a downloaded body). `what` names its origin (a URL, an archive
+// member) for the InputError thrown when the bytes are not a decodable image; `channels` as for ReadImage.
+ImageU8 DecodeImage(std::string_view bytes, const std::string& what, int channels = 0);
 // Writes atomically. JPEG quality 1..100 (95 keeps re-encoded dataset images visually lossless).
 void WriteImage(const std::filesystem::path& path, const ImageU8& image, int jpeg_quality = 95);
 // Encodes to memory ("png" or "jpg"), for reports that embed images.

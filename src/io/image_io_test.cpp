@@ -95,5 +95,35 @@ TEST(ImageIo, CorruptOrMissingFilesNameTheFile) {
   EXPECT_FALSE(fs::exists(tmp / "x.bmp"));
 }
 
+TEST(ImageIo, DecodesFromMemoryAndNamesTheSource) {
+  for (int c : {1, 3, 4}) {
+    const ImageU8 img = Pattern(19, 11, c);
+    const ImageU8 back = DecodeImage(EncodeImage(img, "png"), "mem.png");
+    EXPECT_EQ(back.width(), 19);
+    EXPECT_EQ(back.height(), 11);
+    EXPECT_EQ(back.channels(), c);
+    EXPECT_EQ(back.vector(), img.vector());
+  }
+  // Forcing 4 channels on a 3-channel image adds an opaque alpha and keeps the colour exactly.
+  const ImageU8 rgb = Pattern(5, 4, 3);
+  const ImageU8 rgba = DecodeImage(EncodeImage(rgb, "png"), "mem.png", 4);
+  ASSERT_EQ(rgba.channels(), 4);
+  for (int y = 0; y < 4; ++y)
+    for (int x = 0; x < 5; ++x) {
+      for (int k = 0; k < 3; ++k) EXPECT_EQ(rgba.at(x, y, k), rgb.at(x, y, k));
+      EXPECT_EQ(rgba.at(x, y, 3), 255);
+    }
+  const std::string url = "http://example.invalid/cat.png";
+  const std::string png = EncodeImage(Pattern(8, 8, 3), "png");
+  for (const std::string& bytes : {std::string("<html>not an image</html>"), std::string(), png.substr(0, 40)}) {
+    try {
+      DecodeImage(bytes, url);
+      FAIL() << bytes.size() << " bytes decoded";
+    } catch (const InputError& e) {
+      EXPECT_EQ(std::string(e.what()).rfind(url + ": cannot decode image", 0), 0u) << e.what();
+    }
+  }
+}
+
 }  // namespace
 }  // namespace sd

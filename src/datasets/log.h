@@ -13,6 +13,7 @@
 //  - Annotation boxes are Box3 in the ego frame with the geometric centre and (length, width, height).
 #include <filesystem>
 #include <limits>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -57,6 +58,7 @@ struct Annotation {
   Eigen::Vector2d velocity = Eigen::Vector2d::Constant(std::numeric_limits<double>::quiet_NaN());  // ego frame m/s
   int visibility = -1;            // dataset-specific level, -1 unknown (nuScenes 1..4; KITTI occluded 0..3)
   double truncation = -1;         // KITTI truncated 0..1, -1 unknown
+  std::map<std::string, Box2> box2d_by_camera;  // the dataset's own 2D box per camera channel, where it annotates one (KITTI label bbox for image_2; mmdet3d v1 cam_instances)
 };
 
 struct Frame {

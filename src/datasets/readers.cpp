@@ -565,6 +565,37 @@ Log ReadMmdet3dV1(const json& j, const fs::path& file, const OpenLogOptions& opt
         f.annotations.push_back(std::move(a));
       }
     }
+    if (d.Has("cam_instances") && d["cam_instances"].raw().is_object()) {
+      // cam_instances carry no index into `instances`: each is matched to the annotation whose centre, seen from
+      // that camera, is nearest to its camera-frame bbox_3d centre (the same box gives ~1e-6 m; neighbours are
+      // metres apart), and skipped when none lies within 1 m.
+      for (const auto& [channel, rec] : d["cam_instances"].raw().items()) {
+        const CameraSensor* cam = f.FindCamera(channel);
+        if (!cam) continue;
+        const Rigid3d T_cam_ego = cam->T_ego_cam.Inverse();
+        const JsonReader list = d["cam_instances"][channel];
+        std::map<size_t, double> matched_distance;
+        for (size_t k = 0; k < list.Size(); ++k) {
+          const JsonReader ci = list[k];
+          if (!ci.Has("bbox") || !ci.Has("bbox_3d")) continue;
+          const std::vector<double> b2 = Vec(ci["bbox"], 4);
+          const std::vector<double> b3 = Vec(ci["bbox_3d"], ci["bbox_3d"].Size());
+          if (b3.size() < 3) ci["bbox_3d"].Fail("expected at least 3 numbers");
+          const Eigen::Vector3d c(b3[0], b3[1], b3[2]);
+          size_t best = f.annotations.size();
+          double best_d = 1.0;
+          for (size_t a = 0; a < f.annotations.size(); ++a) {
+            const double dist = (T_cam_ego * f.annotations[a].box.center() - c).norm();
+            if (dist < best_d) best_d = dist, best = a;
+          }
+          if (best == f.annotations.size()) continue;
+          auto it = matched_distance.find(best);
+          if (it != matched_distance.end() && it->second <= best_d) continue;
+          matched_distance[best] = best_d;
+          f.annotations[best].box2d_by_camera[channel] = Box2{b2[0], b2[1], b2[2], b2[3]};
+        }
+      }
+    }
     log.frames.push_back(std::move(f));
   }
   return log;
@@ -731,6 +762,7 @@ Log ReadKitti(const fs::path& root, const OpenLogOptions& options) {
         a.box.size = Eigen::Vector3d(len, w, h);
         a.truncation = v[0];
         a.visibility = static_cast<int>(v[1]);
+        a.box2d_by_camera[cam.channel] = Box2{v[3], v[4], v[5], v[6]};
         f.annotations.push_back(std::move(a));
       }
     }

@@ -121,6 +121,40 @@ TEST(Mmdet3dV1, CamInstancesProjectThroughTEgoCam) {
   EXPECT_LT(worst_yaw, 2e-3);  // boxes tilt slightly with the ground; the yaw ignores that
 }
 
+// The info's cam_instances become Annotation::box2d_by_camera. Values read by hand from data_list[0]:
+// instances[0] (pedestrian) and instances[2] (car, cut by the image's right edge) in CAM_FRONT.
+TEST(Mmdet3dV1, CamInstancesBecomeAnnotatedBox2d) {
+  const Log log = ReadMmdet3dInfo(RepoData(kKf0Info));
+  const Frame& f = log.frames[0];
+  size_t boxes = 0;
+  for (const Annotation& a : f.annotations) boxes += a.box2d_by_camera.size();
+  EXPECT_EQ(boxes, 84u);  // 47 + 18 + 2 + 10 + 2 + 5 cam_instances, each matched to one annotation
+  const Annotation& ped = f.annotations[0];
+  ASSERT_EQ(ped.box2d_by_camera.count("CAM_FRONT"), 1u);
+  const Box2 b = ped.box2d_by_camera.at("CAM_FRONT");
+  EXPECT_NEAR(b.x1, 1206.5693751819117, 1e-9);
+  EXPECT_NEAR(b.y1, 477.86111828160216, 1e-9);
+  EXPECT_NEAR(b.x2, 1225.8893058022245, 1e-9);
+  EXPECT_NEAR(b.y2, 513.6450176828284, 1e-9);
+  const Annotation& car = f.annotations[2];
+  ASSERT_EQ(car.box2d_by_camera.count("CAM_FRONT"), 1u);
+  EXPECT_NEAR(car.box2d_by_camera.at("CAM_FRONT").x1, 1504.5998756594938, 1e-9);
+  EXPECT_NEAR(car.box2d_by_camera.at("CAM_FRONT").x2, 1600.0, 1e-9);
+  EXPECT_NEAR(car.box2d_by_camera.at("CAM_FRONT").y2, 523.157376459145, 1e-9);
+  // Every matched 2D box contains the projection of its annotation's centre (when that lies in the image).
+  for (const Annotation& a : f.annotations) {
+    for (const auto& [channel, box] : a.box2d_by_camera) {
+      const CameraSensor* cam = f.FindCamera(channel);
+      ASSERT_NE(cam, nullptr);
+      const auto uv = cam->intrinsics.Project(cam->T_ego_cam.Inverse() * a.box.center());
+      ASSERT_TRUE(uv) << channel;
+      if (cam->intrinsics.InImage(*uv)) {
+        EXPECT_TRUE(uv->x() >= box.x1 - 1 && uv->x() <= box.x2 + 1 && uv->y() >= box.y1 - 1 && uv->y() <= box.y2 + 1) << channel;
+      }
+    }
+  }
+}
+
 TEST(NuScenesTables, SubsetAgreesWithTheInfo) {
   const Log tables = OpenLog(RepoData(kKf0));
   EXPECT_EQ(tables.format, LogFormat::kNuScenesTables);
@@ -304,6 +338,18 @@ TEST(Kitti, RepoFramesBoxesHoldPointsAndProjectIntoLabels) {
   EXPECT_NEAR(ped.box.size.y(), 0.48, 1e-9);  // w
   EXPECT_NEAR(ped.box.size.z(), 1.89, 1e-9);  // h
   EXPECT_EQ(log.frames[1].annotations[2].visibility, 3);  // the Cyclist of 000001: occluded 3
+  // label_2 columns 4-7 (left top right bottom) -> the image_2 box; values read from the label files.
+  ASSERT_EQ(ped.box2d_by_camera.count("image_2"), 1u);
+  const Box2 pb = ped.box2d_by_camera.at("image_2");
+  EXPECT_DOUBLE_EQ(pb.x1, 712.40);
+  EXPECT_DOUBLE_EQ(pb.y1, 143.00);
+  EXPECT_DOUBLE_EQ(pb.x2, 810.73);
+  EXPECT_DOUBLE_EQ(pb.y2, 307.92);
+  const Box2 tb = log.frames[1].annotations[0].box2d_by_camera.at("image_2");  // 000001 Truck
+  EXPECT_DOUBLE_EQ(tb.x1, 599.41);
+  EXPECT_DOUBLE_EQ(tb.y1, 156.40);
+  EXPECT_DOUBLE_EQ(tb.x2, 629.75);
+  EXPECT_DOUBLE_EQ(tb.y2, 189.25);
 }
 
 TEST(Kitti, OpenPcdetFrames) {

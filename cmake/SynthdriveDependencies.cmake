@@ -11,6 +11,11 @@ find_package(PkgConfig REQUIRED)
 pkg_check_modules(STB REQUIRED IMPORTED_TARGET stb)
 find_package(CLI11 REQUIRED)
 find_package(Threads REQUIRED)
+# Asset mining: FAISS (Debian's static libfaiss, which links OpenMP and BLAS) searches the embedding index;
+# libcurl fetches URL-list images.
+find_package(OpenMP REQUIRED)
+find_package(faiss REQUIRED)
+find_package(CURL REQUIRED)
 # LibTorch runs the learned stages (src/models). Debian's libtorch-dev is CPU-only; a CUDA LibTorch found
 # through CMAKE_PREFIX_PATH builds the same code for the GPU.
 if(SYNTHDRIVE_WITH_TORCH)

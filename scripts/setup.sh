@@ -9,6 +9,7 @@ PACKAGES=(
   libeigen3-dev nlohmann-json3-dev libcli11-dev libtbb-dev libembree-dev
   libstb-dev libtinygltf-dev libtinyobjloader-dev
   libnanoflann-dev
+  libfaiss-dev libcurl4-openssl-dev
   libtorch-dev python3-torch python3-onnx
   libgtest-dev libgmock-dev libbenchmark-dev
 )

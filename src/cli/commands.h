@@ -22,6 +22,7 @@ Runner AddEvalCommand(CLI::App& app);
 Runner AddTextureCommand(CLI::App& app);
 Runner AddUpscaleCommand(CLI::App& app);
 Runner AddGenerateCommand(CLI::App& app);
+Runner AddMineCommand(CLI::App& app);
 
 // The repo's data/ directory: --data, $SYNTHDRIVE_DATA, <binary>/../../data, ./data (first that exists).
 std::string FindDataDir(const std::string& explicit_dir);

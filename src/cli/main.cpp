@@ -28,6 +28,8 @@ int main(int argc, char** argv) {
   };
   add("synth", "Insert assets into a driving log (camera, LiDAR, labels) and write a derivative dataset",
       sd::cli::AddSynthCommand);
+  add("mine", "Find object images for a prompt in driving logs, image folders and URL lists (index, query)",
+      sd::cli::AddMineCommand);
   add("asset", "Make and inspect asset folders (asset.json + mesh.glb + preview.png)", sd::cli::AddAssetCommand);
   add("views", "Render oracle normal maps and masks of a mesh at the Zero123++ rig (for refinement and evaluation)",
       sd::cli::AddViewsCommand);

@@ -1,0 +1,614 @@
+#include "mining/index.h"
+
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cctype>
+#include <chrono>
+#include <cstring>
+#include <fstream>
+#include <mutex>
+#include <sstream>
+
+#include <faiss/utils/distances.h>
+#include <nlohmann/json.hpp>
+
+#include "core/error.h"
+#include "core/log.h"
+#include "core/parallel.h"
+#include "datasets/readers.h"
+#include "io/files.h"
+#include "io/image_io.h"
+#include "io/json.h"
+#include "mining/descriptor.h"
+#include "models/clip.h"
+#include "models/resample.h"
+
+namespace sd::mining {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+constexpr const char* kIndexFormat = "synthdrive-mine-index/1";
+constexpr int kDefaultChunkSize = 16;
+
+double Seconds(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
+// --- Vector files: a 32-byte header ("SDVEC001", dim u32, reserved u32, count u64, reserved u64), then
+// count × dim little-endian float32. A plain layout rather than a serialised faiss::Index, because FAISS 1.7
+// cannot memory-map a flat index and its search kernels take raw row pointers anyway.
+constexpr char kVectorMagic[8] = {'S', 'D', 'V', 'E', 'C', '0', '0', '1'};
+constexpr size_t kVectorHeader = 32;
+
+void WriteVectors(const fs::path& path, int dim, const std::vector<float>& rows) {
+  SD_CHECK(dim > 0 && rows.size() % dim == 0, << dim << " " << rows.size());
+  std::string bytes(kVectorHeader + rows.size() * sizeof(float), '\0');
+  std::memcpy(bytes.data(), kVectorMagic, 8);
+  const uint32_t d = static_cast<uint32_t>(dim);
+  const uint64_t n = rows.size() / dim;
+  std::memcpy(bytes.data() + 8, &d, 4);
+  std::memcpy(bytes.data() + 16, &n, 8);
+  if (!rows.empty()) std::memcpy(bytes.data() + kVectorHeader, rows.data(), rows.size() * sizeof(float));
+  WriteFileAtomic(path, bytes);
+}
+
+class MappedVectors {
+ public:
+  MappedVectors(const fs::path& path, int expected_dim) {
+    fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd_ < 0) throw InputError(path, Msg() << "cannot open vector file: " << std::strerror(errno));
+    struct stat st {};
+    ::fstat(fd_, &st);
+    size_ = static_cast<size_t>(st.st_size);
+    if (size_ < kVectorHeader) Fail(path, "shorter than its header");
+    map_ = ::mmap(nullptr, size_, PROT_READ, MAP_SHARED, fd_, 0);
+    if (map_ == MAP_FAILED) {
+      map_ = nullptr;
+      Fail(path, std::string("cannot map: ") + std::strerror(errno));
+    }
+    const char* p = static_cast<const char*>(map_);
+    if (std::memcmp(p, kVectorMagic, 8) != 0) Fail(path, "not a SynthDrive vector file (bad magic)");
+    uint32_t d = 0;
+    std::memcpy(&d, p + 8, 4);
+    std::memcpy(&count_, p + 16, 8);
+    dim_ = static_cast<int>(d);
+    if (dim_ != expected_dim) Fail(path, Msg() << "vectors of dimension " << dim_ << ", the index says " << expected_dim);
+    if (size_ != kVectorHeader + count_ * dim_ * sizeof(float))
+      Fail(path, Msg() << "truncated: " << size_ << " bytes for " << count_ << " vectors of " << dim_);
+  }
+  ~MappedVectors() {
+    if (map_) ::munmap(map_, size_);
+    if (fd_ >= 0) ::close(fd_);
+  }
+  MappedVectors(const MappedVectors&) = delete;
+  MappedVectors& operator=(const MappedVectors&) = delete;
+
+  size_t count() const { return count_; }
+  const float* data() const {
+    return reinterpret_cast<const float*>(static_cast<const char*>(map_) + kVectorHeader);
+  }
+
+ private:
+  [[noreturn]] void Fail(const fs::path& path, const std::string& what) {
+    if (map_) ::munmap(map_, size_);
+    if (fd_ >= 0) ::close(fd_);
+    map_ = nullptr;
+    fd_ = -1;
+    throw InputError(path, what);
+  }
+  int fd_ = -1;
+  void* map_ = nullptr;
+  size_t size_ = 0;
+  uint64_t count_ = 0;
+  int dim_ = 0;
+};
+
+const char* VectorFileName(VectorKind kind) {
+  return kind == VectorKind::kClip ? "vectors-clip.f32" : "vectors-descriptor.f32";
+}
+
+// --- index.json
+
+struct IndexHeader {
+  int descriptor_version = kDescriptorVersion;
+  int descriptor_dim = 0;
+  std::string clip_model;
+  int clip_dim = 0;
+  int chunk_size = kDefaultChunkSize;
+};
+
+IndexHeader ReadHeader(const fs::path& file) {
+  const json j = ReadJsonFile(file);
+  const JsonReader r(j, file);
+  if (r["format"].String() != kIndexFormat)
+    r["format"].Fail(Msg() << "expected \"" << kIndexFormat << "\" (an index written by another version?)");
+  IndexHeader h;
+  h.descriptor_version = static_cast<int>(r["descriptor"]["version"].Integer());
+  h.descriptor_dim = static_cast<int>(r["descriptor"]["dim"].Integer());
+  if (r.Has("clip")) {
+    h.clip_model = r["clip"]["model"].String();
+    h.clip_dim = static_cast<int>(r["clip"]["dim"].Integer());
+  }
+  h.chunk_size = static_cast<int>(r["chunk_size"].Integer());
+  if (h.chunk_size < 1) r["chunk_size"].Fail("must be at least 1");
+  return h;
+}
+
+json HeaderJson(const IndexHeader& h) {
+  json j = {{"format", kIndexFormat},
+            {"descriptor", {{"version", h.descriptor_version}, {"dim", h.descriptor_dim}}},
+            {"chunk_size", h.chunk_size}};
+  j["clip"] = h.clip_model.empty() ? json(nullptr) : json{{"model", h.clip_model}, {"dim", h.clip_dim}};
+  return j;
+}
+
+// Creates index.json or checks that this run's vectors are comparable with those already stored. Returns the
+// header in force (an existing index keeps its chunk size: chunk names depend on it).
+IndexHeader EnsureIndexHeader(const fs::path& dir, const IndexBuildOptions& options) {
+  IndexHeader wanted;
+  wanted.descriptor_dim = DescriptorDim();
+  if (options.clip) {
+    wanted.clip_model = options.clip->Describe();
+    wanted.clip_dim = options.clip->embed_dim();
+  }
+  if (options.chunk_size > 0) wanted.chunk_size = options.chunk_size;
+  const fs::path file = dir / "index.json";
+  if (!fs::exists(file)) {
+    if (fs::exists(dir) && !fs::is_directory(dir)) throw InputError(dir, "exists and is not an index folder");
+    if (fs::exists(dir) && !fs::is_empty(dir))
+      throw InputError(dir, "exists, is not empty and holds no index.json: refusing to write an index into it");
+    fs::create_directories(dir / "shards");
+    WriteJsonFile(file, HeaderJson(wanted));
+    return wanted;
+  }
+  IndexHeader have = ReadHeader(file);
+  if (have.descriptor_version != wanted.descriptor_version || have.descriptor_dim != wanted.descriptor_dim)
+    throw InputError(file, Msg() << "built with image descriptor v" << have.descriptor_version << " ("
+                                 << have.descriptor_dim << " floats); this build writes v" << wanted.descriptor_version
+                                 << ": rebuild the index in a new folder");
+  if (have.clip_model != wanted.clip_model)
+    throw InputError(file, Msg() << "built with CLIP model '" << (have.clip_model.empty() ? "none" : have.clip_model)
+                                 << "', this run has '" << (wanted.clip_model.empty() ? "none" : wanted.clip_model)
+                                 << "': embeddings of different models cannot be searched together (use the same "
+                                    "--clip, or another --out)");
+  if (options.chunk_size > 0 && options.chunk_size != have.chunk_size)
+    SD_LOG(Warn, file.string() << ": keeps its chunk size " << have.chunk_size << " (asked " << options.chunk_size
+                               << "): chunk names depend on it");
+  return have;
+}
+
+// --- Planning: the sources cut into chunks, the same list in every shard process.
+
+struct SourceState {
+  IndexSource source;
+  std::string key;                  // kind|absolute path: names the chunks and the item ids
+  std::optional<Log> log;           // kLog
+  std::vector<fs::path> images;     // kFolder, sorted
+  std::vector<std::string> urls;    // kUrl
+  size_t size() const { return log ? log->frames.size() : !images.empty() ? images.size() : urls.size(); }
+};
+
+struct Chunk {
+  size_t source = 0;
+  size_t begin = 0, end = 0;
+  std::string name;
+};
+
+bool IsImageFile(const fs::path& p) {
+  std::string ext = p.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+  return ext == ".png" || ext == ".jpg" || ext == ".jpeg";
+}
+
+SourceState OpenSource(const IndexSource& source) {
+  SourceState s;
+  s.source = source;
+  std::error_code ec;
+  const fs::path abs = fs::weakly_canonical(fs::absolute(source.path), ec);
+  s.key = std::string(ToString(source.kind)) + "|" + (ec ? source.path.string() : abs.string());
+  switch (source.kind) {
+    case SourceKind::kLog:
+      s.log = OpenLog(source.path);
+      break;
+    case SourceKind::kFolder: {
+      if (!fs::is_directory(source.path)) throw InputError(source.path, "image folder not found");
+      for (const auto& e : fs::recursive_directory_iterator(source.path, fs::directory_options::skip_permission_denied))
+        if (e.is_regular_file() && IsImageFile(e.path())) s.images.push_back(e.path());
+      std::sort(s.images.begin(), s.images.end());
+      if (s.images.empty()) SD_LOG(Warn, source.path.string() << ": no .png / .jpg images");
+      break;
+    }
+    case SourceKind::kUrl:
+      s.urls = ReadUrlList(source.path);
+      break;
+  }
+  return s;
+}
+
+std::vector<Chunk> PlanChunks(const std::vector<SourceState>& sources, int chunk_size) {
+  std::vector<Chunk> chunks;
+  for (size_t s = 0; s < sources.size(); ++s) {
+    const std::string stem = std::string(ToString(sources[s].source.kind)) + "-" + StableId(sources[s].key);
+    for (size_t b = 0; b < sources[s].size(); b += chunk_size) {
+      char suffix[32];
+      std::snprintf(suffix, sizeof suffix, "-%06zu", b);
+      chunks.push_back({s, b, std::min(sources[s].size(), b + chunk_size), stem + suffix});
+    }
+  }
+  return chunks;
+}
+
+// Temporary folders a killed run of this chunk left behind ("<name>.tmp-<pid>-<n>"). Only the shard that owns
+// a chunk ever writes it, so whatever is there is stale.
+void RemoveStaleStaging(const fs::path& shards, const std::string& name) {
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(shards, ec)) {
+    const std::string n = e.path().filename().string();
+    if (n.rfind(name + ".tmp-", 0) == 0) fs::remove_all(e.path(), ec);
+  }
+}
+
+ImageU8 DownscaleToFit(const ImageU8& image, int max_px, double& scale) {
+  scale = 1;
+  const int longer = std::max(image.width(), image.height());
+  if (max_px <= 0 || longer <= max_px) return image;
+  scale = static_cast<double>(max_px) / longer;
+  const int w = std::max(1, static_cast<int>(std::lround(image.width() * scale)));
+  const int h = std::max(1, static_cast<int>(std::lround(image.height() * scale)));
+  ImageF f(image.width(), image.height(), image.channels());
+  for (size_t i = 0; i < image.size(); ++i) f.data()[i] = image.data()[i];
+  const ImageF r = models::ResizeLinear(f, w, h);
+  ImageU8 out(w, h, image.channels());
+  for (size_t i = 0; i < out.size(); ++i)
+    out.data()[i] = static_cast<uint8_t>(std::clamp(std::lround(r.data()[i]), 0l, 255l));
+  return out;
+}
+
+// A folder or URL image is one item: the whole picture, its alpha channel (if any) as the mask.
+ObjectCrop WholeImageCrop(const ImageU8& decoded, SourceKind kind, const std::string& origin, int max_px) {
+  ObjectCrop c;
+  MinedItem& item = c.item;
+  item.kind = kind;
+  item.origin = origin;
+  const int W = decoded.width(), H = decoded.height();
+  item.crop_rect = Box2{0, 0, static_cast<double>(W), static_cast<double>(H)};
+  item.box2d = item.crop_rect;
+  double scale = 1;
+  const ImageU8 small = DownscaleToFit(decoded, max_px, scale);
+  item.crop_scale = scale;
+  const int w = small.width(), h = small.height(), ch = small.channels();
+  c.image = ImageU8(w, h, 3);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      for (int k = 0; k < 3; ++k) c.image.at(x, y, k) = small.at(x, y, ch >= 3 ? k : 0);
+  if (ch == 4 || ch == 2) {
+    c.mask = ImageU8(w, h, 1);
+    int x1 = w, y1 = h, x2 = -1, y2 = -1;
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        if (small.at(x, y, ch - 1) > 127) {
+          c.mask.at(x, y) = 255;
+          x1 = std::min(x1, x), y1 = std::min(y1, y), x2 = std::max(x2, x), y2 = std::max(y2, y);
+        }
+    if (x2 < 0) {
+      c.mask = ImageU8();  // fully transparent: no usable mask, keep the picture
+    } else {
+      item.mask_source = "alpha";
+      item.box2d = Box2{x1 / scale, y1 / scale, (x2 + 1) / scale, (y2 + 1) / scale};
+    }
+  }
+  item.crop_width = w;
+  item.crop_height = h;
+  return c;
+}
+
+struct ChunkOutput {
+  std::vector<MinedItem> items;
+  std::vector<float> descriptors, clip;
+  json failures = json::array();
+  double crop_seconds = 0, embed_seconds = 0;
+};
+
+void AddFailure(ChunkOutput& out, std::mutex& m, const std::string& origin, const std::string& error) {
+  std::lock_guard<std::mutex> lock(m);
+  out.failures.push_back({{"origin", origin}, {"error", error}});
+  // InputError messages already start with the file they name.
+  if (error.rfind(origin, 0) == 0) SD_LOG(Warn, error);
+  else SD_LOG(Warn, origin << ": " << error);
+}
+
+std::vector<ObjectCrop> CropLogChunk(const SourceState& s, const Chunk& chunk, const IndexBuildOptions& options,
+                                     ChunkOutput& out) {
+  std::vector<ObjectCrop> crops;
+  std::mutex m;
+  for (size_t f = chunk.begin; f < chunk.end; ++f) {
+    const Frame& frame = s.log->frames[f];
+    std::vector<Eigen::Vector3d> sweep;
+    try {
+      sweep = SweepInEgo(frame);
+    } catch (const InputError& e) {
+      AddFailure(out, m, frame.lidar ? frame.lidar->path.string() : frame.token,
+                 std::string(e.what()) + " (masks from boxes only)");
+    }
+    try {
+      for (ObjectCrop& c : CropFrameObjects(frame, sweep, options.crops)) {
+        c.item.log_name = s.log->name;
+        c.item.id = StableId(s.key + "|" + frame.token + "|" + c.item.camera + "|" +
+                             (c.item.annotation_token.empty() ? std::to_string(crops.size()) : c.item.annotation_token));
+        crops.push_back(std::move(c));
+      }
+    } catch (const InputError& e) {
+      AddFailure(out, m, frame.token, e.what());
+    }
+  }
+  return crops;
+}
+
+std::vector<ObjectCrop> CropImageChunk(const SourceState& s, const Chunk& chunk, const IndexBuildOptions& options,
+                                       ChunkOutput& out) {
+  const size_t n = chunk.end - chunk.begin;
+  std::vector<std::optional<ObjectCrop>> slots(n);
+  std::mutex m;
+  if (s.source.kind == SourceKind::kFolder) {
+    ParallelFor(0, n, [&](size_t i) {
+      const fs::path& file = s.images[chunk.begin + i];
+      try {
+        slots[i] = WholeImageCrop(ReadImage(file), SourceKind::kFolder, fs::absolute(file).string(),
+                                  options.max_image_px);
+      } catch (const InputError& e) {
+        AddFailure(out, m, file.string(), e.what());
+      }
+    });
+  } else {
+    const std::vector<std::string> urls(s.urls.begin() + chunk.begin, s.urls.begin() + chunk.end);
+    std::vector<FetchedImage> fetched = FetchImages(urls, options.fetch, options.fetch_concurrency);
+    for (size_t i = 0; i < n; ++i) {
+      if (!fetched[i].error.empty()) {
+        AddFailure(out, m, urls[i], fetched[i].error);
+        continue;
+      }
+      slots[i] = WholeImageCrop(fetched[i].image, SourceKind::kUrl, urls[i], options.max_image_px);
+    }
+  }
+  std::vector<ObjectCrop> crops;
+  for (size_t i = 0; i < n; ++i)
+    if (slots[i]) {
+      slots[i]->item.id = StableId(s.key + "|" + slots[i]->item.origin);
+      crops.push_back(std::move(*slots[i]));
+    }
+  return crops;
+}
+
+// Crops, quality figures, files and vectors of one chunk, written into `dir` (the staging folder).
+ChunkOutput BuildChunk(const SourceState& s, const Chunk& chunk, const IndexBuildOptions& options, const fs::path& dir) {
+  ChunkOutput out;
+  auto t0 = std::chrono::steady_clock::now();
+  std::vector<ObjectCrop> crops = s.source.kind == SourceKind::kLog ? CropLogChunk(s, chunk, options, out)
+                                                                    : CropImageChunk(s, chunk, options, out);
+  const int D = DescriptorDim();
+  out.descriptors.assign(crops.size() * D, 0.f);
+  fs::create_directories(dir / "crops");
+  fs::create_directories(dir / "masks");
+  ParallelFor(0, crops.size(), [&](size_t i) {
+    ObjectCrop& c = crops[i];
+    MinedItem& item = c.item;
+    item.source = s.source.path.string();
+    // A mask with no object pixels (a sliver lost to downscaling) describes nothing: use the whole crop.
+    const bool has_mask = !c.mask.empty() && std::any_of(c.mask.vector().begin(), c.mask.vector().end(),
+                                                         [](uint8_t v) { return v > 127; });
+    if (!has_mask) {
+      c.mask = ImageU8();
+      item.mask_source.clear();
+    }
+    const ImageU8* mask = has_mask ? &c.mask : nullptr;
+    item.sharpness = Sharpness(c.image, mask);
+    item.phash = PerceptualHash(c.image);
+    const std::vector<float> d = ImageDescriptor(c.image, mask);
+    std::copy(d.begin(), d.end(), out.descriptors.begin() + i * D);
+    item.crop_file = "crops/" + item.id + ".jpg";
+    WriteImage(dir / item.crop_file, c.image, options.jpeg_quality);
+    if (mask) {
+      item.mask_file = "masks/" + item.id + ".png";
+      WriteImage(dir / item.mask_file, c.mask);
+    }
+  });
+  out.crop_seconds = Seconds(t0);
+  if (options.clip && !crops.empty()) {
+    t0 = std::chrono::steady_clock::now();
+    std::vector<ImageU8> images;
+    images.reserve(crops.size());
+    for (const ObjectCrop& c : crops) images.push_back(c.image);
+    for (const auto& e : options.clip->EmbedImages(images)) out.clip.insert(out.clip.end(), e.begin(), e.end());
+    out.embed_seconds = Seconds(t0);
+  }
+  for (ObjectCrop& c : crops) out.items.push_back(std::move(c.item));
+  return out;
+}
+
+void WriteChunk(const SourceState& s, const Chunk& chunk, const IndexHeader& header, const ChunkOutput& out,
+                const fs::path& dir) {
+  std::string lines;
+  for (const MinedItem& item : out.items) lines += ToJson(item).dump() + "\n";
+  WriteFileAtomic(dir / "items.jsonl", lines);
+  WriteVectors(dir / VectorFileName(VectorKind::kDescriptor), header.descriptor_dim, out.descriptors);
+  if (header.clip_dim > 0) WriteVectors(dir / VectorFileName(VectorKind::kClip), header.clip_dim, out.clip);
+  WriteJsonFile(dir / "chunk.json", {{"source", s.source.path.string()},
+                                     {"kind", ToString(s.source.kind)},
+                                     {"begin", chunk.begin},
+                                     {"end", chunk.end},
+                                     {"items", out.items.size()},
+                                     {"failures", out.failures},
+                                     {"crop_seconds", out.crop_seconds},
+                                     {"embed_seconds", out.embed_seconds}});
+}
+
+}  // namespace
+
+const char* ToString(VectorKind kind) { return kind == VectorKind::kClip ? "clip" : "descriptor"; }
+
+IndexBuildReport BuildIndex(const fs::path& index_dir, const IndexBuildOptions& options) {
+  const auto t0 = std::chrono::steady_clock::now();
+  if (options.sources.empty()) throw InputError({}, "mine index: no sources (give --log, --images or --urls)");
+  if (options.clip && options.clip->embed_dim() <= 0) throw InputError({}, "CLIP model has no embedding size");
+  // Open every source before writing anything: a typo in the last --log must not leave a half-made index.
+  std::vector<SourceState> sources;
+  for (const IndexSource& src : options.sources) sources.push_back(OpenSource(src));
+  const IndexHeader header = EnsureIndexHeader(index_dir, options);
+  const std::vector<Chunk> chunks = PlanChunks(sources, header.chunk_size);
+
+  IndexBuildReport report;
+  report.chunks_total = chunks.size();
+  std::vector<const Chunk*> todo;
+  for (size_t i = 0; i < chunks.size(); ++i) {
+    if (!options.shard.Owns(i)) continue;
+    ++report.chunks_owned;
+    if (fs::exists(index_dir / "shards" / chunks[i].name / "chunk.json"))
+      ++report.chunks_skipped;
+    else
+      todo.push_back(&chunks[i]);
+  }
+  SD_LOG(Info, "mine index: " << chunks.size() << " chunks from " << sources.size() << " sources; shard "
+                              << options.shard.ToString() << " owns " << report.chunks_owned << ", "
+                              << report.chunks_skipped << " already done; vectors: descriptor"
+                              << (options.clip ? " + CLIP" : " only (no CLIP model: label and example search)"));
+  std::unique_ptr<Progress> progress;
+  if (options.progress && !todo.empty()) progress = std::make_unique<Progress>("mine index", todo.size());
+  const fs::path shards = index_dir / "shards";
+  for (const Chunk* chunk : todo) {
+    RemoveStaleStaging(shards, chunk->name);
+    StagingDirectory staging(shards / chunk->name, /*overwrite=*/false);
+    const SourceState& s = sources[chunk->source];
+    const ChunkOutput out = BuildChunk(s, *chunk, options, staging.path());
+    WriteChunk(s, *chunk, header, out, staging.path());
+    staging.Commit();
+    ++report.chunks_built;
+    report.items += out.items.size();
+    report.failures += out.failures.size();
+    report.crop_seconds += out.crop_seconds;
+    report.embed_seconds += out.embed_seconds;
+    if (progress) progress->Advance();
+  }
+  if (progress) progress->Finish();
+  report.seconds = Seconds(t0);
+  return report;
+}
+
+// --- MiningIndex
+
+struct MiningIndex::Shard {
+  fs::path dir;
+  size_t first_row = 0, rows = 0;
+  std::unique_ptr<MappedVectors> descriptor, clip;
+};
+
+MiningIndex::MiningIndex() = default;
+MiningIndex::MiningIndex(MiningIndex&&) noexcept = default;
+MiningIndex& MiningIndex::operator=(MiningIndex&&) noexcept = default;
+MiningIndex::~MiningIndex() = default;
+
+size_t MiningIndex::shard_count() const { return shards_.size(); }
+fs::path MiningIndex::ItemDir(size_t row) const { return shards_[item_shard_[row]]->dir; }
+
+int MiningIndex::dim(VectorKind kind) const { return kind == VectorKind::kClip ? clip_dim_ : descriptor_dim_; }
+
+const float* MiningIndex::vector(VectorKind kind, size_t row) const {
+  const Shard& s = *shards_[item_shard_[row]];
+  const MappedVectors* v = kind == VectorKind::kClip ? s.clip.get() : s.descriptor.get();
+  SD_CHECK(v != nullptr, << "no " << ToString(kind) << " vectors in this index");
+  return v->data() + (row - s.first_row) * dim(kind);
+}
+
+MiningIndex MiningIndex::Open(const fs::path& index_dir) {
+  const fs::path file = index_dir / "index.json";
+  if (!fs::exists(file)) throw InputError(index_dir, "not a mining index (no index.json; build one with `mine index`)");
+  const IndexHeader header = ReadHeader(file);
+  if (header.descriptor_version != kDescriptorVersion || header.descriptor_dim != DescriptorDim())
+    throw InputError(file, Msg() << "built with image descriptor v" << header.descriptor_version
+                                 << "; this build reads v" << kDescriptorVersion << ": rebuild the index");
+  MiningIndex index;
+  index.dir_ = index_dir;
+  index.clip_model_ = header.clip_model;
+  index.clip_dim_ = header.clip_dim;
+  index.descriptor_dim_ = header.descriptor_dim;
+
+  std::vector<fs::path> dirs;
+  if (fs::is_directory(index_dir / "shards"))
+    for (const auto& e : fs::directory_iterator(index_dir / "shards")) {
+      const std::string name = e.path().filename().string();
+      // Staging folders of running or killed builds are not part of the index until renamed.
+      if (e.is_directory() && name.find(".tmp-") == std::string::npos && fs::exists(e.path() / "chunk.json"))
+        dirs.push_back(e.path());
+    }
+  std::sort(dirs.begin(), dirs.end());
+  for (const fs::path& dir : dirs) {
+    auto shard = std::make_unique<Shard>();
+    shard->dir = dir;
+    shard->first_row = index.items_.size();
+    const fs::path items_file = dir / "items.jsonl";
+    std::istringstream lines(ReadFileToString(items_file));
+    std::string line;
+    for (int n = 1; std::getline(lines, line); ++n) {
+      if (line.empty()) continue;
+      const std::string where = items_file.string() + ":" + std::to_string(n);
+      json j;
+      try {
+        j = json::parse(line);
+      } catch (const json::parse_error& e) {
+        throw InputError(where, Msg() << "not JSON (" << e.what() << ")");
+      }
+      index.items_.push_back(ItemFromJson(j, where));
+      index.item_shard_.push_back(index.shards_.size());
+    }
+    shard->rows = index.items_.size() - shard->first_row;
+    shard->descriptor = std::make_unique<MappedVectors>(dir / VectorFileName(VectorKind::kDescriptor), header.descriptor_dim);
+    if (header.clip_dim > 0)
+      shard->clip = std::make_unique<MappedVectors>(dir / VectorFileName(VectorKind::kClip), header.clip_dim);
+    for (const MappedVectors* v : {shard->descriptor.get(), shard->clip.get()})
+      if (v && v->count() != shard->rows)
+        throw InputError(dir, Msg() << "holds " << shard->rows << " items but " << v->count()
+                                    << " vectors: the shard is corrupt (delete it and run `mine index` again)");
+    index.shards_.push_back(std::move(shard));
+  }
+  return index;
+}
+
+std::vector<std::vector<SearchHit>> MiningIndex::Search(VectorKind kind, const float* queries, size_t nq,
+                                                        size_t k) const {
+  if (kind == VectorKind::kClip && !has_clip())
+    throw InputError(dir_, "has no CLIP embeddings (built without a CLIP model)");
+  const size_t d = static_cast<size_t>(dim(kind));
+  std::vector<std::vector<SearchHit>> hits(nq);
+  if (k == 0) return hits;
+  std::vector<float> scores;
+  std::vector<int64_t> labels;
+  for (const auto& shard : shards_) {
+    const MappedVectors* v = kind == VectorKind::kClip ? shard->clip.get() : shard->descriptor.get();
+    if (!v || v->count() == 0) continue;
+    const size_t kk = std::min(k, v->count());
+    scores.assign(nq * kk, 0.f);
+    labels.assign(nq * kk, -1);
+    faiss::knn_inner_product(queries, v->data(), d, nq, v->count(), kk, scores.data(), labels.data());
+    for (size_t q = 0; q < nq; ++q)
+      for (size_t j = 0; j < kk; ++j)
+        if (labels[q * kk + j] >= 0)
+          hits[q].push_back({shard->first_row + static_cast<size_t>(labels[q * kk + j]), scores[q * kk + j]});
+  }
+  for (auto& h : hits) {
+    // Ties broken by row so results do not depend on shard order.
+    std::sort(h.begin(), h.end(), [](const SearchHit& a, const SearchHit& b) {
+      return a.score != b.score ? a.score > b.score : a.row < b.row;
+    });
+    if (h.size() > k) h.resize(k);
+  }
+  return hits;
+}
+
+}  // namespace sd::mining

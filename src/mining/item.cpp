@@ -1,0 +1,178 @@
+#include "mining/item.h"
+
+#include <algorithm>
+#include <cinttypes>
+#include <cstdio>
+
+#include <nlohmann/json.hpp>
+
+#include "core/error.h"
+#include "io/json.h"
+
+namespace sd::mining {
+
+using nlohmann::json;
+
+const char* ToString(SourceKind kind) {
+  switch (kind) {
+    case SourceKind::kLog: return "log";
+    case SourceKind::kFolder: return "folder";
+    case SourceKind::kUrl: return "url";
+  }
+  return "?";
+}
+
+SourceKind SourceKindFromString(const std::string& s) {
+  if (s == "log") return SourceKind::kLog;
+  if (s == "folder") return SourceKind::kFolder;
+  if (s == "url") return SourceKind::kUrl;
+  throw InputError({}, Msg() << "unknown source kind '" << s << "' (expected log, folder or url)");
+}
+
+double ObjectSizePx(const MinedItem& item) {
+  return std::max(0.0, std::min(item.box2d.x2 - item.box2d.x1, item.box2d.y2 - item.box2d.y1));
+}
+
+std::string StableId(const std::string& key) {
+  uint64_t h = 1469598103934665603ull;
+  for (unsigned char c : key) {
+    h ^= c;
+    h *= 1099511628211ull;
+  }
+  char buf[17];
+  std::snprintf(buf, sizeof buf, "%016" PRIx64, h);
+  return buf;
+}
+
+namespace {
+
+json BoxJson(const Box2& b) { return json::array({b.x1, b.y1, b.x2, b.y2}); }
+
+Box2 ReadBox2(const JsonReader& r) {
+  if (r.Size() != 4) r.Fail("expected [x1, y1, x2, y2]");
+  return Box2{r[0].Number(), r[1].Number(), r[2].Number(), r[3].Number()};
+}
+
+json BoxJson(const Box3& b) {
+  const Eigen::Quaterniond& q = b.T_frame_box.rotation;
+  return {{"center", {b.center().x(), b.center().y(), b.center().z()}},
+          {"size", {b.size.x(), b.size.y(), b.size.z()}},
+          {"rotation_wxyz", {q.w(), q.x(), q.y(), q.z()}}};
+}
+
+Box3 ReadBox3(const JsonReader& b) {
+  const JsonReader c = b["center"], s = b["size"], q = b["rotation_wxyz"];
+  if (c.Size() != 3 || s.Size() != 3 || q.Size() != 4) b.Fail("expected center[3], size[3], rotation_wxyz[4]");
+  Box3 box;
+  box.T_frame_box = Rigid3d::FromWxyz(q[0].Number(), q[1].Number(), q[2].Number(), q[3].Number(),
+                                      {c[0].Number(), c[1].Number(), c[2].Number()});
+  box.size = {s[0].Number(), s[1].Number(), s[2].Number()};
+  if (!(box.size.minCoeff() > 0)) s.Fail("box sizes must be positive");
+  return box;
+}
+
+// A 64-bit hash as 16 hex digits: JSON numbers are doubles in most readers and would lose bits.
+std::string HashHex(uint64_t h) {
+  char buf[17];
+  std::snprintf(buf, sizeof buf, "%016" PRIx64, h);
+  return buf;
+}
+
+uint64_t ReadHashHex(const JsonReader& r) {
+  const std::string s = r.String();
+  if (s.size() != 16 || s.find_first_not_of("0123456789abcdef") != std::string::npos)
+    r.Fail("expected 16 lowercase hex digits");
+  return std::stoull(s, nullptr, 16);
+}
+
+}  // namespace
+
+json ToJson(const MinedItem& item) {
+  json j;
+  j["id"] = item.id;
+  j["kind"] = ToString(item.kind);
+  j["source"] = item.source;
+  j["origin"] = item.origin;
+  j["category"] = item.category;
+  if (item.kind == SourceKind::kLog) {
+    j["dataset_category"] = item.dataset_category;
+    j["log_name"] = item.log_name;
+    j["frame"] = item.frame_token;
+    j["camera"] = item.camera;
+    j["annotation"] = item.annotation_token;
+    j["instance"] = item.instance_token;
+    j["visibility_level"] = item.visibility_level;
+    j["lidar_points"] = item.lidar_points;
+  }
+  if (item.box_ego) j["box_ego"] = BoxJson(*item.box_ego);
+  if (item.box_camera) j["box_camera"] = BoxJson(*item.box_camera);
+  if (item.camera_intrinsics) {
+    const PinholeCamera& c = *item.camera_intrinsics;
+    j["intrinsics"] = {{"width", c.width}, {"height", c.height}, {"fx", c.fx}, {"fy", c.fy}, {"cx", c.cx},
+                       {"cy", c.cy}};
+  }
+  if (item.annotated_box2d) j["annotated_box2d"] = BoxJson(*item.annotated_box2d);
+  j["box2d"] = BoxJson(item.box2d);
+  j["crop_rect"] = BoxJson(item.crop_rect);
+  j["crop_scale"] = item.crop_scale;
+  j["crop_size"] = {item.crop_width, item.crop_height};
+  j["truncation"] = item.truncation;
+  j["occlusion"] = item.occlusion;
+  j["sharpness"] = item.sharpness;
+  j["phash"] = HashHex(item.phash);
+  j["mask_source"] = item.mask_source;
+  j["crop_file"] = item.crop_file;
+  j["mask_file"] = item.mask_file;
+  return j;
+}
+
+MinedItem ItemFromJson(const json& j, const std::string& where) {
+  const JsonReader r(j, where);
+  MinedItem item;
+  item.id = r["id"].String();
+  item.kind = SourceKindFromString(r["kind"].String());
+  item.source = r["source"].String();
+  item.origin = r["origin"].String();
+  item.category = r.StringOr("category", "");
+  if (item.kind == SourceKind::kLog) {
+    item.dataset_category = r.StringOr("dataset_category", "");
+    item.log_name = r.StringOr("log_name", "");
+    item.frame_token = r["frame"].String();
+    item.camera = r["camera"].String();
+    item.annotation_token = r.StringOr("annotation", "");
+    item.instance_token = r.StringOr("instance", "");
+    item.visibility_level = static_cast<int>(r.NumberOr("visibility_level", -1));
+    item.lidar_points = static_cast<int>(r.NumberOr("lidar_points", -1));
+  }
+  if (r.Has("box_ego")) item.box_ego = ReadBox3(r["box_ego"]);
+  if (r.Has("box_camera")) item.box_camera = ReadBox3(r["box_camera"]);
+  if (r.Has("intrinsics")) {
+    const JsonReader k = r["intrinsics"];
+    PinholeCamera cam;
+    cam.width = static_cast<int>(k["width"].Integer());
+    cam.height = static_cast<int>(k["height"].Integer());
+    cam.fx = k["fx"].Number();
+    cam.fy = k["fy"].Number();
+    cam.cx = k["cx"].Number();
+    cam.cy = k["cy"].Number();
+    item.camera_intrinsics = cam;
+  }
+  if (r.Has("annotated_box2d")) item.annotated_box2d = ReadBox2(r["annotated_box2d"]);
+  item.box2d = ReadBox2(r["box2d"]);
+  item.crop_rect = ReadBox2(r["crop_rect"]);
+  item.crop_scale = r.NumberOr("crop_scale", 1);
+  const JsonReader size = r["crop_size"];
+  if (size.Size() != 2) size.Fail("expected [width, height]");
+  item.crop_width = static_cast<int>(size[0].Integer());
+  item.crop_height = static_cast<int>(size[1].Integer());
+  item.truncation = r.NumberOr("truncation", -1);
+  item.occlusion = r.NumberOr("occlusion", -1);
+  item.sharpness = r.NumberOr("sharpness", -1);
+  item.phash = r.Has("phash") ? ReadHashHex(r["phash"]) : 0;
+  item.mask_source = r.StringOr("mask_source", "");
+  item.crop_file = r["crop_file"].String();
+  item.mask_file = r.StringOr("mask_file", "");
+  return item;
+}
+
+}  // namespace sd::mining

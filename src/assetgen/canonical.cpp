@@ -651,23 +651,34 @@ FrameEstimate EstimateCanonicalFrame(const TriangleMesh& mesh) { return Estimate
 CanonicalizeResult Canonicalize(const TriangleMesh& mesh, const CanonicalizeOptions& options) {
   if (mesh.positions.empty() || mesh.faces.empty()) throw InputError("", "mesh has no triangles");
   CanonicalizeResult r;
-  const bool up_auto = options.up == "auto", front_auto = options.front == "auto";
-  if (!up_auto && !front_auto) {
+  const bool up_auto = options.up == "auto", front_auto = !options.front_direction && options.front == "auto";
+  if (!up_auto && !front_auto && !options.front_direction) {
     r.rotation = AxesToCanonical(options.up, options.front);
+  } else if (!up_auto && options.front_direction) {
+    // Up named, front a free direction: no estimation needed.
+    const Eigen::Vector3d u = ParseAxis(options.up), f = *options.front_direction;
+    const Eigen::Vector3d h = f - f.dot(u) * u;
+    if (!(h.norm() > 0.5 * f.norm()) || !h.allFinite())
+      throw InputError("", "the front direction is within 30 degrees of the up axis " + options.up);
+    r.rotation.row(0) = h.normalized().transpose();
+    r.rotation.row(1) = u.cross(h.normalized()).transpose();
+    r.rotation.row(2) = u.transpose();
   } else {
     const std::optional<Eigen::Vector3d> named_up =
         up_auto ? std::nullopt : std::optional<Eigen::Vector3d>(ParseAxis(options.up));
     FrameEstimate est = EstimateFrame(mesh, named_up);
     if (!front_auto) {
       // Up estimated, front named: the named axis, made horizontal.
-      const Eigen::Vector3d f = ParseAxis(options.front);
+      const Eigen::Vector3d f =
+          options.front_direction ? options.front_direction->normalized() : ParseAxis(options.front);
       const Eigen::Vector3d h = f - f.dot(est.up) * est.up;
       if (h.norm() < 0.5)
         throw InputError("", "front axis " + options.front +
                                  " is within 30 degrees of the estimated up; give --up too");
       est.front = h.normalized();
       est.symmetry_error = 0;
-      est.front_method = "given " + options.front + " (made horizontal)";
+      est.front_method = options.front_direction ? "given direction (made horizontal)"
+                                                 : "given " + options.front + " (made horizontal)";
       est.rotation.row(0) = est.front.transpose();
       est.rotation.row(1) = est.up.cross(est.front).transpose();
       est.rotation.row(2) = est.up.transpose();

@@ -21,6 +21,9 @@ namespace sd {
 struct CanonicalizeOptions {
   std::string up = "+z";      // the source's up axis: +x, -x, +y, -y, +z, -z (glTF files are +y), or "auto"
   std::string front = "+x";   // the source's front axis (perpendicular to up), or "auto"
+  // Overrides `front`: any source-frame direction (made horizontal), e.g. where a log's 3D box says the object
+  // in a mined crop faces (assetgen/mined.h).
+  std::optional<Eigen::Vector3d> front_direction;
   double scale = 0;           // source units -> metres; 0 = derive from the targets below
   std::optional<double> target_height;  // metres; used when scale == 0
   std::optional<Eigen::Vector3d> target_size;  // (length, width, height); best uniform fit when scale == 0

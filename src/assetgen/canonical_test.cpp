@@ -54,6 +54,25 @@ TEST(Canonical, ScaleFromTargets) {
   EXPECT_NEAR(Canonicalize(FileBox(), o).scale, 2.0, 1e-9);
 }
 
+TEST(Canonical, FrontFromAFreeDirection) {
+  // The box's long side (file z) lies 30 degrees off the file's x in the horizontal (x-z) plane: naming that
+  // direction as the front puts the long side along +x, even though it is no file axis.
+  TriangleMesh m = FileBox();
+  const double a = 30.0 * M_PI / 180.0;
+  const Eigen::Matrix3f spin = Eigen::AngleAxisf(static_cast<float>(a), Eigen::Vector3f::UnitY()).toRotationMatrix();
+  for (auto& p : m.positions) p = spin * p;
+  CanonicalizeOptions o;
+  o.up = "+y";
+  o.front_direction = (spin.cast<double>() * Eigen::Vector3d::UnitZ() + Eigen::Vector3d(0, 0.3, 0)) * 5.0;
+  o.scale = 1;
+  const CanonicalizeResult r = Canonicalize(m, o);
+  EXPECT_TRUE(r.extent.isApprox(Eigen::Vector3d(2.0, 1.0, 0.5), 1e-5)) << r.extent.transpose();
+  EXPECT_NEAR(r.rotation.determinant(), 1.0, 1e-12);
+  // A direction along the up axis has no horizontal part.
+  o.front_direction = Eigen::Vector3d(0, 2, 0.1);
+  EXPECT_THROW(Canonicalize(m, o), InputError);
+}
+
 TEST(Canonical, ImpossibleOptionsAreErrors) {
   CanonicalizeOptions o;
   o.up = "+y";

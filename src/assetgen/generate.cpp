@@ -209,8 +209,53 @@ ImageF MaskFromFlatBackground(const ImageU8& view, uint8_t background) {
   return mask;
 }
 
+namespace {
+
+// The mask grown by `r` pixels (square structuring element, as two separable max filters).
+std::vector<uint8_t> Grow(const ImageU8& mask, int r) {
+  const int w = mask.width(), h = mask.height();
+  std::vector<uint8_t> on(static_cast<size_t>(w) * h), tmp(on.size(), 0), out(on.size(), 0);
+  for (size_t i = 0; i < on.size(); ++i) on[i] = mask.data()[i] > 127;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      if (on[static_cast<size_t>(y) * w + x])
+        for (int dx = std::max(0, x - r); dx <= std::min(w - 1, x + r); ++dx) tmp[static_cast<size_t>(y) * w + dx] = 1;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      if (tmp[static_cast<size_t>(y) * w + x])
+        for (int dy = std::max(0, y - r); dy <= std::min(h - 1, y + r); ++dy) out[static_cast<size_t>(dy) * w + x] = 1;
+  return out;
+}
+
+// The segmentation stage under a coarse prior (SegmentationPrior): returns the method line.
+std::string SegmentWithPrior(const ImageU8& image, const Box2& box, const ImageToViewsStages& stages,
+                             const std::string& method, const SegmentationPrior& prior, ImageF& mask) {
+  const int w = image.width(), h = image.height();
+  const std::vector<uint8_t> grown = Grow(prior.mask, prior.grow_px);
+  double x1 = w, y1 = h, x2 = 0, y2 = 0, prior_area = 0;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      if (grown[static_cast<size_t>(y) * w + x]) x1 = std::min<double>(x1, x), y1 = std::min<double>(y1, y),
+                                                  x2 = std::max<double>(x2, x + 1), y2 = std::max<double>(y2, y + 1);
+  for (size_t i = 0; i < prior.mask.size(); ++i) prior_area += prior.mask.data()[i] > 127;
+  if (prior_area == 0) throw InputError({}, "the " + prior.source + " mask of the object is empty");
+  const Box2 seg_box{std::max(box.x1, x1), std::max(box.y1, y1), std::min(box.x2, x2), std::min(box.y2, y2)};
+  const ImageF prob = stages.segment(image, seg_box.Empty() ? box : seg_box);
+  mask = ImageF(w, h, 1, 0.0f);
+  double kept = 0;
+  for (size_t i = 0; i < grown.size(); ++i)
+    if (grown[i]) kept += mask.vector()[i] = prob.vector()[i];
+  if (kept >= prior.min_agreement * prior_area)
+    return method + " within the " + prior.source + " mask (grown " + std::to_string(prior.grow_px) + " px)";
+  for (size_t i = 0; i < grown.size(); ++i) mask.vector()[i] = prior.mask.data()[i] > 127 ? 1.0f : 0.0f;
+  return "the " + prior.source + " mask (" + method + " kept only " +
+         std::to_string(static_cast<int>(100 * kept / prior_area)) + "% of it)";
+}
+
+}  // namespace
+
 MultiViewSet ViewsFromImage(const ImageU8& image, const Box2& box_in, const ImageToViewsStages& stages,
-                            std::vector<StageReport>* reports) {
+                            std::vector<StageReport>* reports, const SegmentationPrior* prior) {
   if (image.empty()) throw InputError({}, "empty object image");
   Box2 box = box_in;
   box.x1 = std::max(0.0, box.x1);
@@ -227,8 +272,19 @@ MultiViewSet ViewsFromImage(const ImageU8& image, const Box2& box_in, const Imag
     return i < stages.methods.size() ? stages.methods[i] : std::string(fallback);
   };
 
+  if (prior && (prior->mask.width() != image.width() || prior->mask.height() != image.height() ||
+                prior->mask.channels() != 1))
+    throw InputError({}, Msg() << "the " << prior->source << " mask is " << prior->mask.width() << "x"
+                               << prior->mask.height() << "x" << prior->mask.channels() << ", the image "
+                               << image.width() << "x" << image.height());
   ImageF mask;
   timer.Run("segmentation", [&] {
+    if (prior && prior->source == "alpha") {
+      mask = ImageF(image.width(), image.height(), 1);
+      for (size_t i = 0; i < mask.size(); ++i) mask.vector()[i] = prior->mask.data()[i] / 255.0f;
+      return std::string("the source's alpha mask");
+    }
+    if (prior) return SegmentWithPrior(image, box, stages, method(0, "segmentation"), *prior, mask);
     if (image.channels() == 4) {
       mask = ImageF(image.width(), image.height(), 1);
       for (int y = 0; y < image.height(); ++y)

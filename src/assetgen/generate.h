@@ -74,10 +74,23 @@ struct ImageToViewsStages {
 };
 constexpr uint8_t kViewBackground = 127;  // Zero123++'s grey
 
-// InputError for an empty image, a box outside it, no object found, or a generator that does not return 6
-// square views of one size. `reports` receives one StageReport per stage.
+// A mask the image's source already knows, for the segmentation stage. "alpha" masks are exact and used as
+// they are. "lidar" (projected LiDAR returns) and "box" (a projected 3D box) masks are right about where the
+// object is but coarse at its outline: the segmenter runs on the prior's bounding box, and its mask is kept
+// only inside the prior grown by `grow_px`, which removes the background a box-seeded segmenter picks up. When
+// the segmenter keeps less than `min_agreement` of the prior's area, the two disagree and the prior itself is
+// the mask (the method in the stage report says which happened).
+struct SegmentationPrior {
+  ImageU8 mask;         // 1 channel, the image's size, > 127 = object
+  std::string source;   // "alpha", "lidar" or "box"
+  int grow_px = 6;
+  double min_agreement = 0.25;
+};
+
+// InputError for an empty image, a box outside it, no object found, a prior of another size, or a generator
+// that does not return 6 square views of one size. `reports` receives one StageReport per stage.
 MultiViewSet ViewsFromImage(const ImageU8& image, const Box2& box, const ImageToViewsStages& stages,
-                            std::vector<StageReport>* reports);
+                            std::vector<StageReport>* reports, const SegmentationPrior* prior = nullptr);
 // The object mask of a generated view: pixels that differ from the flat background, cleaned to the largest
 // connected component with its holes filled (hard 0 / 1 edges).
 ImageF MaskFromFlatBackground(const ImageU8& view, uint8_t background = kViewBackground);

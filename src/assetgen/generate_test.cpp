@@ -194,6 +194,60 @@ TEST(ViewsFromImage, TurnsOneImageIntoRegisteredViewsThatGenerateAnAsset) {
   EXPECT_THROW(ViewsFromImage(image, Box2{500, 500, 600, 600}, oracle.Stages(), nullptr), InputError);
 }
 
+// A coarse mask from the source (a projected LiDAR mask or 3D box) keeps the segmenter off the background, and
+// replaces a segmenter that finds little inside it.
+TEST(ViewsFromImage, CoarsePriorMasksTheSegmenterOrReplacesIt) {
+  const TriangleMesh truth = ColouredEllipsoid();
+  OracleStages oracle;
+  oracle.truth_views = RenderOracleViews(truth, Zero123PlusPlusRig(64), 2);
+  const MultiView photo = RenderOracleViews(truth, {OrbitCamera("photo", 10, 5, kRigDistance, 30, 160, 120)}, 2)[0];
+  const ImageU8 image = ToSrgb8(photo.color);
+  // The segmenter's answer: the object plus a background blob a box-seeded segmenter might add.
+  oracle.photo_mask = photo.mask;
+  for (int y = 5; y < 25; ++y)
+    for (int x = 130; x < 155; ++x) oracle.photo_mask.at(x, y) = 1.0f;
+  // The prior: the object's mask grown by 3 px (coarse, but nowhere near the blob).
+  SegmentationPrior prior;
+  prior.source = "lidar";
+  prior.grow_px = 4;
+  prior.mask = ImageU8(160, 120, 1, 0);
+  double object_area = 0;
+  for (int y = 0; y < 120; ++y)
+    for (int x = 0; x < 160; ++x) {
+      object_area += photo.mask.at(x, y) > 0.5f;
+      for (int dy = -3; dy <= 3; ++dy)
+        for (int dx = -3; dx <= 3; ++dx) {
+          const int xx = std::clamp(x + dx, 0, 159), yy = std::clamp(y + dy, 0, 119);
+          if (photo.mask.at(xx, yy) > 0.5f) prior.mask.at(x, y) = 255;
+        }
+    }
+  std::vector<StageReport> reports;
+  ViewsFromImage(image, Box2{0, 0, 160, 120}, oracle.Stages(), &reports, &prior);
+  EXPECT_EQ(reports[0].method, "oracle mask within the lidar mask (grown 4 px)");
+  // The segmenter saw the prior's bounding box, not the whole image, so its blob was outside from the start.
+  EXPECT_GT(oracle.seen_box.x1, 0);
+  EXPECT_LT(oracle.seen_box.x2, 130);
+
+  // A segmenter that finds nothing inside the prior: the prior is the mask.
+  OracleStages blind;
+  blind.truth_views = oracle.truth_views;
+  blind.photo_mask = ImageF(160, 120, 1, 0.0f);
+  reports.clear();
+  ViewsFromImage(image, Box2{0, 0, 160, 120}, blind.Stages(), &reports, &prior);
+  EXPECT_EQ(reports[0].method.rfind("the lidar mask (oracle mask kept only 0% of it)", 0), 0u) << reports[0].method;
+
+  // An exact (alpha) prior is used as it is; a prior of the wrong size is refused.
+  SegmentationPrior alpha = prior;
+  alpha.source = "alpha";
+  OracleStages exact;
+  exact.truth_views = oracle.truth_views;
+  ViewsFromImage(image, Box2{0, 0, 160, 120}, exact.Stages(), nullptr, &alpha);
+  EXPECT_EQ(exact.segment_calls, 0);
+  alpha.mask = ImageU8(80, 60, 1, 255);
+  EXPECT_THROW(ViewsFromImage(image, Box2{0, 0, 160, 120}, exact.Stages(), nullptr, &alpha), InputError);
+  EXPECT_GT(object_area, 500);
+}
+
 TEST(MaskFromFlatBackground, KeepsTheLargestComponentAndFillsItsHoles) {
   ImageU8 view(20, 20, 3, kViewBackground);
   for (int y = 4; y < 16; ++y)

@@ -149,5 +149,27 @@ expect_error "texture: views without images" "has no \"image\"" "$T/t1.glb" -- "
 expect_error "generate: views without images" "has no colour image" "$T/g4" -- "$BIN" -q generate --views "$T/views_noimg" --category traffic_cone --out "$T/g4"
 expect_error "eval: missing prediction" "nothing.glb: no such file" "$T/nothing.geometry.json" -- "$BIN" -q eval geometry --pred "$T/nothing.glb" --gt "$CONE"
 
+# Mine: index the repo's logs, query by label, and the batch/resume contract; bad input named in one line.
+"$BIN" -q mine index --log "$INFO" --log "$DATA/driving/kitti-object" --out "$T/mi" --clip none \
+  && [ "$(ls "$T/mi/shards" | wc -l)" -eq 2 ] && ok || bad "mine index"
+"$BIN" -q mine index --log "$INFO" --log "$DATA/driving/kitti-object" --out "$T/mi" --clip none 2>&1 | grep -q . \
+  && bad "mine index rerun printed something with -q" || ok
+"$BIN" mine index --log "$INFO" --log "$DATA/driving/kitti-object" --out "$T/mi" --clip none 2>&1 \
+  | grep -q "0 new chunks (2 already done" && ok || bad "mine index resumes: nothing rebuilt"
+"$BIN" -q mine query --index "$T/mi" --prompt car --prompt "orange traffic cone" --k 5 --out "$T/mr" \
+  && [ -s "$T/mr/manifest.jsonl" ] && [ -f "$T/mr/index.html" ] \
+  && [ "$(grep -c '"category":"car"' "$T/mr/manifest.jsonl")" -eq "$(wc -l < "$T/mr/manifest.jsonl")" ] \
+  && ok || bad "mine query by label"
+for k in 0 1; do "$BIN" -q mine index --log "$INFO" --log "$DATA/driving/kitti-object" --out "$T/mi_split" --clip none --shard $k/2; done
+[ "$(ls "$T/mi_split/shards" | sort)" = "$(ls "$T/mi/shards" | sort)" ] && ok || bad "mine index --shard 0/2 + 1/2 = the whole index"
+expect_error "mine: missing log" "nope.json: no such file" "$T/mi2" -- "$BIN" -q mine index --log "$T/nope.json" --out "$T/mi2" --clip none
+expect_error "mine: bad shard" "--shard '2/2'" "$T/mi3" -- "$BIN" -q mine index --log "$INFO" --out "$T/mi3" --clip none --shard 2/2
+expect_error "mine: not an index" "not a mining index" "$T/mr2" -- "$BIN" -q mine query --index "$T" --prompt car --out "$T/mr2"
+expect_error "mine: prompt without a category and no CLIP" "names no known category" "$T/mr3" -- "$BIN" -q mine query --index "$T/mi" --prompt "purple elephant" --out "$T/mr3"
+expect_error "mine: existing run" "mr: exists" "" -- "$BIN" -q mine query --index "$T/mi" --prompt car --out "$T/mr"
+printf '{"id": 1}\n' > "$T/bad_manifest.jsonl"
+expect_error "generate: malformed manifest" "bad_manifest.jsonl:1" "$T/g5" -- "$BIN" -q generate --manifest "$T/bad_manifest.jsonl" --out "$T/g5"
+expect_error "generate: manifest without models" "needs the multi-view diffusion" "$T/g6" -- env SYNTHDRIVE_MODELS="$T/no_models" "$BIN" -q generate --manifest "$T/mr/manifest.jsonl" --out "$T/g6"
+
 echo "$pass passed, $fail failed"
 [ $fail -eq 0 ]

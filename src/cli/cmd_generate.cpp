@@ -1,5 +1,6 @@
 // `synthdrive generate`: object views (or, with the learned models, one object image) → a finished asset folder.
 #include <filesystem>
+#include <optional>
 #include <memory>
 #include <vector>
 
@@ -8,13 +9,16 @@
 
 #include "assetgen/asset.h"
 #include "assetgen/generate.h"
+#include "assetgen/mined.h"
 #include "assetgen/views.h"
 #include "cli/commands.h"
 #include "cli/mesh_files.h"
 #include "core/error.h"
 #include "core/log.h"
+#include "core/shard.h"
 #include "datasets/categories.h"
 #include "io/image_io.h"
+#include "mining/query.h"
 #include "models/multiview_diffusion.h"
 #include "models/normal_estimation.h"
 #include "models/runtime.h"
@@ -41,29 +45,37 @@ void RequireSingleImageModels(const fs::path& image, const fs::path& model_dir) 
                                 << "; see docs/models.md), or pass --views with multi-view images and cameras");
 }
 
-// The learned front end: segmenter (classical unless --segmenter names a model), Zero123++ and the normal
-// estimator, each loaded once.
-MultiViewSet ViewsFromImageFile(const fs::path& file, const std::vector<double>& box_px, const fs::path& model_dir,
-                                const std::string& segmenter_choice, int steps, float guidance, uint64_t seed,
-                                std::vector<StageReport>* reports) {
-  const ImageU8 image = ReadImage(file);
-  RequireSingleImageModels(file, model_dir);
-  const Box2 box = box_px.empty() ? Box2{0, 0, double(image.width()), double(image.height())}
-                                  : Box2{box_px[0], box_px[1], box_px[2], box_px[3]};
-  const models::Segmenter segmenter = models::Segmenter::Resolve(segmenter_choice);
-  const models::MultiViewGenerator generator = models::MultiViewGenerator::Load(model_dir);
-  const models::NormalEstimator normals = models::NormalEstimator::FromModel(model_dir / models::kNormalEstimatorFile);
-  ImageToViewsStages stages;
-  stages.segment = [&](const ImageU8& img, const Box2& b) { return segmenter.Segment(img, b).mask; };
-  stages.generate_views = [&](const ImageU8& cutout) { return generator.Generate(cutout, steps, guidance, seed); };
-  stages.estimate_normals = [&](const ImageF& view) { return normals.Estimate(view); };
-  stages.methods = {segmenter.Describe(), generator.Describe(), normals.Describe()};
-  try {
-    return ViewsFromImage(image, box, stages, reports);
-  } catch (const InputError& e) {
-    throw InputError(file, e.what());
+// The learned front end — segmenter (classical unless --segmenter names a model), Zero123++ and the normal
+// estimator — loaded once and reused for every image of a batch.
+class ImageFrontEnd {
+ public:
+  ImageFrontEnd(const fs::path& model_dir, const std::string& segmenter_choice, int steps, float guidance,
+                uint64_t seed)
+      : segmenter_(models::Segmenter::Resolve(segmenter_choice)),
+        generator_(models::MultiViewGenerator::Load(model_dir)),
+        normals_(models::NormalEstimator::FromModel(model_dir / models::kNormalEstimatorFile)),
+        steps_(steps),
+        guidance_(guidance),
+        seed_(seed) {}
+
+  MultiViewSet Views(const ImageU8& image, const Box2& box, const SegmentationPrior* prior,
+                     std::vector<StageReport>* reports) const {
+    ImageToViewsStages stages;
+    stages.segment = [&](const ImageU8& img, const Box2& b) { return segmenter_.Segment(img, b).mask; };
+    stages.generate_views = [&](const ImageU8& cutout) { return generator_.Generate(cutout, steps_, guidance_, seed_); };
+    stages.estimate_normals = [&](const ImageF& view) { return normals_.Estimate(view); };
+    stages.methods = {segmenter_.Describe(), generator_.Describe(), normals_.Describe()};
+    return ViewsFromImage(image, box, stages, reports, prior);
   }
-}
+
+ private:
+  models::Segmenter segmenter_;
+  models::MultiViewGenerator generator_;
+  models::NormalEstimator normals_;
+  int steps_;
+  float guidance_;
+  uint64_t seed_;
+};
 
 nlohmann::json StagesJson(const std::vector<StageReport>& front, const GeneratedMesh& g, const std::string& source) {
   nlohmann::json stages = nlohmann::json::array();
@@ -84,29 +96,131 @@ nlohmann::json StagesJson(const std::vector<StageReport>& front, const Generated
   return stages;
 }
 
+struct Args {
+  std::string views, image, manifest, out, category, id, name, licence, source, attribution, model_dir, shard = "0/1";
+  int limit = 0;
+  std::string segmenter = "classical";
+  std::vector<double> size, box;
+  int diffusion_steps = models::kZero123PlusDefaultSteps;
+  float guidance = models::kZero123PlusDefaultGuidance;
+  uint64_t seed = 0;
+  double height = 0;
+  bool overwrite = false;
+  GenerateOptions options;
+};
+
+// Views -> refined, textured, canonical mesh -> the asset folder (atomic). `info` carries id, name, category
+// and provenance; extent, stages and quality are filled here.
+void BuildAndSave(const MultiViewSet& views, const std::vector<StageReport>& front, const GenerateOptions& options,
+                  AssetInfo info, const std::string& source, const fs::path& out, bool overwrite) {
+  GeneratedMesh g = GenerateFromViews(views, options);
+  Asset asset;
+  asset.mesh = std::move(g.mesh);
+  if (asset.mesh.normals.empty()) asset.mesh.ComputeVertexNormals();
+  asset.info = std::move(info);
+  asset.info.extent = g.extent;
+  asset.info.stages = StagesJson(front, g, source);
+  asset.info.quality = {{"refine_final_loss_normal", g.last_refine_step.loss_normal},
+                        {"refine_final_loss_mask", g.last_refine_step.loss_mask},
+                        {"views", views.size()}};
+  SaveAsset(asset, out, overwrite, &views);
+  double total = 0;
+  for (const StageReport& s : front) total += s.seconds;
+  for (const StageReport& s : g.stages) total += s.seconds;
+  SD_LOG(Info, "asset " << asset.info.id << " (" << asset.info.category << "), " << g.extent.x() << " x "
+                        << g.extent.y() << " x " << g.extent.z() << " m, " << asset.mesh.NumFaces() << " triangles, "
+                        << total << " s -> " << out.string());
+}
+
+// `generate --manifest`: one asset per mining hit, as a batch (DESIGN.md): the shard's share of the hits, each
+// written atomically to <out>/<hit id>/, hits whose folder exists skipped, progress, and a failed hit reported
+// without losing the others (exit 1 when any failed).
+int RunManifest(const Args& a, const fs::path& model_dir) {
+  const fs::path manifest(a.manifest);
+  std::vector<mining::ManifestEntry> entries = mining::ReadManifest(manifest);
+  if (a.limit > 0 && entries.size() > static_cast<size_t>(a.limit)) entries.resize(a.limit);
+  const ShardSpec shard = ParseShard(a.shard);
+  std::optional<CategoryInfo> fallback;
+  if (!a.category.empty()) {
+    fallback = FindCategory(a.category);
+    if (!fallback) throw InputError({}, "unknown category '" + a.category + "' (see `synthdrive categories`)");
+  }
+  if (fs::exists(a.out) && !fs::is_directory(a.out)) throw InputError(a.out, "exists and is not a folder");
+  std::vector<size_t> todo;
+  size_t done = 0;
+  for (size_t i = 0; i < entries.size(); ++i) {
+    if (!shard.Owns(i)) continue;
+    if (fs::exists(fs::path(a.out) / entries[i].item.id / "asset.json")) ++done;
+    else todo.push_back(i);
+  }
+  SD_LOG(Info, manifest.string() << ": " << entries.size() << " hits; shard " << shard.ToString() << ": "
+                                 << todo.size() << " to build, " << done << " already built");
+  if (todo.empty()) return 0;
+  RequireSingleImageModels(manifest, model_dir);
+  const ImageFrontEnd front_end(model_dir, a.segmenter, a.diffusion_steps, a.guidance, a.seed);
+  fs::create_directories(a.out);
+  Progress progress("generate", todo.size());
+  size_t failed = 0;
+  for (size_t i : todo) {
+    const mining::ManifestEntry& e = entries[i];
+    const std::string where = manifest.string() + ":" + std::to_string(i + 1);
+    try {
+      const MinedObject object = LoadMinedObject(e);
+      const std::optional<CategoryInfo> category = object.category.empty() ? fallback : FindCategory(object.category);
+      if (!category)
+        throw InputError(where, object.category.empty() ? "hit has no category: pass --category"
+                                                        : "unknown category '" + object.category + "'");
+      std::vector<StageReport> front;
+      const MultiViewSet views =
+          front_end.Views(object.image, object.box, object.prior ? &*object.prior : nullptr, &front);
+      GenerateOptions options = a.options;
+      options.refine.show_progress = false;
+      options.canonical.up = "+z";
+      if (object.front_in_rig) options.canonical.front_direction = *object.front_in_rig;
+      // Metric scale: the log's 3D box, else --size / --height, else the category's size prior.
+      if (object.size_lwh) options.canonical.target_size = *object.size_lwh;
+      else if (!a.size.empty()) options.canonical.target_size = Eigen::Vector3d(a.size[0], a.size[1], a.size[2]);
+      else options.canonical.target_height = a.height > 0 ? a.height : category->default_size.z();
+      AssetInfo info;
+      info.id = e.item.id;
+      info.name = e.prompt.empty() ? e.item.id : e.prompt + " #" + std::to_string(e.rank);
+      info.category = category->name;
+      info.licence = a.licence;
+      info.source = object.source;
+      info.attribution = a.attribution;
+      BuildAndSave(views, front, options, info, object.source, fs::path(a.out) / e.item.id, false);
+    } catch (const InputError& err) {
+      ++failed;
+      const std::string what = err.what();
+      SD_LOG(Error, (what.rfind(where, 0) == 0 ? what : where + ": " + what));
+    }
+    progress.Advance();
+  }
+  progress.Finish();
+  SD_LOG(Info, "generate: " << todo.size() - failed << " assets built, " << failed << " failed, " << done
+                            << " already there -> " << a.out);
+  return failed == 0 ? 0 : 1;
+}
+
 }  // namespace
 
 Runner AddGenerateCommand(CLI::App& app) {
-  struct Args {
-    std::string views, image, out, category, id, name, licence, source, attribution, model_dir;
-    std::string segmenter = "classical";
-    std::vector<double> size, box;
-    int diffusion_steps = models::kZero123PlusDefaultSteps;
-    float guidance = models::kZero123PlusDefaultGuidance;
-    uint64_t seed = 0;
-    double height = 0;
-    bool overwrite = false;
-    GenerateOptions options;
-  };
   auto a = std::make_shared<Args>();
   auto* input = app.add_option_group("input", "what to build the asset from");
   input->add_option("--views", a->views,
                     "Views folder (cameras.json + colour images + normal maps + masks; docs/refine.md)");
   input->add_option("--image", a->image, "One object image (needs the multi-view and normal models installed)");
+  input->add_option("--manifest", a->manifest,
+                    "A mining run's manifest.jsonl (mine query): one asset per hit, into <out>/<hit id>/ (needs the "
+                    "multi-view and normal models installed)");
   input->require_option(1);
-  app.add_option("--category", a->category, "Object category (see `synthdrive categories`); its size is the default scale")
-      ->required();
-  app.add_option("--out", a->out, "Asset folder to create")->required();
+  app.add_option("--category", a->category,
+                 "Object category (see `synthdrive categories`); its size is the default scale. With --manifest, "
+                 "only for hits that carry no category");
+  app.add_option("--out", a->out, "Asset folder to create (with --manifest: the folder of asset folders)")->required();
+  app.add_option("--limit", a->limit, "--manifest: at most this many hits (in manifest order; 0 = all)")
+      ->default_val(0)->check(CLI::NonNegativeNumber);
+  app.add_option("--shard", a->shard, "--manifest: build only hits K, K+N, ... (K/N, 0-based)")->default_val("0/1");
   app.add_option("--height", a->height, "Real height in metres (default: the category's)")->check(CLI::PositiveNumber);
   app.add_option("--size", a->size, "Real length width height in metres (best uniform fit)")->expected(3);
   app.add_option("--front", a->options.canonical.front,
@@ -140,49 +254,46 @@ Runner AddGenerateCommand(CLI::App& app) {
   app.add_flag("--overwrite", a->overwrite, "Replace an existing asset folder");
 
   return [a]() {
+    const fs::path model_dir = a->model_dir.empty() ? models::DefaultModelDir() : fs::path(a->model_dir);
+    if (!a->manifest.empty()) return RunManifest(*a, model_dir);
+    if (a->category.empty()) throw InputError({}, "--category is required with --views and --image");
     RefuseExisting(a->out, a->overwrite);
     const auto category = FindCategory(a->category);
     if (!category) throw InputError({}, "unknown category '" + a->category + "' (see `synthdrive categories`)");
     std::vector<StageReport> front;
-    const fs::path model_dir = a->model_dir.empty() ? models::DefaultModelDir() : fs::path(a->model_dir);
-    const MultiViewSet views = a->image.empty()
-                                   ? LoadViews(a->views)
-                                   : ViewsFromImageFile(a->image, a->box, model_dir, a->segmenter, a->diffusion_steps,
-                                                        a->guidance, a->seed, &front);
+    MultiViewSet views;
+    if (a->image.empty()) {
+      views = LoadViews(a->views);
+    } else {
+      const ImageU8 image = ReadImage(a->image);
+      RequireSingleImageModels(a->image, model_dir);
+      const Box2 box = a->box.empty() ? Box2{0, 0, double(image.width()), double(image.height())}
+                                      : Box2{a->box[0], a->box[1], a->box[2], a->box[3]};
+      const ImageFrontEnd front_end(model_dir, a->segmenter, a->diffusion_steps, a->guidance, a->seed);
+      try {
+        views = front_end.Views(image, box, nullptr, &front);
+      } catch (const InputError& e) {
+        throw InputError(a->image, e.what());
+      }
+    }
     const std::string source = a->image.empty() ? a->views : a->image;
     GenerateOptions options = a->options;
     options.refine.show_progress = GetLogLevel() <= LogLevel::kInfo;
     options.canonical.up = "+z";
     if (!a->size.empty()) options.canonical.target_size = Eigen::Vector3d(a->size[0], a->size[1], a->size[2]);
     else options.canonical.target_height = a->height > 0 ? a->height : category->default_size.z();
-
-    GeneratedMesh g;
+    AssetInfo info;
+    info.id = a->id.empty() ? fs::absolute(a->out).lexically_normal().filename().string() : a->id;
+    info.name = a->name.empty() ? info.id : a->name;
+    info.category = category->name;
+    info.licence = a->licence;
+    info.source = a->source.empty() ? source : a->source;
+    info.attribution = a->attribution;
     try {
-      g = GenerateFromViews(views, options);
+      BuildAndSave(views, front, options, info, source, a->out, a->overwrite);
     } catch (const InputError& e) {
       throw InputError(a->image.empty() ? fs::path(a->views) / "cameras.json" : fs::path(a->image), e.what());
     }
-    Asset asset;
-    asset.mesh = std::move(g.mesh);
-    if (asset.mesh.normals.empty()) asset.mesh.ComputeVertexNormals();
-    asset.info.id = a->id.empty() ? fs::absolute(a->out).lexically_normal().filename().string() : a->id;
-    asset.info.name = a->name.empty() ? asset.info.id : a->name;
-    asset.info.category = category->name;
-    asset.info.extent = g.extent;
-    asset.info.licence = a->licence;
-    asset.info.source = a->source.empty() ? source : a->source;
-    asset.info.attribution = a->attribution;
-    asset.info.stages = StagesJson(front, g, source);
-    asset.info.quality = {{"refine_final_loss_normal", g.last_refine_step.loss_normal},
-                          {"refine_final_loss_mask", g.last_refine_step.loss_mask},
-                          {"views", views.size()}};
-    SaveAsset(asset, a->out, a->overwrite, &views);
-    double total = 0;
-    for (const StageReport& s : front) total += s.seconds;
-    for (const StageReport& s : g.stages) total += s.seconds;
-    SD_LOG(Info, "asset " << asset.info.id << " (" << asset.info.category << "), " << g.extent.x() << " x "
-                          << g.extent.y() << " x " << g.extent.z() << " m, " << asset.mesh.NumFaces()
-                          << " triangles, " << total << " s -> " << a->out);
     return 0;
   };
 }

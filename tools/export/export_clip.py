@@ -27,6 +27,10 @@ import sys
 
 import torch
 
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.realpath(__file__))))  # tools/
+from synthdrive_contract import contract, save_scripted, tensor_spec  # noqa: E402
+
+EXPORTER = "tools/export/export_clip.py"
 OPENAI_MEAN = (0.48145466, 0.4578275, 0.40821073)
 OPENAI_STD = (0.26862954, 0.26130258, 0.27577711)
 
@@ -78,11 +82,6 @@ def load(backend, arch, pretrained):
     return model, mean, std, size, bpe, tokenize, source, preprocess
 
 
-def spec(name, shape, rng, layout, encoding=""):
-    return {"name": name, "shape": shape, "dtype": "float32", "layout": layout, "range": list(rng),
-            "encoding": encoding}
-
-
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("out_dir")
@@ -106,8 +105,6 @@ def main():
         traced_image = torch.jit.trace(image_enc, torch.rand(2, 3, size, size), check_trace=True)
         traced_text = torch.jit.trace(text_enc, tokenize(["a photo of a car", "a bus"]).float(), check_trace=True)
 
-    common = {"format": "synthdrive-model/1", "source": source, "license": "MIT",
-              "exporter": "tools/export/export_clip.py"}
     # Self-check against the eager model: the exported image path from 0..1 pixels must equal
     # encode_image(normalise(x)), and the text path encode_text(ids).
     with torch.no_grad():
@@ -120,20 +117,17 @@ def main():
     if err_i > 1e-4 or err_t > 1e-4:
         sys.exit(f"export_clip: exported modules differ from the eager model (image {err_i:g}, text {err_t:g})")
 
-    image_contract = dict(common, stage="clip_image", name=f"clip-{args.arch.lower()}-{args.pretrained}-image",
-                          inputs=[spec("image", [-1, 3, size, size], (0, 1), "NCHW", "srgb")],
-                          outputs=[spec("embedding", [-1, dim], (-1e4, 1e4), "NC")],
-                          params={"embed_dim": dim, "image_size": size},
-                          verification={"max_abs_diff_vs_eager": err_i})
-    text_contract = dict(common, stage="clip_text", name=f"clip-{args.arch.lower()}-{args.pretrained}-text",
-                         inputs=[spec("tokens", [-1, context], (0, vocab - 1), "NL", "token_ids")],
-                         outputs=[spec("embedding", [-1, dim], (-1e4, 1e4), "NC")],
-                         params={"embed_dim": dim, "context_length": context, "vocab_size": vocab},
-                         verification={"max_abs_diff_vs_eager": err_t})
-    torch.jit.save(traced_image, os.path.join(args.out_dir, "clip_image.pt"),
-                   _extra_files={"synthdrive_contract.json": json.dumps(image_contract)})
-    torch.jit.save(traced_text, os.path.join(args.out_dir, "clip_text.pt"),
-                   _extra_files={"synthdrive_contract.json": json.dumps(text_contract)})
+    embedding = tensor_spec("embedding", [-1, dim], (-1e4, 1e4), "NC")
+    image_contract = contract("clip_image", f"clip-{args.arch.lower()}-{args.pretrained}-image",
+                              [tensor_spec("image", [-1, 3, size, size], (0, 1), "NCHW", "srgb")], [embedding],
+                              {"embed_dim": dim, "image_size": size}, source, "MIT", exporter=EXPORTER,
+                              verification={"max_abs_diff_vs_eager": err_i})
+    text_contract = contract("clip_text", f"clip-{args.arch.lower()}-{args.pretrained}-text",
+                             [tensor_spec("tokens", [-1, context], (0, vocab - 1), "NL", "token_ids")],
+                             [dict(embedding)], {"embed_dim": dim, "context_length": context, "vocab_size": vocab},
+                             source, "MIT", exporter=EXPORTER, verification={"max_abs_diff_vs_eager": err_t})
+    save_scripted(traced_image, os.path.join(args.out_dir, "clip_image.pt"), image_contract)
+    save_scripted(traced_text, os.path.join(args.out_dir, "clip_text.pt"), text_contract)
     opener = gzip.open if bpe.endswith(".gz") else open
     with opener(bpe, "rt", encoding="utf-8") as src, \
             open(os.path.join(args.out_dir, "bpe_simple_vocab_16e6.txt"), "w", encoding="utf-8") as dst:

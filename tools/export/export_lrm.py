@@ -24,11 +24,15 @@ that fixed P and the C++ side pads its last chunk (src/models/lrm.cpp).
 Usage: export_lrm.py OUT_DIR [--model zxhezexin/openlrm-mix-base-1.1] [--source-size 336] [--mesh-thres 3.0]
 """
 import argparse
-import json
 import os
 import sys
 
 import torch
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.realpath(__file__))))  # tools/
+from synthdrive_contract import contract, save_scripted, tensor_spec  # noqa: E402
+
+EXPORTER = "tools/export/export_lrm.py"
 
 
 def canonical_source_camera(dist_to_center=2.0):
@@ -58,11 +62,6 @@ class Decoder(torch.nn.Module):
         out = self.synthesizer.forward_points(planes, points * 2.0)
         sdf = (self.thres - out["sigma"].float()) / self.thres
         return sdf, out["rgb"].float().clamp(0.0, 1.0)
-
-
-def spec(name, shape, rng, layout, encoding=""):
-    return {"name": name, "shape": shape, "dtype": "float32", "layout": layout, "range": list(rng),
-            "encoding": encoding}
 
 
 def main():
@@ -104,23 +103,21 @@ def main():
         sys.exit(f"export_lrm: traced modules differ from eager (encoder {err_enc:g}, decoder {err_dec_traced:g})")
 
     _, _, c, r, r2 = planes.shape
-    common = {"format": "synthdrive-model/1", "source": f"3DTopia/OpenLRM {args.model}", "license": "CC-BY-NC-4.0",
-              "exporter": "tools/export/export_lrm.py"}
+    source, license_ = f"3DTopia/OpenLRM {args.model}", "CC-BY-NC-4.0"
     params = {"image_size": s, "triplane_channels": int(c), "triplane_resolution": int(r), "background": 1.0,
               "mesh_thres": args.mesh_thres}
-    tri = spec("triplane", [1, 3, int(c), int(r), int(r2)], (-1e4, 1e4), "NPCHW")
-    enc_contract = dict(common, stage="lrm_encoder", name=args.model.split("/")[-1] + "-encoder",
-                        inputs=[spec("image", [1, 3, s, s], (0, 1), "NCHW", "srgb")], outputs=[tri], params=params,
-                        verification={"max_abs_diff_vs_eager": err_enc})
-    dec_contract = dict(common, stage="lrm_decoder", name=args.model.split("/")[-1] + "-decoder",
-                        inputs=[dict(tri), spec("points", [1, fixed_p, 3], (-0.5, 0.5), "NPC", "unit_cube")],
-                        outputs=[spec("sdf", [1, fixed_p, 1], (-1e4, 1e4), "NPC"),
-                                 spec("colour", [1, fixed_p, 3], (0, 1), "NPC", "srgb")],
-                        params=params, verification={"max_abs_diff_vs_eager": err_dec_traced})
-    torch.jit.save(traced_enc, os.path.join(args.out_dir, "lrm_encoder.pt"),
-                   _extra_files={"synthdrive_contract.json": json.dumps(enc_contract)})
-    torch.jit.save(traced_dec, os.path.join(args.out_dir, "lrm_decoder.pt"),
-                   _extra_files={"synthdrive_contract.json": json.dumps(dec_contract)})
+    tri = tensor_spec("triplane", [1, 3, int(c), int(r), int(r2)], (-1e4, 1e4), "NPCHW")
+    enc_contract = contract("lrm_encoder", args.model.split("/")[-1] + "-encoder",
+                            [tensor_spec("image", [1, 3, s, s], (0, 1), "NCHW", "srgb")], [tri], params,
+                            source, license_, exporter=EXPORTER, verification={"max_abs_diff_vs_eager": err_enc})
+    dec_contract = contract("lrm_decoder", args.model.split("/")[-1] + "-decoder",
+                            [dict(tri), tensor_spec("points", [1, fixed_p, 3], (-0.5, 0.5), "NPC", "unit_cube")],
+                            [tensor_spec("sdf", [1, fixed_p, 1], (-1e4, 1e4), "NPC"),
+                             tensor_spec("colour", [1, fixed_p, 3], (0, 1), "NPC", "srgb")],
+                            params, source, license_, exporter=EXPORTER,
+                            verification={"max_abs_diff_vs_eager": err_dec_traced})
+    save_scripted(traced_enc, os.path.join(args.out_dir, "lrm_encoder.pt"), enc_contract)
+    save_scripted(traced_dec, os.path.join(args.out_dir, "lrm_decoder.pt"), dec_contract)
     print(f"export_lrm: {args.model}: S={s}, triplane 3x{c}x{r}x{r2}, points per call "
           f"{'any' if fixed_p < 0 else fixed_p}; max |diff| vs eager: encoder {err_enc:.2e}, "
           f"decoder {err_dec_traced:.2e} -> {args.out_dir}")

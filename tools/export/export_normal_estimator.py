@@ -27,11 +27,14 @@ a floor and a frontal wall: the floor must come out near (0, -1, 0) (up is -y in
 Usage: export_normal_estimator.py OUT.pt [--frame opengl|opencv] [--size 384]
 """
 import argparse
-import json
+import os
 import sys
 
 import torch
 import torch.nn.functional as F
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.realpath(__file__))))  # tools/
+from synthdrive_contract import contract, save_scripted, tensor_spec  # noqa: E402
 
 
 class NormalWrapper(torch.nn.Module):
@@ -69,19 +72,15 @@ def main():
     if max(errs) > 1e-4:
         sys.exit(f"export_normal_estimator: traced module differs from eager ({errs}); export at a fixed size")
 
-    contract = {
-        "format": "synthdrive-model/1", "stage": "normal_estimation", "name": "omnidata-normal-dpt-hybrid-384",
-        "source": "torch.hub alexsax/omnidata_models surface_normal_dpt_hybrid_384",
-        "license": "Omnidata (non-commercial research; see the repository)",
-        "exporter": "tools/export/export_normal_estimator.py",
-        "inputs": [{"name": "image", "shape": [-1, 3, -1, -1], "dtype": "float32", "layout": "NCHW",
-                    "range": [0, 1], "encoding": "srgb"}],
-        "outputs": [{"name": "normals", "shape": [-1, 3, -1, -1], "dtype": "float32", "layout": "NCHW",
-                     "range": [-1, 1], "encoding": "camera_opencv"}],
-        "params": {"multiple": 32},
-        "verification": {"max_abs_diff_vs_eager": max(errs), "frame_signs_y": signs[1], "frame_signs_z": signs[2]},
-    }
-    torch.jit.save(traced, args.out, _extra_files={"synthdrive_contract.json": json.dumps(contract)})
+    doc = contract(
+        "normal_estimation", "omnidata-normal-dpt-hybrid-384",
+        [tensor_spec("image", [-1, 3, -1, -1], (0, 1), "NCHW", "srgb")],
+        [tensor_spec("normals", [-1, 3, -1, -1], (-1, 1), "NCHW", "camera_opencv")], {"multiple": 32},
+        "torch.hub alexsax/omnidata_models surface_normal_dpt_hybrid_384",
+        "Omnidata (non-commercial research; see the repository)",
+        exporter="tools/export/export_normal_estimator.py",
+        verification={"max_abs_diff_vs_eager": max(errs), "frame_signs_y": signs[1], "frame_signs_z": signs[2]})
+    save_scripted(traced, args.out, doc)
     print(f"export_normal_estimator: wrote {args.out} (frame {args.frame}, max |diff| vs eager {max(errs):.2e})")
 
 

@@ -28,21 +28,14 @@ import sys
 import torch
 import torch.nn.functional as F
 
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.realpath(__file__))))  # tools/
+from synthdrive_contract import contract, save_scripted, tensor_spec  # noqa: E402
+
+EXPORTER = "tools/export/export_zero123plus.py"
+LICENSE = "CC-BY-NC-4.0 (weights), Apache-2.0 (pipeline code)"
 GRID_W, GRID_H = 640, 960  # the pipeline's default width/height: 2 columns x 3 rows of 320
 SPACING_CODES = {"trailing": 0, "leading": 1, "linspace": 2}
 SCHEDULE_CODES = {"linear": 0, "scaled_linear": 1}
-
-
-def spec(name, shape, rng, encoding="", layout=""):
-    return {"name": name, "shape": shape, "dtype": "float32", "layout": layout, "range": list(rng),
-            "encoding": encoding}
-
-
-def contract(stage, name, inputs, outputs, params, verification, source):
-    return {"format": "synthdrive-model/1", "stage": stage, "name": name, "source": source,
-            "license": "CC-BY-NC-4.0 (weights), Apache-2.0 (pipeline code)",
-            "exporter": "tools/export/export_zero123plus.py",
-            "inputs": inputs, "outputs": outputs, "params": params, "verification": verification}
 
 
 def processor_geometry(processor):
@@ -152,8 +145,8 @@ def max_diff(a, b):
     return float((a.float() - b.float()).abs().max())
 
 
-def save(module, path, contract_json):
-    torch.jit.save(module, path, _extra_files={"synthdrive_contract.json": json.dumps(contract_json)})
+def save(module, path, doc):
+    save_scripted(module, path, doc)
     print(f"wrote {path}")
 
 
@@ -213,12 +206,12 @@ def main():
         hr, wr = ref.shape[2], ref.shape[3]
         save(traced_enc, os.path.join(args.out_dir, "zero123plus_image_encoder.pt"), contract(
             "mv_image_encoder", "zero123plus-v1.2-encoder",
-            [spec("image", [1, 3, -1, -1], (0, 1), "srgb", "NCHW")],
-            [spec("cond_embeds", [2, L, D], (-1e4, 1e4)), spec("ref_latents", [2, 4, hr, wr], (-1e3, 1e3),
-                                                                  layout="NCHW")],
+            [tensor_spec("image", [1, 3, -1, -1], (0, 1), "NCHW", "srgb")],
+            [tensor_spec("cond_embeds", [2, L, D], (-1e4, 1e4)),
+             tensor_spec("ref_latents", [2, 4, hr, wr], (-1e3, 1e3), "NCHW")],
             {"vae_image_size": processor_geometry(pipe.feature_extractor_vae)[1],
              "clip_image_size": processor_geometry(pipe.feature_extractor_clip)[1]},
-            {"trace_max_abs_diff": enc_diff}, source))
+            source, LICENSE, exporter=EXPORTER, verification={"trace_max_abs_diff": enc_diff}))
 
         # --- UNet (traced at batch 2, checked at batch 1 and 2) ---
         unet = UNet(inner_unet).eval()
@@ -235,11 +228,12 @@ def main():
             sys.exit(f"traced UNet disagrees with eager (batch 2: {unet_diff}, batch 1: {one_diff})")
         save(traced_unet, os.path.join(args.out_dir, "zero123plus_unet.pt"), contract(
             "mv_unet", "zero123plus-v1.2-unet",
-            [spec("latents", [-1, 4, h, w], (-1e3, 1e3), layout="NCHW"), spec("timestep", [-1], (0, 1000)),
-             spec("encoder_hidden_states", [-1, L, D], (-1e4, 1e4)),
-             spec("ref_latents", [-1, 4, hr, wr], (-1e3, 1e3), layout="NCHW")],
-            [spec("v", [-1, 4, h, w], (-1e3, 1e3), layout="NCHW")],
-            unet_params, {"trace_max_abs_diff_batch2": unet_diff, "trace_max_abs_diff_batch1": one_diff}, source))
+            [tensor_spec("latents", [-1, 4, h, w], (-1e3, 1e3), "NCHW"), tensor_spec("timestep", [-1], (0, 1000)),
+             tensor_spec("encoder_hidden_states", [-1, L, D], (-1e4, 1e4)),
+             tensor_spec("ref_latents", [-1, 4, hr, wr], (-1e3, 1e3), "NCHW")],
+            [tensor_spec("v", [-1, 4, h, w], (-1e3, 1e3), "NCHW")],
+            unet_params, source, LICENSE, exporter=EXPORTER,
+            verification={"trace_max_abs_diff_batch2": unet_diff, "trace_max_abs_diff_batch1": one_diff}))
 
         # --- VAE decoder ---
         dec = Decoder(pipe.vae).eval()
@@ -250,10 +244,10 @@ def main():
             sys.exit(f"traced VAE decoder disagrees with eager ({dec_diff})")
         save(traced_dec, os.path.join(args.out_dir, "zero123plus_vae_decoder.pt"), contract(
             "mv_vae_decoder", "zero123plus-v1.2-vae-decoder",
-            [spec("latents", [-1, 4, -1, -1], (-1e3, 1e3), layout="NCHW")],
-            [spec("image", [-1, 3, -1, -1], (-1, 1), "srgb", "NCHW")],
+            [tensor_spec("latents", [-1, 4, -1, -1], (-1e3, 1e3), "NCHW")],
+            [tensor_spec("image", [-1, 3, -1, -1], (-1, 1), "NCHW", "srgb")],
             {"scale_factor": vae_factor, "scaling_factor": scaling_factor},
-            {"trace_max_abs_diff": dec_diff}, source))
+            source, LICENSE, exporter=EXPORTER, verification={"trace_max_abs_diff": dec_diff}))
     print("done; install the three files together (see docs/models.md)")
 
 

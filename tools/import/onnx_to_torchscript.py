@@ -13,7 +13,6 @@ Usage: onnx_to_torchscript.py MODEL.onnx OUT.pt [--size 1024] [--output output] 
                               [--name isnet] [--source ...] [--license AGPL-3.0]
 """
 import argparse
-import json
 import math
 import os
 import sys
@@ -24,6 +23,9 @@ import onnx
 import onnx.numpy_helper
 import torch
 import torch.nn.functional as F
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.realpath(__file__))))  # tools/
+from synthdrive_contract import contract, save_scripted, tensor_spec  # noqa: E402
 
 OPS = ["Add", "Cast", "Concat", "Constant", "Conv", "MaxPool", "Mul", "Relu", "Resize", "Shape", "Sigmoid", "Slice",
        "Sub", "Div", "Reshape", "Unsqueeze", "Identity"]
@@ -252,16 +254,12 @@ def convert(onnx_path, out_path, size, output="output", mean=128.0, std=256.0, n
     if tuple(y.shape) != (1, 1, size, size):
         raise UnsupportedGraph(f"output {output!r} has shape {tuple(y.shape)}, not (1, 1, {size}, {size})")
     ops = sorted({n.op_type for n in model.graph.node})
-    contract = {"format": "synthdrive-model/1", "stage": "segmentation", "name": name, "source": source,
-                "license": license_, "importer": "tools/import/onnx_to_torchscript.py",
-                "inputs": [{"name": "image", "shape": [1, 3, size, size], "dtype": "float32", "layout": "NCHW",
-                            "range": [0, 1], "encoding": "srgb"}],
-                "outputs": [{"name": "mask", "shape": [1, 1, size, size], "dtype": "float32", "layout": "NCHW",
-                             "range": [0, 1], "encoding": "linear"}],
-                "params": {"input_size": size},
-                "verification": dict(verification or {}), "onnx_ops": ops}
+    doc = contract("segmentation", name, [tensor_spec("image", [1, 3, size, size], (0, 1), "NCHW", "srgb")],
+                   [tensor_spec("mask", [1, 1, size, size], (0, 1), "NCHW", "linear")], {"input_size": size},
+                   source, license_, importer="tools/import/onnx_to_torchscript.py",
+                   verification=dict(verification or {}), onnx_ops=ops)
     tmp = out_path + ".tmp"
-    torch.jit.save(traced, tmp, _extra_files={"synthdrive_contract.json": json.dumps(contract)})
+    save_scripted(traced, tmp, doc)
     os.replace(tmp, out_path)
     return traced, ops
 

@@ -25,6 +25,9 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.realpath(__file__))))  # tools/
+from synthdrive_contract import contract, save_scripted, tensor_spec  # noqa: E402
+
 IMPORTER = "tools/import/tfjs_layers_to_torchscript.py"
 FUSED_ACTIVATIONS = ("linear", "relu", "sigmoid", "tanh", "softmax")
 SUPPORTED = ("InputLayer", "Conv2D", "Activation", "ReLU", "LeakyReLU", "Add", "Multiply", "Concatenate",
@@ -652,19 +655,20 @@ def package_relative(path):
 # Contract and output
 
 
-def contract(args, imported, verification):
+def build_contract(args, imported, verification):
     def port(channels, value_range):
-        return {"name": "image", "shape": [-1, channels, -1, -1], "dtype": "float32", "layout": "NCHW",
-                "range": value_range, "encoding": args.encoding}
+        return tensor_spec("image", [-1, channels, -1, -1], number_list(value_range), "NCHW", args.encoding)
 
-    doc = {"format": "synthdrive-model/1", "stage": args.stage, "name": args.name, "source": args.source,
-           "license": args.license, "importer": IMPORTER,
-           "inputs": [port(imported.in_channels, number_list(args.input_range))],
-           "outputs": [port(imported.out_channels, number_list(args.output_range or args.input_range))],
-           "params": {"scale": imported.scale, "receptive_radius": imported.radius}}
+    extra = {"importer": IMPORTER}
     if verification:
-        doc["verification"] = verification
-    return doc
+        extra["verification"] = verification
+    try:
+        return contract(args.stage, args.name, [port(imported.in_channels, args.input_range)],
+                        [port(imported.out_channels, args.output_range or args.input_range)],
+                        {"scale": imported.scale, "receptive_radius": imported.radius}, args.source, args.license,
+                        **extra)
+    except ValueError as e:  # e.g. an --input-range whose low is not below its high
+        raise ImportFailure(args.out, str(e))
 
 
 def number_list(values):
@@ -684,7 +688,7 @@ def save_atomically(traced, out_path, doc):
     os.close(fd)
     try:
         os.chmod(tmp, 0o666 & ~current_umask())  # mkstemp's 0600 would hide the model from other users.
-        torch.jit.save(traced, tmp, _extra_files={"synthdrive_contract.json": json.dumps(doc, indent=1)})
+        save_scripted(traced, tmp, doc, indent=1)
         os.replace(tmp, out_path)
     finally:
         if os.path.exists(tmp):
@@ -708,7 +712,7 @@ def run(args):
         verification = {"input": package_relative(args.verify_input),
                         "expected": package_relative(args.verify_expected),
                         "psnr_db": round(psnr, 2) if math.isfinite(psnr) else 999.0}
-    save_atomically(traced, args.out, contract(args, imported, verification))
+    save_atomically(traced, args.out, build_contract(args, imported, verification))
     print(f"imported {args.name}: {imported.layers} layers, {imported.params:,} parameters, x{imported.scale}, "
           f"receptive radius {imported.radius} px, {time.time() - started:.1f} s -> {args.out}")
 

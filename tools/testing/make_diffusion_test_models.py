@@ -27,34 +27,30 @@ import torch.nn.functional as F
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import scheduler_reference as sr  # noqa: E402  (the independent sampler + noise replay)
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.realpath(__file__))))  # tools/
+from synthdrive_contract import contract, save_scripted, tensor_spec  # noqa: E402
 
 T = 1000
 BETA_START, BETA_END = 0.00085, 0.012
 SCALING_FACTOR = 0.18215
 EMBED_LEN, EMBED_DIM = 4, 8
-
-
-def spec(name, shape, rng=(-1e9, 1e9), encoding=""):
-    return {"name": name, "shape": shape, "dtype": "float32", "layout": "", "range": list(rng), "encoding": encoding}
-
-
-def contract(stage, name, inputs, outputs, params):
-    return {"format": "synthdrive-model/1", "stage": stage, "name": name,
-            "source": "tools/testing/make_diffusion_test_models.py", "license": "Apache-2.0",
-            "inputs": inputs, "outputs": outputs, "params": params}
-
+SOURCE, LICENSE = "tools/testing/make_diffusion_test_models.py", "Apache-2.0"
+ANY = (-1e9, 1e9)  # the range of tensors the contracts leave unbounded (no layout stated either)
 
 ENCODER_CONTRACT = contract(
     "mv_image_encoder", "tiny-mv-encoder",
-    [spec("image", [1, 3, -1, -1], (0, 1), "srgb")],
-    [spec("cond_embeds", [2, -1, -1]), spec("ref_latents", [2, 4, -1, -1])], {})
+    [tensor_spec("image", [1, 3, -1, -1], (0, 1), encoding="srgb")],
+    [tensor_spec("cond_embeds", [2, -1, -1], ANY), tensor_spec("ref_latents", [2, 4, -1, -1], ANY)], {},
+    SOURCE, LICENSE)
 UNET_PARAMS = {"num_train_timesteps": T, "beta_start": BETA_START, "beta_end": BETA_END, "beta_schedule": 0,
                "timestep_spacing": 0, "steps_offset": 1, "v_prediction": 1}
-UNET_INPUTS = [spec("latents", [-1, 4, -1, -1]), spec("timestep", [-1]),
-               spec("encoder_hidden_states", [-1, -1, -1]), spec("ref_latents", [-1, 4, -1, -1])]
+UNET_INPUTS = [tensor_spec("latents", [-1, 4, -1, -1], ANY), tensor_spec("timestep", [-1], ANY),
+               tensor_spec("encoder_hidden_states", [-1, -1, -1], ANY),
+               tensor_spec("ref_latents", [-1, 4, -1, -1], ANY)]
 DECODER_CONTRACT = contract(
-    "mv_vae_decoder", "tiny-mv-decoder", [spec("latents", [-1, 4, -1, -1])],
-    [spec("image", [-1, 3, -1, -1], (-1, 1))], {"scale_factor": 8, "scaling_factor": SCALING_FACTOR})
+    "mv_vae_decoder", "tiny-mv-decoder", [tensor_spec("latents", [-1, 4, -1, -1], ANY)],
+    [tensor_spec("image", [-1, 3, -1, -1], (-1, 1))], {"scale_factor": 8, "scaling_factor": SCALING_FACTOR},
+    SOURCE, LICENSE)
 
 
 class TinyEncoder(torch.nn.Module):
@@ -171,10 +167,6 @@ def reference_generate(encoder, unet, decoder, obj, steps, guidance, seed):
     return (raw / 0.5 * 0.8 / 2 + 0.5).clamp(0, 1).float()
 
 
-def save(module, path, extra):
-    torch.jit.save(torch.jit.script(module), path, _extra_files={"synthdrive_contract.json": json.dumps(extra)})
-
-
 def main():
     out = sys.argv[1]
     torch.manual_seed(11)
@@ -185,26 +177,28 @@ def main():
                                                       [-0.1, 0.0, 0.2, 0.4]]).reshape(3, 4, 1, 1))
         decoder.conv.bias.copy_(torch.tensor([0.05, -0.1, 0.0]))
     target = [0.1, -0.3, 0.25, 0.05]
-    unet_contract = contract("mv_unet", "tiny-mv-unet", UNET_INPUTS, [spec("v", [-1, 4, -1, -1])], UNET_PARAMS)
+    unet_contract = contract("mv_unet", "tiny-mv-unet", UNET_INPUTS, [tensor_spec("v", [-1, 4, -1, -1], ANY)],
+                             UNET_PARAMS, SOURCE, LICENSE)
     for sub in ("diffusion", "oracle", "missing_two", "wrong_stage"):
         shutil.rmtree(os.path.join(out, sub), ignore_errors=True)
         os.makedirs(os.path.join(out, sub))
     d = os.path.join(out, "diffusion")
-    save(encoder, os.path.join(d, "zero123plus_image_encoder.pt"), ENCODER_CONTRACT)
-    save(unet, os.path.join(d, "zero123plus_unet.pt"), unet_contract)
-    save(decoder, os.path.join(d, "zero123plus_vae_decoder.pt"), DECODER_CONTRACT)
+    save_scripted(encoder, os.path.join(d, "zero123plus_image_encoder.pt"), ENCODER_CONTRACT)
+    save_scripted(unet, os.path.join(d, "zero123plus_unet.pt"), unet_contract)
+    save_scripted(decoder, os.path.join(d, "zero123plus_vae_decoder.pt"), DECODER_CONTRACT)
     o = os.path.join(out, "oracle")
-    save(encoder, os.path.join(o, "zero123plus_image_encoder.pt"), ENCODER_CONTRACT)
-    save(OracleUNet(target), os.path.join(o, "zero123plus_unet.pt"), dict(unet_contract, name="oracle-mv-unet"))
-    save(decoder, os.path.join(o, "zero123plus_vae_decoder.pt"), DECODER_CONTRACT)
+    save_scripted(encoder, os.path.join(o, "zero123plus_image_encoder.pt"), ENCODER_CONTRACT)
+    save_scripted(OracleUNet(target), os.path.join(o, "zero123plus_unet.pt"),
+                  dict(unet_contract, name="oracle-mv-unet"))
+    save_scripted(decoder, os.path.join(o, "zero123plus_vae_decoder.pt"), DECODER_CONTRACT)
     with open(os.path.join(out, "oracle.json"), "w") as f:
         json.dump({"target": target, "weight": decoder.conv.weight.reshape(3, 4).tolist(),
                    "bias": decoder.conv.bias.tolist(), "scaling_factor": SCALING_FACTOR}, f)
-    save(encoder, os.path.join(out, "missing_two", "zero123plus_image_encoder.pt"), ENCODER_CONTRACT)
+    save_scripted(encoder, os.path.join(out, "missing_two", "zero123plus_image_encoder.pt"), ENCODER_CONTRACT)
     w = os.path.join(out, "wrong_stage")
-    save(unet, os.path.join(w, "zero123plus_image_encoder.pt"), unet_contract)
-    save(unet, os.path.join(w, "zero123plus_unet.pt"), unet_contract)
-    save(decoder, os.path.join(w, "zero123plus_vae_decoder.pt"), DECODER_CONTRACT)
+    save_scripted(unet, os.path.join(w, "zero123plus_image_encoder.pt"), unet_contract)
+    save_scripted(unet, os.path.join(w, "zero123plus_unet.pt"), unet_contract)
+    save_scripted(decoder, os.path.join(w, "zero123plus_vae_decoder.pt"), DECODER_CONTRACT)
     grid = reference_generate(encoder, unet, decoder, reference_object(), steps=3, guidance=3.0, seed=21)
     write_raw(os.path.join(out, "reference_grid.f32"), grid)
     print(f"make_diffusion_test_models: wrote the tiny multi-view diffusion models to {out}")

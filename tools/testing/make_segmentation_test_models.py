@@ -7,7 +7,6 @@ input range, NCHW layout and flips all change its answer. The C++ test checks th
 images of other sizes (resizing) and against this module's own output on a 64x64 reference (no resizing).
 The other files break one thing each. Usage: make_segmentation_test_models.py OUT_DIR
 """
-import json
 import os
 import sys
 
@@ -15,17 +14,17 @@ import torch
 
 from raw_tensors import write_raw  # noqa: E402  (beside this script)
 
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.realpath(__file__))))  # tools/
+from synthdrive_contract import contract, save_scripted, tensor_spec  # noqa: E402
+
 SIZE = 64
+SOURCE = "tools/testing/make_segmentation_test_models.py"
 
 
-def contract(name, stage="segmentation", size=SIZE, out_range=(0, 1), in_shape=None):
-    return {"format": "synthdrive-model/1", "stage": stage, "name": name,
-            "source": "tools/testing/make_segmentation_test_models.py", "license": "Apache-2.0",
-            "inputs": [{"name": "image", "shape": in_shape or [1, 3, size, size], "dtype": "float32",
-                        "layout": "NCHW", "range": [0, 1], "encoding": "srgb"}],
-            "outputs": [{"name": "mask", "shape": [1, 1, size, size], "dtype": "float32", "layout": "NCHW",
-                         "range": list(out_range), "encoding": "linear"}],
-            "params": {"input_size": size}}
+def seg_contract(name, stage="segmentation", size=SIZE, out_range=(0, 1), in_shape=None):
+    return contract(stage, name, [tensor_spec("image", in_shape or [1, 3, size, size], (0, 1), "NCHW", "srgb")],
+                    [tensor_spec("mask", [1, 1, size, size], out_range, "NCHW", "linear")], {"input_size": size},
+                    SOURCE, "Apache-2.0")
 
 
 class ColourRule(torch.nn.Module):
@@ -46,22 +45,18 @@ class Empty(torch.nn.Module):
         return torch.zeros_like(x[:, 0:1])
 
 
-def save(module, path, extra):
-    torch.jit.save(torch.jit.script(module), path, _extra_files={"synthdrive_contract.json": json.dumps(extra)})
-
-
 def main():
     out = sys.argv[1]
     os.makedirs(out, exist_ok=True)
     torch.manual_seed(3)
     rule = ColourRule().eval()
-    save(rule, os.path.join(out, "seg_tiny.pt"), contract("seg-tiny"))
+    save_scripted(rule, os.path.join(out, "seg_tiny.pt"), seg_contract("seg-tiny"))
     scaled = ColourRule(255.0).eval()
     scaled.load_state_dict(rule.state_dict())
-    save(scaled, os.path.join(out, "seg_tiny_255.pt"), contract("seg-tiny-255", out_range=(0, 255)))
-    save(Empty(), os.path.join(out, "seg_empty.pt"), contract("seg-empty"))
-    save(rule, os.path.join(out, "seg_wrong_stage.pt"), contract("seg-tiny", stage="super_resolution"))
-    save(rule, os.path.join(out, "seg_any_size.pt"), contract("seg-any", in_shape=[1, 3, -1, -1]))
+    save_scripted(scaled, os.path.join(out, "seg_tiny_255.pt"), seg_contract("seg-tiny-255", out_range=(0, 255)))
+    save_scripted(Empty(), os.path.join(out, "seg_empty.pt"), seg_contract("seg-empty"))
+    save_scripted(rule, os.path.join(out, "seg_wrong_stage.pt"), seg_contract("seg-tiny", stage="super_resolution"))
+    save_scripted(rule, os.path.join(out, "seg_any_size.pt"), seg_contract("seg-any", in_shape=[1, 3, -1, -1]))
     # Reference: an 8-bit 64x64 image (object block + noise), HWC, and the module's mask on it.
     g = torch.Generator().manual_seed(11)
     img = torch.empty(SIZE, SIZE, 3)

@@ -17,27 +17,17 @@ import torch
 from raw_tensors import write_raw  # noqa: E402  (beside this script)
 import torch.nn.functional as F
 
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.realpath(__file__))))  # tools/
+from synthdrive_contract import contract, save_scripted, tensor_spec  # noqa: E402
+
 SOURCE = "tools/testing/make_stage_test_models.py"
+LICENSE = "Apache-2.0"
 
 # The handmade BPE merges of src/models/clip_tokenizer_test.cpp: vocabulary 512 + 6 + 2 = 520.
 MERGES = "#version: 0.2\nh e\nl l\nhe ll\nhell o</w>\nw o\nr l\n"
 VOCAB = 520
 # "hello world" under MERGES, worked out by hand in clip_tokenizer_test.cpp: start, hello</w>, wo, rl, d</w>, end.
 HELLO_WORLD_IDS = [518, 515, 516, 517, 256 + ord("d") - 33, 519]
-
-
-def spec(name, shape, rng=(0, 1), layout="", encoding=""):
-    return {"name": name, "shape": shape, "dtype": "float32", "layout": layout, "range": list(rng),
-            "encoding": encoding}
-
-
-def contract(stage, name, inputs, outputs, params):
-    return {"format": "synthdrive-model/1", "stage": stage, "name": name, "source": SOURCE,
-            "license": "Apache-2.0", "inputs": inputs, "outputs": outputs, "params": params}
-
-
-def save(module, path, extra):
-    torch.jit.save(torch.jit.script(module), path, _extra_files={"synthdrive_contract.json": json.dumps(extra)})
 
 
 # --- CLIP -------------------------------------------------------------------------------------------------
@@ -80,12 +70,15 @@ def make_clip(out):
     image, text = TinyClipImage(dim).eval(), TinyClipText(VOCAB, dim, ctx).eval()
     params_i = {"embed_dim": dim, "image_size": size}
     params_t = {"embed_dim": dim, "context_length": ctx, "vocab_size": VOCAB}
-    save(image, os.path.join(d, "clip_image.pt"),
-         contract("clip_image", "clip-tiny-image", [spec("image", [-1, 3, size, size], (0, 1), "NCHW", "srgb")],
-                  [spec("embedding", [-1, dim], (-1e4, 1e4), "NC")], params_i))
-    save(text, os.path.join(d, "clip_text.pt"),
-         contract("clip_text", "clip-tiny-text", [spec("tokens", [-1, ctx], (0, VOCAB - 1), "NL", "token_ids")],
-                  [spec("embedding", [-1, dim], (-1e4, 1e4), "NC")], params_t))
+    embedding = tensor_spec("embedding", [-1, dim], (-1e4, 1e4), "NC")
+    save_scripted(image, os.path.join(d, "clip_image.pt"),
+                  contract("clip_image", "clip-tiny-image",
+                           [tensor_spec("image", [-1, 3, size, size], (0, 1), "NCHW", "srgb")], [embedding],
+                           params_i, SOURCE, LICENSE))
+    save_scripted(text, os.path.join(d, "clip_text.pt"),
+                  contract("clip_text", "clip-tiny-text",
+                           [tensor_spec("tokens", [-1, ctx], (0, VOCAB - 1), "NL", "token_ids")], [dict(embedding)],
+                           params_t, SOURCE, LICENSE))
     with open(os.path.join(d, "bpe_simple_vocab_16e6.txt"), "w") as f:
         f.write(MERGES)
     # References from the eager modules: an image already at 224 (no resize) and the ids of "hello world".
@@ -113,10 +106,10 @@ class TinyNormals(torch.nn.Module):
 
 
 def make_normals(out):
-    img = spec("image", [-1, 3, -1, -1], (0, 1), "NCHW", "srgb")
-    normals = spec("normals", [-1, 3, -1, -1], (-1, 1), "NCHW", "camera_opencv")
-    save(TinyNormals(), os.path.join(out, "normals_tiny.pt"),
-         contract("normal_estimation", "normals-tiny", [img], [normals], {"multiple": 8}))
+    img = tensor_spec("image", [-1, 3, -1, -1], (0, 1), "NCHW", "srgb")
+    normals = tensor_spec("normals", [-1, 3, -1, -1], (-1, 1), "NCHW", "camera_opencv")
+    save_scripted(TinyNormals(), os.path.join(out, "normals_tiny.pt"),
+                  contract("normal_estimation", "normals-tiny", [img], [normals], {"multiple": 8}, SOURCE, LICENSE))
 
 
 # --- LRM ----------------------------------------------------------------------------------------------------
@@ -143,21 +136,22 @@ class TinyLrmDecoder(torch.nn.Module):
 
 
 def make_lrm(out):
-    image = spec("image", [1, 3, 32, 32], (0, 1), "NCHW", "srgb")
-    triplane = spec("triplane", [1, 3, 4, 8, 8], (-1e4, 1e4), "NPCHW")
-    points = spec("points", [1, -1, 3], (-0.5, 0.5), "NPC", "unit_cube")
-    sdf = spec("sdf", [1, -1, 1], (-1e4, 1e4), "NPC")
-    colour = spec("colour", [1, -1, 3], (0, 1), "NPC", "srgb")
+    image = tensor_spec("image", [1, 3, 32, 32], (0, 1), "NCHW", "srgb")
+    triplane = tensor_spec("triplane", [1, 3, 4, 8, 8], (-1e4, 1e4), "NPCHW")
+    points = tensor_spec("points", [1, -1, 3], (-0.5, 0.5), "NPC", "unit_cube")
+    sdf = tensor_spec("sdf", [1, -1, 1], (-1e4, 1e4), "NPC")
+    colour = tensor_spec("colour", [1, -1, 3], (0, 1), "NPC", "srgb")
     params = {"image_size": 32, "triplane_channels": 4, "triplane_resolution": 8}
-    save(TinyLrmEncoder(), os.path.join(out, "lrm_tiny_encoder.pt"),
-         contract("lrm_encoder", "lrm-tiny-encoder", [image], [triplane], params))
-    save(TinyLrmDecoder(), os.path.join(out, "lrm_tiny_decoder.pt"),
-         contract("lrm_decoder", "lrm-tiny-decoder", [dict(triplane), points], [sdf, colour], params))
+    save_scripted(TinyLrmEncoder(), os.path.join(out, "lrm_tiny_encoder.pt"),
+                  contract("lrm_encoder", "lrm-tiny-encoder", [image], [triplane], params, SOURCE, LICENSE))
+    save_scripted(TinyLrmDecoder(), os.path.join(out, "lrm_tiny_decoder.pt"),
+                  contract("lrm_decoder", "lrm-tiny-decoder", [dict(triplane), points], [sdf, colour], params, SOURCE,
+                           LICENSE))
     # The same decoder as a trace frozen at 1000 points would declare itself.
     fixed = [dict(triplane), dict(points, shape=[1, 1000, 3])]
-    save(TinyLrmDecoder(), os.path.join(out, "lrm_tiny_decoder_p1000.pt"),
-         contract("lrm_decoder", "lrm-tiny-decoder-p1000", fixed,
-                  [dict(sdf, shape=[1, 1000, 1]), dict(colour, shape=[1, 1000, 3])], params))
+    save_scripted(TinyLrmDecoder(), os.path.join(out, "lrm_tiny_decoder_p1000.pt"),
+                  contract("lrm_decoder", "lrm-tiny-decoder-p1000", fixed,
+                           [dict(sdf, shape=[1, 1000, 1]), dict(colour, shape=[1, 1000, 3])], params, SOURCE, LICENSE))
 
 
 # --- harmonisation ------------------------------------------------------------------------------------------
@@ -171,13 +165,14 @@ class TinyHarmonizer(torch.nn.Module):
 
 
 def make_harmonizer(out):
-    comp = spec("composite", [-1, 3, -1, -1], (0, 1), "NCHW", "srgb")
-    mask = spec("mask", [-1, 1, -1, -1], (0, 1), "NCHW")
-    res = spec("image", [-1, 3, -1, -1], (0, 1), "NCHW", "srgb")
-    save(TinyHarmonizer(), os.path.join(out, "harmonizer_tiny.pt"),
-         contract("harmonization", "harmonizer-tiny", [comp, mask], [res], {}))
-    save(TinyHarmonizer(), os.path.join(out, "harmonizer_tiny_64.pt"),
-         contract("harmonization", "harmonizer-tiny-64", [comp, mask], [res], {"image_size": 64}))
+    comp = tensor_spec("composite", [-1, 3, -1, -1], (0, 1), "NCHW", "srgb")
+    mask = tensor_spec("mask", [-1, 1, -1, -1], (0, 1), "NCHW")
+    res = tensor_spec("image", [-1, 3, -1, -1], (0, 1), "NCHW", "srgb")
+    save_scripted(TinyHarmonizer(), os.path.join(out, "harmonizer_tiny.pt"),
+                  contract("harmonization", "harmonizer-tiny", [comp, mask], [res], {}, SOURCE, LICENSE))
+    save_scripted(TinyHarmonizer(), os.path.join(out, "harmonizer_tiny_64.pt"),
+                  contract("harmonization", "harmonizer-tiny-64", [comp, mask], [res], {"image_size": 64}, SOURCE,
+                           LICENSE))
 
 
 # --- an independent tokenizer reference -------------------------------------------------------------------

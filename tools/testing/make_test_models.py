@@ -5,7 +5,6 @@ Each model honours (or, for the error cases, deliberately breaks) a SynthDrive s
 is checked end to end -- loading, contract checks, tensor layout and ranges, tiling -- without real weights.
 Usage: make_test_models.py OUT_DIR
 """
-import json
 import os
 import sys
 
@@ -14,14 +13,16 @@ import torch
 from raw_tensors import write_raw  # noqa: E402  (beside this script)
 import torch.nn.functional as F
 
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.realpath(__file__))))  # tools/
+from synthdrive_contract import contract, save_scripted, tensor_spec  # noqa: E402
 
-def contract(stage, name, scale, radius, in_range=(0, 255)):
-    image = {"name": "image", "shape": [-1, 3, -1, -1], "dtype": "float32", "layout": "NCHW",
-             "range": list(in_range), "encoding": "srgb"}
-    return {"format": "synthdrive-model/1", "stage": stage, "name": name,
-            "source": "tools/testing/make_test_models.py", "license": "Apache-2.0",
-            "inputs": [image], "outputs": [dict(image)],
-            "params": {"scale": scale, "receptive_radius": radius}}
+SOURCE = "tools/testing/make_test_models.py"
+
+
+def sr_contract(stage, name, scale, radius, in_range=(0, 255)):
+    image = tensor_spec("image", [-1, 3, -1, -1], in_range, "NCHW", "srgb")
+    return contract(stage, name, [image], [dict(image)], {"scale": scale, "receptive_radius": radius}, SOURCE,
+                    "Apache-2.0")
 
 
 class TinyUpscaler(torch.nn.Module):
@@ -45,21 +46,16 @@ class Identity(torch.nn.Module):
         return x
 
 
-def save(module, path, extra=None):
-    scripted = torch.jit.script(module)
-    files = {"synthdrive_contract.json": json.dumps(extra)} if extra is not None else {}
-    torch.jit.save(scripted, path, _extra_files=files)
-
-
 def main():
     out = sys.argv[1]
     os.makedirs(out, exist_ok=True)
     torch.manual_seed(7)
     model = TinyUpscaler().eval()
-    save(model, os.path.join(out, "sr_tiny_x2.pt"), contract("super_resolution", "sr-tiny-x2", 2, 2.5))
-    save(Identity(), os.path.join(out, "no_contract.pt"))
-    save(model, os.path.join(out, "wrong_stage.pt"), contract("clip_image", "clip-tiny", 2, 2.5))
-    save(Identity(), os.path.join(out, "not_upscaling.pt"), contract("super_resolution", "sr-identity", 2, 0))
+    save_scripted(model, os.path.join(out, "sr_tiny_x2.pt"), sr_contract("super_resolution", "sr-tiny-x2", 2, 2.5))
+    save_scripted(Identity(), os.path.join(out, "no_contract.pt"), None)
+    save_scripted(model, os.path.join(out, "wrong_stage.pt"), sr_contract("clip_image", "clip-tiny", 2, 2.5))
+    save_scripted(Identity(), os.path.join(out, "not_upscaling.pt"),
+                  sr_contract("super_resolution", "sr-identity", 2, 0))
     # A reference pair from the eager module on one whole image: the C++ side must reproduce it tile by tile.
     x = torch.rand(1, 3, 45, 70) * 255.0
     with torch.no_grad():

@@ -10,6 +10,9 @@ PACKAGES=(
   libstb-dev libtinygltf-dev libtinyobjloader-dev
   libnanoflann-dev
   libfaiss-dev libcurl4-openssl-dev
+  # OpenBLAS takes over libblas.so.3 (Debian alternatives) from the netlib reference BLAS: LibTorch's matrix
+  # products (CLIP, the learned stages) and FAISS's batched search run about 11x faster with it.
+  libopenblas0-pthread
   libtorch-dev python3-torch python3-onnx
   libgtest-dev libgmock-dev libbenchmark-dev
 )

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <exception>
 #include <cctype>
 #include <chrono>
 #include <cstring>
@@ -110,6 +111,14 @@ class MappedVectors {
   uint64_t count_ = 0;
   int dim_ = 0;
 };
+
+// FAISS answers a batch of queries with one BLAS matrix product once it holds this many (its default is 20);
+// below that it scans the vectors once per query. A query of a few prompts is already cheaper as a product
+// (the vectors are read once instead of once per prompt), so the product starts at 4.
+[[maybe_unused]] const int kBlasFromQueries = [] {
+  faiss::distance_compute_blas_threshold = 4;
+  return 4;
+}();
 
 const char* VectorFileName(VectorKind kind) {
   return kind == VectorKind::kClip ? "vectors-clip.f32" : "vectors-descriptor.f32";
@@ -397,29 +406,36 @@ ChunkOutput BuildChunk(const SourceState& s, const Chunk& chunk, const IndexBuil
   out.descriptors.assign(crops.size() * D, 0.f);
   fs::create_directories(dir / "crops");
   fs::create_directories(dir / "masks");
+  std::vector<std::exception_ptr> errors(crops.size());
   ParallelFor(0, crops.size(), [&](size_t i) {
-    ObjectCrop& c = crops[i];
-    MinedItem& item = c.item;
-    item.source = s.source.path.string();
-    // A mask with no object pixels (a sliver lost to downscaling) describes nothing: use the whole crop.
-    const bool has_mask = !c.mask.empty() && std::any_of(c.mask.vector().begin(), c.mask.vector().end(),
-                                                         [](uint8_t v) { return v > 127; });
-    if (!has_mask) {
-      c.mask = ImageU8();
-      item.mask_source.clear();
-    }
-    const ImageU8* mask = has_mask ? &c.mask : nullptr;
-    item.sharpness = Sharpness(c.image, mask);
-    item.phash = PerceptualHash(c.image);
-    const std::vector<float> d = ImageDescriptor(c.image, mask);
-    std::copy(d.begin(), d.end(), out.descriptors.begin() + i * D);
-    item.crop_file = "crops/" + item.id + ".jpg";
-    WriteImage(dir / item.crop_file, c.image, options.jpeg_quality);
-    if (mask) {
-      item.mask_file = "masks/" + item.id + ".png";
-      WriteImage(dir / item.mask_file, c.mask);
+    try {
+      ObjectCrop& c = crops[i];
+      MinedItem& item = c.item;
+      item.source = s.source.path.string();
+      // A mask with no object pixels (a sliver lost to downscaling) describes nothing: use the whole crop.
+      const bool has_mask = !c.mask.empty() && std::any_of(c.mask.vector().begin(), c.mask.vector().end(),
+                                                           [](uint8_t v) { return v > 127; });
+      if (!has_mask) {
+        c.mask = ImageU8();
+        item.mask_source.clear();
+      }
+      const ImageU8* mask = has_mask ? &c.mask : nullptr;
+      item.sharpness = Sharpness(c.image, mask);
+      item.phash = PerceptualHash(c.image);
+      const std::vector<float> d = ImageDescriptor(c.image, mask);
+      std::copy(d.begin(), d.end(), out.descriptors.begin() + i * D);
+      item.crop_file = "crops/" + item.id + ".jpg";
+      WriteImage(dir / item.crop_file, c.image, options.jpeg_quality);
+      if (mask) {
+        item.mask_file = "masks/" + item.id + ".png";
+        WriteImage(dir / item.mask_file, c.mask);
+      }
+    } catch (...) {
+      errors[i] = std::current_exception();  // ParallelFor bodies must not throw: rethrown below
     }
   });
+  for (const std::exception_ptr& e : errors)
+    if (e) std::rethrow_exception(e);
   out.crop_seconds = Seconds(t0);
   if (options.clip && !crops.empty()) {
     t0 = std::chrono::steady_clock::now();
@@ -548,10 +564,13 @@ MiningIndex MiningIndex::Open(const fs::path& index_dir) {
         dirs.push_back(e.path());
     }
   std::sort(dirs.begin(), dirs.end());
-  for (const fs::path& dir : dirs) {
+  // Shards parse in parallel (the records are most of the opening time), then join in name order.
+  std::vector<std::vector<MinedItem>> shard_items(dirs.size());
+  std::vector<std::unique_ptr<Shard>> shards(dirs.size());
+  // One shard's records and vector maps (a lambda: Shard is private to MiningIndex).
+  auto load_shard = [&header](const fs::path& dir, std::vector<MinedItem>& items, std::unique_ptr<Shard>& out) {
     auto shard = std::make_unique<Shard>();
     shard->dir = dir;
-    shard->first_row = index.items_.size();
     const fs::path items_file = dir / "items.jsonl";
     std::istringstream lines(ReadFileToString(items_file));
     std::string line;
@@ -564,10 +583,9 @@ MiningIndex MiningIndex::Open(const fs::path& index_dir) {
       } catch (const json::parse_error& e) {
         throw InputError(where, Msg() << "not JSON (" << e.what() << ")");
       }
-      index.items_.push_back(ItemFromJson(j, where));
-      index.item_shard_.push_back(index.shards_.size());
+      items.push_back(ItemFromJson(j, where));
     }
-    shard->rows = index.items_.size() - shard->first_row;
+    shard->rows = items.size();
     shard->descriptor = std::make_unique<MappedVectors>(dir / VectorFileName(VectorKind::kDescriptor), header.descriptor_dim);
     if (header.clip_dim > 0)
       shard->clip = std::make_unique<MappedVectors>(dir / VectorFileName(VectorKind::kClip), header.clip_dim);
@@ -575,7 +593,25 @@ MiningIndex MiningIndex::Open(const fs::path& index_dir) {
       if (v && v->count() != shard->rows)
         throw InputError(dir, Msg() << "holds " << shard->rows << " items but " << v->count()
                                     << " vectors: the shard is corrupt (delete it and run `mine index` again)");
-    index.shards_.push_back(std::move(shard));
+    out = std::move(shard);
+  };
+  std::vector<std::exception_ptr> errors(dirs.size());
+  ParallelFor(0, dirs.size(), [&](size_t s) {
+    try {
+      load_shard(dirs[s], shard_items[s], shards[s]);
+    } catch (...) {
+      errors[s] = std::current_exception();  // ParallelFor bodies must not throw: rethrown below, first shard first
+    }
+  });
+  for (const std::exception_ptr& e : errors)
+    if (e) std::rethrow_exception(e);
+  for (size_t s = 0; s < dirs.size(); ++s) {
+    shards[s]->first_row = index.items_.size();
+    for (MinedItem& item : shard_items[s]) {
+      index.items_.push_back(std::move(item));
+      index.item_shard_.push_back(s);
+    }
+    index.shards_.push_back(std::move(shards[s]));
   }
   return index;
 }
@@ -587,20 +623,24 @@ std::vector<std::vector<SearchHit>> MiningIndex::Search(VectorKind kind, const f
   const size_t d = static_cast<size_t>(dim(kind));
   std::vector<std::vector<SearchHit>> hits(nq);
   if (k == 0) return hits;
-  std::vector<float> scores;
-  std::vector<int64_t> labels;
-  for (const auto& shard : shards_) {
-    const MappedVectors* v = kind == VectorKind::kClip ? shard->clip.get() : shard->descriptor.get();
-    if (!v || v->count() == 0) continue;
+  // One exact top-k per shard, shards in parallel (a single query is memory-bound in one thread), then merged.
+  std::vector<std::vector<std::vector<SearchHit>>> per_shard(shards_.size());
+  ParallelFor(0, shards_.size(), [&](size_t s) {
+    const Shard& shard = *shards_[s];
+    const MappedVectors* v = kind == VectorKind::kClip ? shard.clip.get() : shard.descriptor.get();
+    if (!v || v->count() == 0) return;
     const size_t kk = std::min(k, v->count());
-    scores.assign(nq * kk, 0.f);
-    labels.assign(nq * kk, -1);
+    std::vector<float> scores(nq * kk, 0.f);
+    std::vector<int64_t> labels(nq * kk, -1);
     faiss::knn_inner_product(queries, v->data(), d, nq, v->count(), kk, scores.data(), labels.data());
+    per_shard[s].resize(nq);
     for (size_t q = 0; q < nq; ++q)
       for (size_t j = 0; j < kk; ++j)
         if (labels[q * kk + j] >= 0)
-          hits[q].push_back({shard->first_row + static_cast<size_t>(labels[q * kk + j]), scores[q * kk + j]});
-  }
+          per_shard[s][q].push_back({shard.first_row + static_cast<size_t>(labels[q * kk + j]), scores[q * kk + j]});
+  });
+  for (const auto& shard_hits : per_shard)
+    for (size_t q = 0; q < shard_hits.size(); ++q) hits[q].insert(hits[q].end(), shard_hits[q].begin(), shard_hits[q].end());
   for (auto& h : hits) {
     // Ties broken by row so results do not depend on shard order.
     std::sort(h.begin(), h.end(), [](const SearchHit& a, const SearchHit& b) {

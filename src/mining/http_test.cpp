@@ -1,10 +1,5 @@
 #include "mining/http.h"
 
-#include <arpa/inet.h>
-#include <netinet/in.h>
-#include <sys/socket.h>
-#include <unistd.h>
-
 #include <gtest/gtest.h>
 
 #include <atomic>
@@ -16,6 +11,7 @@
 #include "core/error.h"
 #include "io/files.h"
 #include "io/image_io.h"
+#include "testing/http_server.h"
 #include "testing/testing.h"
 
 namespace sd::mining {
@@ -29,180 +25,79 @@ ImageU8 Pattern(int w, int h, int c) {
   return img;
 }
 
-bool SendAll(int fd, std::string_view data) {
-  while (!data.empty()) {
-    const ssize_t n = ::send(fd, data.data(), data.size(), MSG_NOSIGNAL);
-    if (n <= 0) return false;
-    data.remove_prefix(static_cast<size_t>(n));
-  }
-  return true;
-}
+using sd::testing::LoopbackHttpServer;
 
-// Blocks until the peer closes the connection (or the server shuts it down): how the test server "hangs".
-void WaitForClose(int fd) {
-  char buf[4096];
-  while (::recv(fd, buf, sizeof(buf), 0) > 0) {
-  }
-}
+int ClosedPort() { return sd::testing::ClosedLoopbackPort(); }
 
-std::string Response(int status, const std::string& reason, const std::string& content_type,
-                     const std::string& body, const std::string& extra_headers = "") {
-  std::string r = "HTTP/1.1 " + std::to_string(status) + " " + reason + "\r\n";
-  if (!content_type.empty()) r += "Content-Type: " + content_type + "\r\n";
-  r += "Content-Length: " + std::to_string(body.size()) + "\r\n" + extra_headers + "Connection: close\r\n\r\n";
-  return r + body;
-}
-
-// A loopback HTTP/1.1 server with one route per failure mode of a real crawl. One thread per connection and
-// "Connection: close" on every response keep it simple; the destructor unblocks and joins every thread.
+// The loopback server with one route per failure mode of a real crawl.
 class TestServer {
  public:
   static constexpr size_t kBigBytes = 10u << 20;
   static constexpr size_t kChunkedCapBytes = 8u << 20;
 
-  TestServer() : png_(EncodeImage(Pattern(23, 17, 3), "png")), jpg_(EncodeImage(Pattern(32, 24, 3), "jpg")) {
-    listen_fd_ = ::socket(AF_INET, SOCK_STREAM, 0);
-    SD_CHECK(listen_fd_ >= 0, << "socket");
-    sockaddr_in addr{};
-    addr.sin_family = AF_INET;
-    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    addr.sin_port = 0;
-    SD_CHECK(::bind(listen_fd_, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) == 0, << "bind");
-    SD_CHECK(::listen(listen_fd_, 64) == 0, << "listen");
-    socklen_t len = sizeof(addr);
-    SD_CHECK(::getsockname(listen_fd_, reinterpret_cast<sockaddr*>(&addr), &len) == 0, << "getsockname");
-    port_ = ntohs(addr.sin_port);
-    accept_thread_ = std::thread([this] { AcceptLoop(); });
-  }
+  TestServer()
+      : png_(EncodeImage(Pattern(23, 17, 3), "png")),
+        jpg_(EncodeImage(Pattern(32, 24, 3), "jpg")),
+        server_([this](LoopbackHttpServer& s, int fd, const std::string& target, int hit) {
+          Route(s, fd, target, hit);
+        }) {}
 
-  ~TestServer() {
-    stopping_ = true;
-    ::shutdown(listen_fd_, SHUT_RDWR);  // wakes the blocked accept()
-    accept_thread_.join();
-    ::close(listen_fd_);
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      for (int fd : open_fds_) ::shutdown(fd, SHUT_RDWR);  // wakes handlers blocked in recv/send
-    }
-    for (std::thread& t : connection_threads_) t.join();
-  }
-
-  std::string Url(const std::string& target) const {
-    return "http://127.0.0.1:" + std::to_string(port_) + target;
-  }
-  int Hits(const std::string& target) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    return hits_[target];
-  }
+  std::string Url(const std::string& target) const { return server_.Url(target); }
+  int Hits(const std::string& target) { return server_.Hits(target); }
   const std::string& png() const { return png_; }
   const std::string& jpg() const { return jpg_; }
 
  private:
-  void AcceptLoop() {
-    while (!stopping_) {
-      const int fd = ::accept(listen_fd_, nullptr, nullptr);
-      if (fd < 0) {
-        if (stopping_) return;
-        continue;
-      }
-      std::lock_guard<std::mutex> lock(mutex_);
-      open_fds_.insert(fd);
-      connection_threads_.emplace_back([this, fd] {
-        Handle(fd);
-        std::lock_guard<std::mutex> inner(mutex_);
-        open_fds_.erase(fd);
-        ::close(fd);
-      });
-    }
-  }
-
-  void Handle(int fd) {
-    std::string request;
-    char buf[4096];
-    while (request.find("\r\n\r\n") == std::string::npos) {
-      const ssize_t n = ::recv(fd, buf, sizeof(buf), 0);
-      if (n <= 0) return;
-      request.append(buf, static_cast<size_t>(n));
-    }
-    // "GET <target> HTTP/1.1"
-    const size_t a = request.find(' ');
-    const size_t b = request.find(' ', a + 1);
-    if (a == std::string::npos || b == std::string::npos) return;
-    const std::string target = request.substr(a + 1, b - a - 1);
+  void Route(LoopbackHttpServer& s, int fd, const std::string& target, int hit) {
+    using L = LoopbackHttpServer;
     const std::string path = target.substr(0, target.find('?'));
-    int hit = 0;
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      hit = ++hits_[target];
-    }
-
     if (path == "/ok.png") {
-      SendAll(fd, Response(200, "OK", "image/png", png_));
+      L::SendAll(fd, L::Response(200, "OK", "image/png", png_));
     } else if (path == "/ok.jpg") {
-      SendAll(fd, Response(200, "OK", "image/jpeg", jpg_));
+      L::SendAll(fd, L::Response(200, "OK", "image/jpeg", jpg_));
     } else if (path == "/ok-upper") {
-      SendAll(fd, Response(200, "OK", "Image/PNG; charset=binary", png_));
+      L::SendAll(fd, L::Response(200, "OK", "Image/PNG; charset=binary", png_));
     } else if (path == "/html") {
-      SendAll(fd, Response(200, "OK", "text/html; charset=utf-8", "<html><body>hello</body></html>"));
+      L::SendAll(fd, L::Response(200, "OK", "text/html; charset=utf-8", "<html><body>hello</body></html>"));
     } else if (path == "/big") {
       // Announces 10 MB and sends only a little: a client that did not refuse at the headers would stall.
-      SendAll(fd, "HTTP/1.1 200 OK\r\nContent-Type: image/png\r\nContent-Length: " + std::to_string(kBigBytes) +
-                      "\r\nConnection: close\r\n\r\n" + std::string(1000, 'x'));
-      WaitForClose(fd);
+      L::SendAll(fd, "HTTP/1.1 200 OK\r\nContent-Type: image/png\r\nContent-Length: " + std::to_string(kBigBytes) +
+                         "\r\nConnection: close\r\n\r\n" + std::string(1000, 'x'));
+      L::WaitForClose(fd);
     } else if (path == "/big-chunked") {
       // No length announced; streams until the client hangs up (or a cap far above any test's max_bytes).
-      if (!SendAll(fd, "HTTP/1.1 200 OK\r\nContent-Type: image/png\r\nTransfer-Encoding: chunked\r\n"
-                       "Connection: close\r\n\r\n"))
+      if (!L::SendAll(fd, "HTTP/1.1 200 OK\r\nContent-Type: image/png\r\nTransfer-Encoding: chunked\r\n"
+                          "Connection: close\r\n\r\n"))
         return;
       const std::string chunk = "4000\r\n" + std::string(0x4000, 'y') + "\r\n";
-      for (size_t sent = 0; sent < kChunkedCapBytes && !stopping_; sent += 0x4000)
-        if (!SendAll(fd, chunk)) return;
-      SendAll(fd, "0\r\n\r\n");
+      for (size_t sent = 0; sent < kChunkedCapBytes && !s.stopping(); sent += 0x4000)
+        if (!L::SendAll(fd, chunk)) return;
+      L::SendAll(fd, "0\r\n\r\n");
     } else if (path == "/hang") {
-      WaitForClose(fd);
+      L::WaitForClose(fd);
     } else if (path == "/stall") {
-      SendAll(fd, "HTTP/1.1 200 OK\r\nContent-Type: image/png\r\nContent-Length: 100000\r\n"
-                  "Connection: close\r\n\r\n" + png_.substr(0, 100));
-      WaitForClose(fd);
+      L::SendAll(fd, "HTTP/1.1 200 OK\r\nContent-Type: image/png\r\nContent-Length: 100000\r\n"
+                     "Connection: close\r\n\r\n" + png_.substr(0, 100));
+      L::WaitForClose(fd);
     } else if (path == "/flaky") {
-      if (hit <= 2) SendAll(fd, Response(503, "Service Unavailable", "text/plain", "busy"));
-      else SendAll(fd, Response(200, "OK", "image/png", png_));
+      if (hit <= 2) L::SendAll(fd, L::Response(503, "Service Unavailable", "text/plain", "busy"));
+      else L::SendAll(fd, L::Response(200, "OK", "image/png", png_));
     } else if (path == "/too-many") {
-      SendAll(fd, Response(429, "Too Many Requests", "text/plain", "slow down"));
+      L::SendAll(fd, L::Response(429, "Too Many Requests", "text/plain", "slow down"));
     } else if (path == "/redirect") {
-      SendAll(fd, Response(302, "Found", "text/html", "moved", "Location: /ok.png\r\n"));
+      L::SendAll(fd, L::Response(302, "Found", "text/html", "moved", "Location: /ok.png\r\n"));
     } else if (path == "/loop") {
-      SendAll(fd, Response(302, "Found", "text/html", "moved", "Location: /loop\r\n"));
+      L::SendAll(fd, L::Response(302, "Found", "text/html", "moved", "Location: /loop\r\n"));
     } else if (path == "/not-image") {
-      SendAll(fd, Response(200, "OK", "image/png", "this is not a png at all, just text"));
+      L::SendAll(fd, L::Response(200, "OK", "image/png", "this is not a png at all, just text"));
     } else {
-      SendAll(fd, Response(404, "Not Found", "text/plain", "no such thing"));
+      L::SendAll(fd, L::Response(404, "Not Found", "text/plain", "no such thing"));
     }
   }
 
   const std::string png_, jpg_;
-  int listen_fd_ = -1;
-  int port_ = 0;
-  std::atomic<bool> stopping_{false};
-  std::thread accept_thread_;
-  std::mutex mutex_;
-  std::set<int> open_fds_;
-  std::vector<std::thread> connection_threads_;
-  std::map<std::string, int> hits_;
+  LoopbackHttpServer server_;  // last: its threads use the members above
 };
-
-// A port nothing listens on: bound, read back, and closed again.
-int ClosedPort() {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in addr{};
-  addr.sin_family = AF_INET;
-  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  SD_CHECK(::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) == 0, << "bind");
-  socklen_t len = sizeof(addr);
-  ::getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len);
-  ::close(fd);
-  return ntohs(addr.sin_port);
-}
 
 // Small limits so every failure mode resolves in about a second.
 FetchOptions Fast() {

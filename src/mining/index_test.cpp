@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <map>
 #include <random>
 #include <set>
 
@@ -16,6 +17,7 @@
 #include "mining/descriptor.h"
 #include "mining/query.h"
 #include "models/clip.h"
+#include "testing/http_server.h"
 #include "testing/testing.h"
 
 namespace sd::mining {
@@ -202,6 +204,62 @@ TEST(MiningIndex, BadInputIsRefusedWithoutPartialOutput) {
     EXPECT_NE(std::string(e.what()).find("items.jsonl:4"), std::string::npos) << e.what();
   }
   EXPECT_THROW(MiningIndex::Open(tmp / "nothing"), InputError);
+}
+
+// A URL list where some downloads fail: the good images are indexed, each failure is recorded in its chunk with
+// the reason, and a rerun fetches nothing again (the chunks are done).
+TEST(MiningIndex, UrlListFailuresAreRecordedWithoutLosingTheRest) {
+  using sd::testing::LoopbackHttpServer;
+  const std::vector<ImageU8> crops = RealCrops(4, 96);
+  std::vector<std::string> bodies;
+  for (const ImageU8& c : crops) bodies.push_back(EncodeImage(c, "png"));
+  LoopbackHttpServer server([&](LoopbackHttpServer&, int fd, const std::string& target, int) {
+    using L = LoopbackHttpServer;
+    for (size_t i = 0; i < bodies.size(); ++i)
+      if (target == "/img" + std::to_string(i) + ".png") {
+        L::SendAll(fd, L::Response(200, "OK", "image/png", bodies[i]));
+        return;
+      }
+    if (target == "/page") L::SendAll(fd, L::Response(200, "OK", "text/html", "<html></html>"));
+    else if (target == "/hang") L::WaitForClose(fd);
+    else if (target == "/garbage") L::SendAll(fd, L::Response(200, "OK", "image/png", "not a png"));
+    else L::SendAll(fd, L::Response(404, "Not Found", "text/plain", "no"));
+  });
+  TempDir tmp;
+  std::ofstream list(tmp / "urls.txt");
+  list << "# test list\n";
+  for (const char* t : {"/img0.png", "/missing", "/img1.png", "/page", "/hang", "/img2.png", "/garbage", "/img3.png"})
+    list << server.Url(t) << "\n";
+  list.close();
+  IndexBuildOptions o;
+  o.sources = {{SourceKind::kUrl, tmp / "urls.txt"}};
+  o.chunk_size = 3;
+  o.progress = false;
+  o.fetch.stall_timeout_s = 0.5;
+  o.fetch.total_timeout_s = 3;
+  o.fetch.retries = 0;
+  const IndexBuildReport r = BuildIndex(tmp / "index", o);
+  EXPECT_EQ(r.chunks_built, 3u);
+  EXPECT_EQ(r.items, 4u);
+  EXPECT_EQ(r.failures, 4u);
+  std::map<std::string, std::string> errors;
+  for (const auto& e : fs::directory_iterator(tmp / "index" / "shards")) {
+    const nlohmann::json chunk = ReadJsonFile(e.path() / "chunk.json");  // named: the loop must not outlive it
+    for (const auto& f : chunk["failures"]) errors[f["origin"].get<std::string>()] = f["error"].get<std::string>();
+  }
+  EXPECT_EQ(errors[server.Url("/missing")], "HTTP 404");
+  EXPECT_NE(errors[server.Url("/page")].find("content type text/html"), std::string::npos);
+  EXPECT_NE(errors[server.Url("/hang")].find("no data for"), std::string::npos);
+  EXPECT_EQ(errors[server.Url("/garbage")], "not a decodable image");
+  const MiningIndex index = MiningIndex::Open(tmp / "index");
+  ASSERT_EQ(index.size(), 4u);
+  for (size_t row = 0; row < index.size(); ++row) {
+    EXPECT_EQ(index.item(row).kind, SourceKind::kUrl);
+    EXPECT_EQ(index.item(row).origin.rfind(server.Url("/img"), 0), 0u);
+  }
+  const int hits = server.Hits("/img0.png");
+  EXPECT_EQ(BuildIndex(tmp / "index", o).chunks_built, 0u);
+  EXPECT_EQ(server.Hits("/img0.png"), hits);
 }
 
 TEST(MiningQuery, PromptsNameCategories) {

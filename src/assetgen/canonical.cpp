@@ -18,6 +18,7 @@
 #include "core/log.h"
 #include "core/parallel.h"
 #include "geometry/metrics.h"
+#include "geometry/polygon.h"
 
 namespace sd {
 namespace {
@@ -205,29 +206,6 @@ ConvexHull BuildConvexHull(const std::vector<Eigen::Vector3d>& p, double eps) {
   return hull;
 }
 
-// 2D convex hull (Andrew's monotone chain), counter-clockwise, no repeated end point.
-std::vector<Eigen::Vector2d> ConvexHull2(std::vector<Eigen::Vector2d> pts) {
-  std::sort(pts.begin(), pts.end(), [](const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
-    return a.x() < b.x() || (a.x() == b.x() && a.y() < b.y());
-  });
-  if (pts.size() < 3) return pts;
-  std::vector<Eigen::Vector2d> h(2 * pts.size());
-  auto cross = [](const Eigen::Vector2d& o, const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
-    return (a - o).x() * (b - o).y() - (a - o).y() * (b - o).x();
-  };
-  size_t k = 0;
-  for (size_t i = 0; i < pts.size(); ++i) {
-    while (k >= 2 && cross(h[k - 2], h[k - 1], pts[i]) <= 0) --k;
-    h[k++] = pts[i];
-  }
-  for (size_t i = pts.size() - 1, t = k + 1; i-- > 0;) {
-    while (k >= t && cross(h[k - 2], h[k - 1], pts[i]) <= 0) --k;
-    h[k++] = pts[i];
-  }
-  h.resize(k - 1);
-  return h;
-}
-
 // Two unit vectors completing `n` to a right-handed orthonormal basis (deterministic).
 std::pair<Eigen::Vector3d, Eigen::Vector3d> Basis(const Eigen::Vector3d& n) {
   const Eigen::Vector3d a = std::abs(n.x()) < 0.6 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
@@ -325,7 +303,7 @@ std::vector<Support> SupportCandidates(const ConvexHull& hull, const std::vector
     const auto [t1, t2] = Basis(n);
     std::vector<Eigen::Vector2d> flat;
     for (int v : verts) flat.emplace_back(t1.dot(p[v]), t2.dot(p[v]));
-    const std::vector<Eigen::Vector2d> poly = ConvexHull2(std::move(flat));
+    const std::vector<Eigen::Vector2d> poly = geometry::ConvexHull2D(std::move(flat));
     Support s;
     s.normal = n;
     s.com_height = plane - n.dot(com);

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "core/error.h"
+#include "io/json.h"
 #include "testing/testing.h"
 
 namespace sd {
@@ -101,6 +102,24 @@ TEST(Files, StagingRefusesExistingOutputUnlessOverwrite) {
   EXPECT_EQ(ReadFileToString(out / "new.txt"), "new");
   EXPECT_FALSE(fs::exists(out / "other.txt"));
   EXPECT_EQ(CountEntries(tmp.path()), 1u);
+}
+
+TEST(JsonLines, CallsBackPerLineAndNamesTheBadLine) {
+  sd::testing::TempDir tmp;
+  const fs::path file = tmp / "x.jsonl";
+  WriteFileAtomic(file, "{\"a\": 1}\n\n  \n[2, 3]\n{\"b\": tru}\n");
+  std::vector<std::string> wheres;
+  try {
+    ForEachJsonLine(file, [&](const nlohmann::json& j, const std::string& where) {
+      wheres.push_back(where);
+      EXPECT_TRUE(j.is_object() || j.is_array());
+    });
+    FAIL() << "line 5 is not JSON";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()).rfind(file.string() + ":5: malformed JSON", 0), 0u) << e.what();
+  }
+  ASSERT_EQ(wheres.size(), 2u);  // blank lines skipped, line numbers kept
+  EXPECT_EQ(wheres[1], file.string() + ":4");
 }
 
 }  // namespace

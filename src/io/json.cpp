@@ -20,6 +20,25 @@ nlohmann::json ReadJsonFile(const std::filesystem::path& path) {
   }
 }
 
+void ForEachJsonLine(const std::filesystem::path& path,
+                     const std::function<void(const nlohmann::json& value, const std::string& where)>& fn) {
+  std::istringstream lines(ReadFileToString(path));
+  std::string line;
+  for (int n = 1; std::getline(lines, line); ++n) {
+    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
+    const std::string where = path.string() + ":" + std::to_string(n);
+    nlohmann::json value;
+    try {
+      value = nlohmann::json::parse(line);
+    } catch (const nlohmann::json::parse_error& e) {
+      std::string what = e.what();
+      const auto pos = what.find("] ");
+      throw InputError(where, "malformed JSON: " + (pos == std::string::npos ? what : what.substr(pos + 2)));
+    }
+    fn(value, where);
+  }
+}
+
 void WriteJsonFile(const std::filesystem::path& path, const nlohmann::json& j, int indent) {
   WriteFileAtomic(path, j.dump(indent) + "\n");
 }

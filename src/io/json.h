@@ -1,6 +1,7 @@
 #pragma once
 // JSON helpers: reading with located errors (the file and the JSON path of the bad value).
 #include <filesystem>
+#include <functional>
 #include <string>
 
 #include <nlohmann/json.hpp>
@@ -9,6 +10,10 @@ namespace sd {
 
 // Parses a JSON file; throws InputError naming the file and the parse error position.
 nlohmann::json ReadJsonFile(const std::filesystem::path& path);
+// A JSON Lines file (one value per line, blank lines skipped): calls fn(value, "<file>:<line>") in order, so
+// the caller's own errors can name the line too. InputError naming file and line for a line that is not JSON.
+void ForEachJsonLine(const std::filesystem::path& path,
+                     const std::function<void(const nlohmann::json& value, const std::string& where)>& fn);
 // Writes `j` atomically (temporary file + rename). indent < 0 writes compactly.
 void WriteJsonFile(const std::filesystem::path& path, const nlohmann::json& j, int indent = 2);
 

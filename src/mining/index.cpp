@@ -13,7 +13,6 @@
 #include <cstring>
 #include <fstream>
 #include <mutex>
-#include <sstream>
 
 #include <faiss/utils/distances.h>
 #include <nlohmann/json.hpp>
@@ -571,20 +570,8 @@ MiningIndex MiningIndex::Open(const fs::path& index_dir) {
   auto load_shard = [&header](const fs::path& dir, std::vector<MinedItem>& items, std::unique_ptr<Shard>& out) {
     auto shard = std::make_unique<Shard>();
     shard->dir = dir;
-    const fs::path items_file = dir / "items.jsonl";
-    std::istringstream lines(ReadFileToString(items_file));
-    std::string line;
-    for (int n = 1; std::getline(lines, line); ++n) {
-      if (line.empty()) continue;
-      const std::string where = items_file.string() + ":" + std::to_string(n);
-      json j;
-      try {
-        j = json::parse(line);
-      } catch (const json::parse_error& e) {
-        throw InputError(where, Msg() << "not JSON (" << e.what() << ")");
-      }
-      items.push_back(ItemFromJson(j, where));
-    }
+    ForEachJsonLine(dir / "items.jsonl",
+                    [&](const json& j, const std::string& where) { items.push_back(ItemFromJson(j, where)); });
     shard->rows = items.size();
     shard->descriptor = std::make_unique<MappedVectors>(dir / VectorFileName(VectorKind::kDescriptor), header.descriptor_dim);
     if (header.clip_dim > 0)

@@ -8,6 +8,7 @@
 
 #include "core/error.h"
 #include "core/parallel.h"
+#include "geometry/polygon.h"
 #include "datasets/categories.h"
 #include "datasets/readers.h"
 #include "io/image_io.h"
@@ -44,38 +45,6 @@ AngularSpacing SpacingOf(const Frame& frame) {
 // A return is hidden from the camera when a return this much nearer lands within a few pixels of it: less than
 // the depth of most objects, more than the scatter of one surface's returns.
 constexpr double kOccluderGapM = 0.5;
-
-std::vector<Vec2> ConvexHull(std::vector<Vec2> p) {
-  std::sort(p.begin(), p.end(), [](const Vec2& a, const Vec2& b) { return a.x() < b.x() || (a.x() == b.x() && a.y() < b.y()); });
-  p.erase(std::unique(p.begin(), p.end()), p.end());
-  if (p.size() < 3) return p;
-  auto cross = [](const Vec2& o, const Vec2& a, const Vec2& b) {
-    return (a.x() - o.x()) * (b.y() - o.y()) - (a.y() - o.y()) * (b.x() - o.x());
-  };
-  std::vector<Vec2> h(2 * p.size());
-  size_t k = 0;
-  for (size_t i = 0; i < p.size(); ++i) {
-    while (k >= 2 && cross(h[k - 2], h[k - 1], p[i]) <= 0) --k;
-    h[k++] = p[i];
-  }
-  for (size_t i = p.size() - 1, t = k + 1; i-- > 0;) {
-    while (k >= t && cross(h[k - 2], h[k - 1], p[i]) <= 0) --k;
-    h[k++] = p[i];
-  }
-  h.resize(k - 1);
-  return h;  // counter-clockwise in (u, v) axes
-}
-
-// Inside test for a convex polygon in ConvexHull's orientation (boundary counts as inside).
-bool InConvex(const std::vector<Vec2>& poly, double u, double v) {
-  if (poly.size() < 3) return false;
-  for (size_t i = 0; i < poly.size(); ++i) {
-    const Vec2& a = poly[i];
-    const Vec2& b = poly[(i + 1) % poly.size()];
-    if ((b.x() - a.x()) * (v - a.y()) - (b.y() - a.y()) * (u - a.x()) < 0) return false;
-  }
-  return true;
-}
 
 // Area-filter weights along one axis: output pixel o covers source [o / s, (o + 1) / s).
 struct AxisWeights {
@@ -297,7 +266,8 @@ std::vector<ObjectCrop> CropCamera(const Frame& frame, const CameraSensor& cam_i
     // The box polygon, rasterised by pixel centres over the window.
     std::vector<uint8_t> poly_mask(static_cast<size_t>(cw) * ch, 0);
     for (int y = 0; y < ch; ++y)
-      for (int x = 0; x < cw; ++x) poly_mask[static_cast<size_t>(y) * cw + x] = InConvex(c.polygon, x1 + x + 0.5, y1 + y + 0.5);
+      for (int x = 0; x < cw; ++x)
+        poly_mask[static_cast<size_t>(y) * cw + x] = geometry::InsideConvexPolygon(c.polygon, {x1 + x + 0.5, y1 + y + 0.5});
 
     // LiDAR: returns in the grown box, above the ground clearance; visible ones splat into the mask.
     std::vector<uint8_t> mask(poly_mask.size(), 0);
@@ -318,7 +288,7 @@ std::vector<ObjectCrop> CropCamera(const Frame& frame, const CameraSensor& cam_i
         const bool grown_in = strictly_in || a.box.Contains(p, options.box_margin_m);
         // Occlusion counts the returns on the object's image: inside the outline and inside the image. Distances
         // are from the camera centre, which is near the LiDAR's on every rig we read.
-        if (q.uv.x() >= 0 && q.uv.y() >= 0 && q.uv.x() < W && q.uv.y() < H && InConvex(c.polygon, q.uv.x(), q.uv.y())) {
+        if (q.uv.x() >= 0 && q.uv.y() >= 0 && q.uv.x() < W && q.uv.y() < H && geometry::InsideConvexPolygon(c.polygon, q.uv)) {
           ++in_poly;
           if (!grown_in && (T_cam_ego * p).norm() < nearest_corner - options.box_margin_m) ++in_front;
         }
@@ -400,7 +370,7 @@ std::vector<Eigen::Vector2d> ProjectBoxOutline(const Box3& box_ego, const Camera
     }
   }
   if (pts.empty()) return {};
-  return ConvexHull(std::move(pts));
+  return geometry::ConvexHull2D(std::move(pts));
 }
 
 std::vector<Eigen::Vector3d> SweepInEgo(const Frame& frame) {

@@ -344,19 +344,9 @@ void WriteMiningRun(const fs::path& run_dir, const MiningIndex& index, const std
 }
 
 std::vector<ManifestEntry> ReadManifest(const fs::path& manifest_jsonl) {
-  std::istringstream lines(ReadFileToString(manifest_jsonl));
   const fs::path dir = fs::absolute(manifest_jsonl).parent_path();
   std::vector<ManifestEntry> entries;
-  std::string line;
-  for (int n = 1; std::getline(lines, line); ++n) {
-    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
-    const std::string where = manifest_jsonl.string() + ":" + std::to_string(n);
-    json j;
-    try {
-      j = json::parse(line);
-    } catch (const json::parse_error& e) {
-      throw InputError(where, Msg() << "not JSON (" << e.what() << ")");
-    }
+  ForEachJsonLine(manifest_jsonl, [&](const json& j, const std::string& where) {
     ManifestEntry e;
     e.item = ItemFromJson(j, where);
     const JsonReader r(j, where);
@@ -372,7 +362,7 @@ std::vector<ManifestEntry> ReadManifest(const fs::path& manifest_jsonl) {
       *file = p.string();
     }
     entries.push_back(std::move(e));
-  }
+  });
   return entries;
 }
 

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cerrno>
 #include <exception>
 #include <cctype>
 #include <chrono>
@@ -171,11 +172,25 @@ IndexHeader EnsureIndexHeader(const fs::path& dir, const IndexBuildOptions& opti
   const fs::path file = dir / "index.json";
   if (!fs::exists(file)) {
     if (fs::exists(dir) && !fs::is_directory(dir)) throw InputError(dir, "exists and is not an index folder");
-    if (fs::exists(dir) && !fs::is_empty(dir))
-      throw InputError(dir, "exists, is not empty and holds no index.json: refusing to write an index into it");
+    // Shard processes started together all get here: besides shards/ and index.json temporaries (another
+    // process creating the index right now), anything in the folder means it is not ours to write into.
+    if (fs::exists(dir))
+      for (const auto& e : fs::directory_iterator(dir)) {
+        const std::string name = e.path().filename().string();
+        if (name != "shards" && name != "index.json" && name.rfind("index.json.tmp-", 0) != 0)
+          throw InputError(dir, "exists, is not empty and holds no index.json: refusing to write an index into it");
+      }
     fs::create_directories(dir / "shards");
-    WriteJsonFile(file, HeaderJson(wanted));
-    return wanted;
+    // Create-if-absent in one step: a complete temporary file hard-linked to index.json. link() fails when
+    // another process got there first, and then that header (read below) must agree with this run.
+    const fs::path tmp = TemporarySibling(file);
+    WriteJsonFile(tmp, HeaderJson(wanted));
+    const int linked = ::link(tmp.c_str(), file.c_str());
+    const int link_errno = errno;
+    fs::remove(tmp);
+    if (linked != 0 && link_errno != EEXIST)
+      throw InputError(file, Msg() << "cannot create: " << std::strerror(link_errno));
+    if (linked == 0) return wanted;
   }
   IndexHeader have = ReadHeader(file);
   if (have.descriptor_version != wanted.descriptor_version || have.descriptor_dim != wanted.descriptor_dim)

@@ -2,10 +2,12 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <fstream>
 #include <map>
 #include <random>
 #include <set>
+#include <thread>
 
 #include <nlohmann/json.hpp>
 
@@ -165,6 +167,35 @@ TEST(MiningIndex, GrowsIncrementallyResumesAndSplitsIntoShards) {
     EXPECT_EQ(r.chunks_owned, 3u);
   }
   EXPECT_EQ(Ids(MiningIndex::Open(tmp / "split")), all);
+}
+
+// Shard processes started at the same moment all find no index yet: every one must succeed, with one header.
+TEST(MiningIndex, ShardsCreatingTheSameNewIndexTogetherAllSucceed) {
+  TempDir tmp;
+  WriteFolder(tmp / "a", RealCrops(8, 48), "a");
+  for (int round = 0; round < 5; ++round) {
+    const fs::path out = tmp / ("index" + std::to_string(round));
+    std::atomic<int> ready{0}, failed{0};
+    std::vector<std::thread> shards;
+    for (int k = 0; k < 4; ++k)
+      shards.emplace_back([&, k] {
+        IndexBuildOptions o = FolderOptions({tmp / "a"}, 2);
+        o.shard = ShardSpec{k, 4};
+        ++ready;
+        while (ready < 4) std::this_thread::yield();
+        try {
+          BuildIndex(out, o);
+        } catch (const std::exception& e) {
+          ++failed;
+          ADD_FAILURE() << "shard " << k << ": " << e.what();
+        }
+      });
+    for (std::thread& t : shards) t.join();
+    EXPECT_EQ(failed, 0);
+    EXPECT_EQ(MiningIndex::Open(out).size(), 8u);
+    for (const auto& e : fs::directory_iterator(out))
+      EXPECT_TRUE(e.path().filename() == "index.json" || e.path().filename() == "shards") << e.path();
+  }
 }
 
 TEST(MiningIndex, BadInputIsRefusedWithoutPartialOutput) {

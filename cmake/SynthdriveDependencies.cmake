@@ -16,6 +16,9 @@ find_package(Threads REQUIRED)
 find_package(OpenMP REQUIRED)
 find_package(faiss REQUIRED)
 find_package(CURL REQUIRED)
+# The asset bank: a SQLite catalogue; OpenSSL's EVP hashes the catalogued files (SHA-256).
+find_package(SQLite3 REQUIRED)
+find_package(OpenSSL REQUIRED)
 # LibTorch runs the learned stages (src/models). Debian's libtorch-dev is CPU-only; a CUDA LibTorch found
 # through CMAKE_PREFIX_PATH builds the same code for the GPU.
 if(SYNTHDRIVE_WITH_TORCH)

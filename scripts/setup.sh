@@ -9,7 +9,7 @@ PACKAGES=(
   libeigen3-dev nlohmann-json3-dev libcli11-dev libtbb-dev libembree-dev
   libstb-dev libtinygltf-dev libtinyobjloader-dev
   libnanoflann-dev
-  libfaiss-dev libcurl4-openssl-dev
+  libfaiss-dev libcurl4-openssl-dev libsqlite3-dev libssl-dev
   # OpenBLAS takes over libblas.so.3 (Debian alternatives) from the netlib reference BLAS: LibTorch's matrix
   # products (CLIP, the learned stages) and FAISS's batched search run about 11x faster with it.
   libopenblas0-pthread

@@ -171,5 +171,71 @@ printf '{"id": 1}\n' > "$T/bad_manifest.jsonl"
 expect_error "generate: malformed manifest" "bad_manifest.jsonl:1" "$T/g5" -- "$BIN" -q generate --manifest "$T/bad_manifest.jsonl" --out "$T/g5"
 expect_error "generate: manifest without models" "needs the multi-view diffusion" "$T/g6" -- env SYNTHDRIVE_MODELS="$T/no_models" "$BIN" -q generate --manifest "$T/mr/manifest.jsonl" --out "$T/g6"
 
+# Synth as a batch on the 3-frame KITTI log: shards 0/2 + 1/2 + --merge write what a plain run writes; each
+# shard logs its frames; a bad --shard and a merge with a missing part are refused, creating nothing.
+SY=(--log "$DATA/driving/kitti-object" --asset "$T/cone" --scenario "$T/one_cone.json" --spp 1 --ao-samples 2)
+synth "${SY[@]}" --out "$T/k_plain" && [ ! -e "$T/k_plain.parts" ] && ok || bad "synth kitti plain run"
+synth "${SY[@]}" --out "$T/k_sh" --shard 0/2 && synth "${SY[@]}" --out "$T/k_sh" --shard 0/2 \
+  && [ "$(grep -c '"status":"skipped"' "$T/k_sh.parts/log-0-of-2.jsonl")" -eq 2 ] \
+  && ok || bad "synth shard rerun skips its finished frames"
+synth "${SY[@]}" --out "$T/k_sh" --shard 1/2 && synth "${SY[@]}" --out "$T/k_sh" --merge && diff -r "$T/k_plain" "$T/k_sh" \
+  && ok || bad "synth --shard 0/2 + --shard 1/2 + --merge differs from a plain run"
+[ "$(cat "$T"/k_sh.parts/log-0-of-2.jsonl "$T"/k_sh.parts/log-1-of-2.jsonl | grep -c '"status":"done"')" -eq 3 ] \
+  && ok || bad "synth shard run logs"
+expect_error "synth: bad shard" "--shard '2/2'" "$T/k_bad" -- synth "${SY[@]}" --out "$T/k_bad" --shard 2/2
+[ ! -e "$T/k_bad.parts" ] && ok || bad "synth: bad shard created parts"
+synth "${SY[@]}" --out "$T/k_half" --shard 1/2 || bad "synth --shard 1/2"
+expect_error "synth: merge with a missing part" "selected frame(s): 0, 2 (" "$T/k_half" -- synth "${SY[@]}" --out "$T/k_half" --merge
+
+# Bank: catalogue a folder of asset folders, reruns are no-ops, queries, verify finds changed files, one-line errors.
+BANK=$T/bank.sqlite
+"$BIN" -q asset import --mesh "$DATA/assets/metadrive_traffic_cone/scene.gltf" --up +y --height 0.7 \
+  --category traffic_cone --out "$T/bank_assets/bank_cone" || bad "bank: import cone"
+"$BIN" -q asset import --mesh "$DATA/assets/metadrive_road_barrier/scene.gltf" --up +y --height 0.9 \
+  --category barrier --out "$T/bank_assets/bank_barrier" || bad "bank: import barrier"
+"$BIN" -q bank add --bank "$BANK" --clip none "$T/bank_assets" && [ "$("$BIN" -q bank list --bank "$BANK" | wc -l)" -eq 3 ] \
+  && ok || bad "bank add a folder of asset folders"
+"$BIN" bank add --bank "$BANK" --clip none "$T/bank_assets" 2>&1 | grep -q "0 added, 2 unchanged" && ok || bad "bank add rerun is a no-op"
+for k in 0 1; do "$BIN" -q bank add --bank "$T/bank_shards.sqlite" --clip none --shard $k/2 "$T/bank_assets" || bad "bank add --shard $k/2"; done
+[ "$("$BIN" -q bank list --bank "$T/bank_shards.sqlite")" = "$("$BIN" -q bank list --bank "$BANK")" ] && ok || bad "bank add --shard 0/2 + 1/2 = the whole list"
+"$BIN" -q bank query --bank "$BANK" --category traffic_cone --json > "$T/bq.json" \
+  && [ "$(grep -c '"id"' "$T/bq.json")" -eq 1 ] && grep -q '"id": "bank_cone"' "$T/bq.json" && ok || bad "bank query by category"
+SYNTHDRIVE_BANK="$BANK" "$BIN" -q bank query --max-extent 2,2,0.8 | grep -q "bank_cone" \
+  && ! SYNTHDRIVE_BANK="$BANK" "$BIN" -q bank query --max-extent 2,2,0.8 | grep -q "bank_barrier" && ok || bad "bank query by extent (\$SYNTHDRIVE_BANK)"
+printf '{"bank": "bank.sqlite", "category": "barrier", "limit": 1}\n' > "$T/bank_query.json"
+"$BIN" -q bank query --from "$T/bank_query.json" --json | grep -q '"id": "bank_barrier"' && ok || bad "bank query from a JSON query file"
+[ "$("$BIN" -q bank show --bank "$BANK" bank_cone | grep -c '"sha256"')" -eq 3 ] && ok || bad "bank show lists the files"
+"$BIN" -q bank verify --bank "$BANK" && ok || bad "bank verify of an intact bank"
+# A scenario that takes its assets from the bank instead of --asset.
+cat > "$T/bank_scenario.json" <<'J'
+{"seed": 3, "assets_from_bank": {"bank": "bank.sqlite", "category": "traffic_cone"},
+ "objects": [{"category": "traffic_cone", "count": 1, "distance_m": [6, 15], "lateral_m": [-3, 3]}]}
+J
+"$BIN" -q synth --log "$INFO" --scenario "$T/bank_scenario.json" --out "$T/bank_synth" --spp 1 --ao-samples 2 \
+  && grep -q '"bank_cone"' "$T/bank_synth/synth.json" && ok || bad "synth with assets_from_bank"
+printf '{"assets_from_bank": {"bank": "bank.sqlite", "category": "bus"}, "objects": [{"category": "bus"}]}\n' > "$T/bank_none.json"
+expect_error "synth: bank query matching nothing" "matches no asset" "$T/bank_synth2" -- "$BIN" -q synth --log "$INFO" --scenario "$T/bank_none.json" --out "$T/bank_synth2"
+sed -i 's/"name": "bank_barrier"/"name": "Barrier B"/' "$T/bank_assets/bank_barrier/asset.json"
+"$BIN" -q bank add --bank "$BANK" --clip none "$T/bank_assets/bank_barrier" 2>"$T/stderr" && bad "bank add of changed contents: exit 0" \
+  || { grep -q "already in the bank" "$T/stderr" && ok || bad "bank add of changed contents: $(cat "$T/stderr")"; }
+"$BIN" -q bank add --bank "$BANK" --clip none --replace "$T/bank_assets/bank_barrier" \
+  && "$BIN" -q bank show --bank "$BANK" bank_barrier | grep -q '"name": "Barrier B"' && ok || bad "bank add --replace"
+rm "$T/bank_assets/bank_cone/preview.png" && printf 'glTF garbage' > "$T/bank_assets/bank_barrier/mesh.glb"
+"$BIN" -q bank verify --bank "$BANK" > "$T/verify.txt"; rc=$?
+[ $rc -ne 0 ] && grep -q "bank_cone/preview.png: missing" "$T/verify.txt" && grep -q "bank_barrier/mesh.glb: size changed" "$T/verify.txt" \
+  && grep -q "bank_barrier: .*not loadable" "$T/verify.txt" && [ "$(wc -l < "$T/verify.txt")" -eq 3 ] \
+  && ok || bad "bank verify finds a missing preview and a corrupt mesh: rc $rc, $(cat "$T/verify.txt")"
+"$BIN" -q bank add --bank "$T/bank2.sqlite" --clip none "$T/corrupt" "$T/cone" 2>"$T/stderr"; rc=$?
+[ $rc -eq 1 ] && [ "$(grep -c . "$T/stderr")" -eq 1 ] && grep -q "corrupt/mesh.glb" "$T/stderr" \
+  && [ "$("$BIN" -q bank list --bank "$T/bank2.sqlite" | wc -l)" -eq 2 ] && ok || bad "bank add batch: one failure reported, the rest added (rc $rc)"
+"$BIN" -q bank remove --bank "$BANK" bank_cone && ! "$BIN" -q bank list --bank "$BANK" | grep -q bank_cone && ok || bad "bank remove"
+expect_error "bank: no bank file" "no bank here" "$T/nobank.sqlite" -- "$BIN" -q bank list --bank "$T/nobank.sqlite"
+expect_error "bank: not an asset folder" "neither an asset folder" "$T/bank3.sqlite" -- "$BIN" -q bank add --bank "$T/bank3.sqlite" "$DATA/assets/torcs_p406"
+expect_error "bank: unknown id" "no asset 'nope'" "" -- "$BIN" -q bank show --bank "$BANK" nope
+expect_error "bank: text query without CLIP" "needs a CLIP model" "" -- "$BIN" -q bank query --bank "$BANK" --text red --clip none
+expect_error "bank: not a bank" "not a SynthDrive bank" "" -- "$BIN" -q bank list --bank "$T/one_cone.json"
+printf '{"categroy": "car"}\n' > "$T/bad_query.json"
+expect_error "bank: bad JSON query" "unknown key 'categroy'" "" -- "$BIN" -q bank query --bank "$BANK" --from "$T/bad_query.json"
+
 echo "$pass passed, $fail failed"
 [ $fail -eq 0 ]

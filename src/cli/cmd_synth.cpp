@@ -2,6 +2,7 @@
 
 #include "cli/commands.h"
 #include "core/log.h"
+#include "core/shard.h"
 #include "synth/pipeline.h"
 
 namespace sd::cli {
@@ -11,10 +12,13 @@ Runner AddSynthCommand(CLI::App& app) {
   auto format = std::make_shared<std::string>();
   auto data_root = std::make_shared<std::string>();
   auto symlink = std::make_shared<bool>(false);
+  auto shard = std::make_shared<std::string>();
+  auto merge = std::make_shared<bool>(false);
   app.add_option("--log", req->log, "Driving log: a dataset root (nuScenes tables, KITTI) or an info file (mmdet3d .json)")
       ->required();
-  app.add_option("--asset", req->assets, "Asset folder(s) to insert (asset.json + mesh.glb); see `synthdrive asset import`")
-      ->required();
+  app.add_option("--asset", req->assets,
+                 "Asset folder(s) to insert (asset.json + mesh.glb); see `synthdrive asset import`. Optional when the "
+                 "scenario names assets_from_bank");
   app.add_option("--scenario", req->scenario, "Scenario JSON: which objects, how many, where, seed (README)")->required();
   app.add_option("--out", req->out, "Output directory for the derivative dataset (must not exist unless --overwrite)")
       ->required();
@@ -27,6 +31,11 @@ Runner AddSynthCommand(CLI::App& app) {
   app.add_option("--jpeg-quality", req->options.write.jpeg_quality, "Quality of re-encoded JPEG images")->check(CLI::Range(1, 100));
   app.add_flag("--symlink-unchanged", *symlink, "Symlink unchanged sensor files instead of copying them");
   app.add_flag("--overwrite", req->options.overwrite, "Replace an existing output directory (only once the new one is complete)");
+  auto* shard_opt = app.add_option("--shard", *shard,
+                                   "Synthesise only frames K, K+N, ... of the selection (K/N, 0-based) into parts under "
+                                   "<out>.parts/ (resumable); then --merge");
+  app.add_flag("--merge", *merge, "Write <out> from the parts the --shard runs left in <out>.parts/ (same arguments)")
+      ->excludes(shard_opt);
   return [=]() {
     SynthRequest r = *req;
     if (*format == "kitti") r.log_options.format = LogFormat::kKitti;
@@ -34,7 +43,14 @@ Runner AddSynthCommand(CLI::App& app) {
     else if (*format == "mmdet3d") r.log_options.format.reset();  // v1 vs v0 is probed from the file
     if (!data_root->empty()) r.log_options.data_root = *data_root;
     if (*symlink) r.options.write.unchanged = UnchangedFiles::kSymlink;
-    const SynthSummary s = RunSynth(r);
+    if (!shard->empty()) {
+      const SynthShardSummary s = RunSynthShard(r, ParseShard(*shard));
+      SD_LOG(Info, "shard " << *shard << ": " << s.owned << " frame(s), " << s.done << " synthesised, " << s.skipped
+                            << " already done, " << s.failed.size() << " failed -> " << s.parts.string() << " (log: "
+                            << s.run_log.filename().string() << ")");
+      return s.failed.empty() ? 0 : 1;
+    }
+    const SynthSummary s = *merge ? MergeSynthParts(r) : RunSynth(r);
     SD_LOG(Info, "wrote " << s.frames << " frame(s) with " << s.objects << " inserted object(s) to " << s.out.string());
     SD_LOG(Info, "report: " << s.report.string());
     return 0;

@@ -23,6 +23,8 @@ Runner AddTextureCommand(CLI::App& app);
 Runner AddUpscaleCommand(CLI::App& app);
 Runner AddGenerateCommand(CLI::App& app);
 Runner AddMineCommand(CLI::App& app);
+Runner AddBankCommand(CLI::App& app);
+Runner AddSlurmCommand(CLI::App& app);
 
 // The repo's data/ directory: --data, $SYNTHDRIVE_DATA, <binary>/../../data, ./data (first that exists).
 std::string FindDataDir(const std::string& explicit_dir);

@@ -30,6 +30,8 @@ int main(int argc, char** argv) {
       sd::cli::AddSynthCommand);
   add("mine", "Find object images for a prompt in driving logs, image folders and URL lists (index, query)",
       sd::cli::AddMineCommand);
+  add("bank", "The asset catalogue: add, list, query, show, verify, remove", sd::cli::AddBankCommand);
+  add("slurm", "Run a batch command's shards as a Slurm job array (submit, status)", sd::cli::AddSlurmCommand);
   add("asset", "Make and inspect asset folders (asset.json + mesh.glb + preview.png)", sd::cli::AddAssetCommand);
   add("views", "Render oracle normal maps and masks of a mesh at the Zero123++ rig (for refinement and evaluation)",
       sd::cli::AddViewsCommand);

@@ -1,17 +1,21 @@
 #include "synth/pipeline.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <fstream>
 #include <map>
 #include <memory>
 #include <set>
 
+#include "bank/bank.h"
 #include "core/log.h"
 #include "core/parallel.h"
 #include "datasets/categories.h"
 #include "io/files.h"
 #include "io/image_io.h"
 #include "io/json.h"
+#include "io/pointcloud_io.h"
 #include "render/camera_render.h"
 #include "render/ray_scene.h"
 #include "synth/lidar_sim.h"
@@ -59,6 +63,23 @@ std::vector<Eigen::Vector3d> RoadPointsNear(const GroundModel& ground, const std
   return out;
 }
 
+std::vector<Eigen::Vector3d> PointsInEgo(const Frame& frame, const PointCloud& sweep) {
+  std::vector<Eigen::Vector3d> points_ego(sweep.size());
+  for (size_t i = 0; i < sweep.size(); ++i) points_ego[i] = frame.lidar->T_ego_lidar * sweep.xyz(i).cast<double>();
+  return points_ego;
+}
+
+// The one ground estimate of a frame: synthesis places on it and the merge recomputes it for the report, so it
+// must depend on nothing but the frame and the scenario.
+GroundModel EstimateFrameGround(const Frame& frame, const std::vector<Eigen::Vector3d>& points_ego, const Scenario& scenario) {
+  std::vector<Box3> real_boxes;
+  for (const auto& a : frame.annotations) real_boxes.push_back(a.box);
+  GroundOptions gopt;
+  gopt.seed = scenario.seed;
+  gopt.sensor_xy = frame.lidar->T_ego_lidar.translation.head<2>();
+  return GroundModel::Estimate(points_ego, real_boxes, gopt);
+}
+
 int NuScenesVisibility(double fraction) {
   if (fraction < 0.4) return 1;
   if (fraction < 0.6) return 2;
@@ -79,18 +100,14 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
   // LiDAR in the ego frame, ground, placement.
   out.sweep_before = ReadLidar(*frame.lidar);
   const PointCloud& sweep = out.sweep_before;
-  std::vector<Eigen::Vector3d> points_ego(sweep.size());
-  for (size_t i = 0; i < sweep.size(); ++i) points_ego[i] = frame.lidar->T_ego_lidar * sweep.xyz(i).cast<double>();
+  const std::vector<Eigen::Vector3d> points_ego = PointsInEgo(frame, sweep);
   std::vector<Box3> real_boxes;
   std::vector<std::pair<std::string, Box3>> annotated;
   for (const auto& a : frame.annotations) {
     real_boxes.push_back(a.box);
     annotated.push_back({a.category, a.box});
   }
-  GroundOptions gopt;
-  gopt.seed = scenario.seed;
-  gopt.sensor_xy = frame.lidar->T_ego_lidar.translation.head<2>();
-  out.ground = GroundModel::Estimate(points_ego, real_boxes, gopt);
+  out.ground = EstimateFrameGround(frame, points_ego, scenario);
   const GroundModel& ground = out.ground;
 
   PlacementInput pin;
@@ -263,49 +280,424 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
   return out;
 }
 
-SynthSummary RunSynth(const SynthRequest& request) {
-  // Validate and load every input before creating any output.
-  const Log log = OpenLog(request.log, request.log_options);
-  SD_LOG(Info, "log: " << request.log.string() << " (" << ToString(log.format) << ", " << log.frames.size() << " frames)");
-  if (request.assets.empty()) throw InputError("", "no --asset given");
+// ---------------------------------------------------------------------------------------------------------
+// Batch: parts, shards, merge.
+
+namespace {
+
+using nlohmann::json;
+
+// Everything a shard and the merge load before doing any work; bad input fails here, before any output.
+struct SynthInputs {
+  Log log;
   std::vector<Asset> assets;
+  Scenario scenario;
+  std::vector<size_t> selected;  // frame indices, in the order the user named them
+  json fingerprint;              // what a part's content depends on (see RequestFingerprint)
+};
+
+std::string Fnv1a64Hex(std::string_view bytes) {
+  uint64_t h = 1469598103934665603ull;
+  for (unsigned char c : bytes) {
+    h ^= c;
+    h *= 1099511628211ull;
+  }
+  char buf[17];
+  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(h));
+  return buf;
+}
+
+// What a part's bytes depend on: the log, the scenario, the assets and the render options. Write options
+// (JPEG quality, symlinks) and the frame selection apply at the merge, so parts stay valid across them.
+json RequestFingerprint(const SynthRequest& request, const std::vector<Asset>& assets) {
+  json j;
+  j["log"] = fs::absolute(request.log).lexically_normal().string();
+  j["format"] = request.log_options.format ? ToString(*request.log_options.format) : "probe";
+  j["data_root"] = request.log_options.data_root.empty() ? "" : fs::absolute(request.log_options.data_root).lexically_normal().string();
+  j["scenario_fnv1a64"] = Fnv1a64Hex(ReadFileToString(request.scenario));
+  j["assets"] = json::array();
+  for (const Asset& a : assets) {
+    std::string bytes = ReadFileToString(a.dir / "asset.json");
+    if (fs::exists(a.dir / "mesh.glb")) bytes += ReadFileToString(a.dir / "mesh.glb");
+    j["assets"].push_back({{"id", a.info.id}, {"fnv1a64", Fnv1a64Hex(bytes)}});
+  }
+  j["samples_per_pixel"] = request.options.samples_per_pixel;
+  j["ao_samples"] = request.options.ao_samples;
+  return j;
+}
+
+// The asset folders the scenario's bank queries name, in query order; an asset matched by several queries (or
+// also given with --asset) is an error of duplicate ids below, so queries must not overlap.
+std::vector<fs::path> BankAssets(const Scenario& scenario, const fs::path& scenario_file) {
+  std::vector<fs::path> dirs;
+  for (size_t i = 0; i < scenario.bank_queries.size(); ++i) {
+    fs::path bank_path;
+    const bank::BankQuery query = bank::BankQueryFromJson(scenario.bank_queries[i], scenario_file, &bank_path);
+    if (bank_path.empty()) bank_path = bank::DefaultBankPath();
+    if (!query.text.empty())
+      throw InputError(scenario_file, "assets_from_bank: text queries need a CLIP model; use category, extent "
+                                      "and quality, or pick the assets with `synthdrive bank query --text`");
+    const std::vector<bank::BankEntry> found = bank::Bank::Open(bank_path, false).Query(query);
+    if (found.empty())
+      throw InputError(scenario_file, Msg() << "assets_from_bank[" << i << "] matches no asset in " << bank_path.string());
+    SD_LOG(Info, "bank " << bank_path.string() << ": query " << i << " gives " << found.size() << " asset(s)");
+    for (const bank::BankEntry& e : found) dirs.push_back(e.dir);
+  }
+  return dirs;
+}
+
+SynthInputs LoadInputs(const SynthRequest& request) {
+  SynthInputs in;
+  in.log = OpenLog(request.log, request.log_options);
+  const Log& log = in.log;
+  SD_LOG(Info, "log: " << request.log.string() << " (" << ToString(log.format) << ", " << log.frames.size() << " frames)");
+  in.scenario = ReadScenario(request.scenario);
+  std::vector<fs::path> asset_dirs = request.assets;
+  for (const fs::path& dir : BankAssets(in.scenario, request.scenario)) asset_dirs.push_back(dir);
+  if (asset_dirs.empty()) throw InputError("", "no --asset given, and the scenario names no assets_from_bank");
   std::set<std::string> ids;
-  for (const auto& path : request.assets) {
-    assets.push_back(LoadAsset(path));
-    const auto& info = assets.back().info;
+  for (const auto& path : asset_dirs) {
+    in.assets.push_back(LoadAsset(path));
+    const auto& info = in.assets.back().info;
     if (!FindCategory(info.category))
       throw InputError(path, "unknown category '" + info.category + "' (see `synthdrive categories`)");
     if (!ids.insert(info.id).second) throw InputError(path, "duplicate asset id '" + info.id + "'");
   }
-  const Scenario scenario = ReadScenario(request.scenario);
-  std::vector<size_t> selected;
   if (request.options.frames.empty()) {
-    for (size_t i = 0; i < log.frames.size(); ++i) selected.push_back(i);
+    for (size_t i = 0; i < log.frames.size(); ++i) in.selected.push_back(i);
   } else {
+    std::set<size_t> seen;
     for (const auto& f : request.options.frames) {
       size_t found = log.frames.size();
       for (size_t i = 0; i < log.frames.size(); ++i)
         if (log.frames[i].token == f) found = i;
       if (found == log.frames.size() && !f.empty() && std::all_of(f.begin(), f.end(), ::isdigit)) found = std::stoul(f);
       if (found >= log.frames.size()) throw InputError(request.log, "no frame '" + f + "'");
-      selected.push_back(found);
+      if (!seen.insert(found).second) throw InputError(request.log, "frame '" + f + "' selected twice");
+      in.selected.push_back(found);
     }
   }
-  if (selected.empty()) throw InputError(request.log, "log has no frames");
+  if (in.selected.empty()) throw InputError(request.log, "log has no frames");
+  in.fingerprint = RequestFingerprint(request, in.assets);
+  return in;
+}
 
-  StagingDirectory staging(request.out, request.options.overwrite);
-  std::vector<FrameOutcome> outcomes;
-  std::vector<FrameEdit> edits;
-  Progress progress("synthesising frames", selected.size());
-  for (size_t fi : selected) {
-    outcomes.push_back(SynthesizeFrame(log, fi, assets, scenario, request.options));
-    edits.push_back(outcomes.back().edit);
+fs::path NormalOut(const fs::path& out) {
+  fs::path p = fs::absolute(out).lexically_normal();
+  if (p.filename().empty()) p = p.parent_path();
+  return p;
+}
+
+// The check StagingDirectory makes at the merge, made up front so a shard does not work for a refused output.
+void CheckOutputFree(const SynthRequest& request) {
+  const fs::path out = NormalOut(request.out);
+  std::error_code ec;
+  if (fs::exists(out, ec) && !request.options.overwrite)
+    throw InputError(out, "output already exists (pass --overwrite to replace it)");
+}
+
+std::string PartName(const Log& log, size_t frame_index) {
+  std::string token = log.frames[frame_index].token;
+  for (char& c : token)
+    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '-' && c != '_' && c != '.') c = '_';
+  return std::to_string(frame_index) + "-" + token;
+}
+
+// Doubles go through nlohmann's shortest round-trip formatting, so a value read back is the value written;
+// non-finite values (unknown velocities) are written as null.
+json Num(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+double NumFrom(const JsonReader& r) {
+  return r.raw().is_null() ? std::numeric_limits<double>::quiet_NaN() : r.Number();
+}
+json VecJson(const Eigen::Vector3d& v) { return {Num(v.x()), Num(v.y()), Num(v.z())}; }
+Eigen::Vector3d VecFrom(const JsonReader& r) { return {NumFrom(r[0]), NumFrom(r[1]), NumFrom(r[2])}; }
+json RigidJson(const Rigid3d& T) {
+  const Eigen::Quaterniond& q = T.rotation;
+  return {{"q_wxyz", {q.w(), q.x(), q.y(), q.z()}}, {"t", VecJson(T.translation)}};
+}
+Rigid3d RigidFrom(const JsonReader& r) {
+  Rigid3d T;  // fields set directly: the constructor's normalisation could change the last bit
+  const JsonReader q = r["q_wxyz"];
+  T.rotation = Eigen::Quaterniond(q[0].Number(), q[1].Number(), q[2].Number(), q[3].Number());
+  T.translation = VecFrom(r["t"]);
+  return T;
+}
+json BoxJson(const Box3& b) { return {{"T_frame_box", RigidJson(b.T_frame_box)}, {"size", VecJson(b.size)}}; }
+Box3 BoxFrom(const JsonReader& r) {
+  Box3 b;
+  b.T_frame_box = RigidFrom(r["T_frame_box"]);
+  b.size = VecFrom(r["size"]);
+  return b;
+}
+json Box2Json(const Box2& b) { return {b.x1, b.y1, b.x2, b.y2}; }
+Box2 Box2From(const JsonReader& r) { return Box2{r[0].Number(), r[1].Number(), r[2].Number(), r[3].Number()}; }
+
+json AnnotationJson(const Annotation& a) {
+  json j = {{"category", a.category},       {"box", BoxJson(a.box)},          {"token", a.token},
+            {"instance_token", a.instance_token}, {"num_lidar_pts", a.num_lidar_pts},
+            {"velocity", {Num(a.velocity.x()), Num(a.velocity.y())}}, {"visibility", a.visibility},
+            {"truncation", Num(a.truncation)}, {"box2d_by_camera", json::object()}};
+  for (const auto& [channel, b] : a.box2d_by_camera) j["box2d_by_camera"][channel] = Box2Json(b);
+  return j;
+}
+Annotation AnnotationFrom(const JsonReader& r) {
+  Annotation a;
+  a.category = r["category"].String();
+  a.box = BoxFrom(r["box"]);
+  a.token = r["token"].String();
+  a.instance_token = r["instance_token"].String();
+  a.num_lidar_pts = static_cast<int>(r["num_lidar_pts"].Integer());
+  a.velocity = Eigen::Vector2d(NumFrom(r["velocity"][0]), NumFrom(r["velocity"][1]));
+  a.visibility = static_cast<int>(r["visibility"].Integer());
+  a.truncation = NumFrom(r["truncation"]);
+  for (const auto& [channel, b] : r["box2d_by_camera"].raw().items())
+    a.box2d_by_camera[channel] = Box2From(r["box2d_by_camera"][channel]);
+  return a;
+}
+
+json AddedJson(const AddedObject& o) {
+  json boxes = json::array();
+  for (const CameraBox& cb : o.camera_boxes)
+    boxes.push_back({{"channel", cb.channel}, {"box", Box2Json(cb.box)}, {"visible_fraction", cb.visible_fraction},
+                     {"truncation", cb.truncation}});
+  return {{"category", o.category}, {"annotation", AnnotationJson(o.annotation)}, {"camera_boxes", boxes}, {"asset_id", o.asset_id}};
+}
+AddedObject AddedFrom(const JsonReader& r) {
+  AddedObject o;
+  o.category = r["category"].String();
+  o.annotation = AnnotationFrom(r["annotation"]);
+  for (size_t i = 0; i < r["camera_boxes"].Size(); ++i) {
+    const JsonReader b = r["camera_boxes"][i];
+    o.camera_boxes.push_back(CameraBox{b["channel"].String(), Box2From(b["box"]), b["visible_fraction"].Number(), b["truncation"].Number()});
+  }
+  o.asset_id = r["asset_id"].String();
+  return o;
+}
+
+constexpr int kPartVersion = 1;
+
+// A part: part.json (the request fingerprint, the frame, the labels and everything synth.json and the report
+// need) + images/<channel>.png (replacement images, lossless, re-encoded by WriteDerivative exactly as a local
+// run encodes them) + sweep.bin (the replacement sweep in its record layout). The ground model, the original
+// images and sweep are not stored: the merge recomputes or re-reads them from the log.
+void WritePart(const fs::path& dir, const FrameOutcome& o, const SynthInputs& in, const SynthOptions& options) {
+  SD_CHECK(o.edit.images.size() == o.cameras.size(), << o.edit.images.size() << " images, " << o.cameras.size() << " cameras");
+  SD_CHECK(o.edit.added.size() == o.objects.size(), << o.edit.added.size() << " labels, " << o.objects.size() << " objects");
+  json cameras = json::array();
+  for (size_t c = 0; c < o.cameras.size(); ++c) {
+    const CameraOutcome& co = o.cameras[c];
+    const auto it = o.edit.images.find(co.channel);
+    SD_CHECK(it != o.edit.images.end(), << co.channel);
+    const std::string file = "images/" + std::to_string(c) + ".png";
+    WriteImage(dir / file, it->second);
+    cameras.push_back({{"channel", co.channel}, {"image", file}, {"objects", co.objects}});
+  }
+  json sweep = nullptr;
+  if (o.edit.points) {
+    WritePointCloudBin(dir / "sweep.bin", *o.edit.points);
+    sweep = {{"file", "sweep.bin"}, {"num_features", o.edit.points->num_features},
+             {"feature_names", o.edit.points->feature_names}, {"points", o.edit.points->size()}};
+  }
+  if (options.part_written_hook) options.part_written_hook(o.frame_index, dir);
+  json objects = json::array();
+  for (size_t k = 0; k < o.objects.size(); ++k) {
+    const ObjectOutcome& ob = o.objects[k];
+    objects.push_back({{"label", AddedJson(o.edit.added[k])},
+                       {"asset", ob.placement.asset->info.id},
+                       {"request", ob.placement.request},
+                       {"T_ego_asset", RigidJson(ob.placement.T_ego_asset)},
+                       {"box", BoxJson(ob.placement.box)},
+                       {"ground_height", ob.placement.ground_height},
+                       {"lidar_points", ob.lidar_points},
+                       {"rendered_pixels", ob.rendered_pixels},
+                       {"visible_pixels", ob.visible_pixels}});
+  }
+  json lidar_object_points = json::array();
+  for (const auto& [i, k] : o.lidar_object_points) lidar_object_points.push_back({i, k});
+  json j = {{"version", kPartVersion},
+            {"request", in.fingerprint},
+            {"frame", {{"index", o.frame_index}, {"token", in.log.frames[o.frame_index].token}}},
+            {"sun", o.sun_source},
+            {"objects", objects},
+            {"cameras", cameras},
+            {"sweep", sweep},
+            {"lidar_object_points", lidar_object_points}};
+  WriteJsonFile(dir / "part.json", j, -1);
+}
+
+std::string Short(const json& v) {
+  std::string s = v.dump();
+  return s.size() > 80 ? s.substr(0, 77) + "..." : s;
+}
+
+// InputError unless the part was made for the request `in` describes; names the first thing that differs.
+void CheckPartRequest(const fs::path& part_json, const json& part, const SynthInputs& in) {
+  if (!part.is_object() || part.value("version", 0) != kPartVersion)
+    throw InputError(part_json, Msg() << "not a synth part of version " << kPartVersion);
+  const json& theirs = part.contains("request") ? part["request"] : json();
+  if (theirs == in.fingerprint) return;
+  std::string what;
+  for (const auto& [key, ours] : in.fingerprint.items())
+    if (!theirs.is_object() || !theirs.contains(key) || theirs[key] != ours)
+      what += (what.empty() ? "" : "; ") + key + " is " +
+              (theirs.is_object() && theirs.contains(key) ? Short(theirs[key]) : "missing") + ", this run's is " + Short(ours);
+  throw InputError(part_json, "part of a different synth request (" + (what.empty() ? "request differs" : what) +
+                                  "); give the shards' arguments, or another --out");
+}
+
+FrameOutcome ReadPart(const fs::path& dir, size_t frame_index, const SynthInputs& in, bool for_report) {
+  const fs::path file = dir / "part.json";
+  const json j = ReadJsonFile(file);
+  CheckPartRequest(file, j, in);
+  const JsonReader r(j, file);
+  const Frame& frame = in.log.frames.at(frame_index);
+  if (static_cast<size_t>(r["frame"]["index"].Integer()) != frame_index || r["frame"]["token"].String() != frame.token)
+    r["frame"].Fail(Msg() << "part is for frame " << r["frame"]["index"].Integer() << " (" << r["frame"]["token"].String()
+                          << "), its folder says frame " << frame_index << " (" << frame.token << ")");
+  FrameOutcome o;
+  o.frame_index = frame_index;
+  o.edit.frame_index = frame_index;
+  o.sun_source = r["sun"].String();
+  std::map<std::string, const Asset*> by_id;
+  for (const Asset& a : in.assets) by_id[a.info.id] = &a;
+  for (size_t k = 0; k < r["objects"].Size(); ++k) {
+    const JsonReader ro = r["objects"][k];
+    ObjectOutcome ob;
+    ob.label = AddedFrom(ro["label"]);
+    const auto asset = by_id.find(ro["asset"].String());
+    if (asset == by_id.end()) ro["asset"].Fail("no such asset in this request");
+    ob.placement.asset = asset->second;
+    ob.placement.request = static_cast<int>(ro["request"].Integer());
+    ob.placement.T_ego_asset = RigidFrom(ro["T_ego_asset"]);
+    ob.placement.box = BoxFrom(ro["box"]);
+    ob.placement.ground_height = ro["ground_height"].Number();
+    ob.lidar_points = static_cast<int>(ro["lidar_points"].Integer());
+    ob.rendered_pixels = ro["rendered_pixels"].Number();
+    ob.visible_pixels = ro["visible_pixels"].Number();
+    o.edit.added.push_back(ob.label);
+    o.objects.push_back(std::move(ob));
+  }
+  for (size_t c = 0; c < r["cameras"].Size(); ++c) {
+    const JsonReader rc = r["cameras"][c];
+    CameraOutcome co;
+    co.channel = rc["channel"].String();
+    const CameraSensor* cam = frame.FindCamera(co.channel);
+    if (!cam) rc["channel"].Fail("the log's frame has no such camera");
+    co.after = ReadImage(dir / rc["image"].String(), 3);
+    if (for_report) co.before = ReadImage(cam->image_path, 3);
+    for (size_t i = 0; i < rc["objects"].Size(); ++i) co.objects.push_back(static_cast<int>(rc["objects"][i].Integer()));
+    o.edit.images[co.channel] = co.after;
+    o.cameras.push_back(std::move(co));
+  }
+  if (!r["sweep"].raw().is_null()) {
+    PointLayout layout;
+    layout.num_features = static_cast<int>(r["sweep"]["num_features"].Integer());
+    for (size_t i = 0; i < r["sweep"]["feature_names"].Size(); ++i) layout.feature_names.push_back(r["sweep"]["feature_names"][i].String());
+    PointCloud cloud = ReadPointCloudBin(dir / r["sweep"]["file"].String(), layout);
+    cloud.feature_names = layout.feature_names;
+    if (cloud.size() != static_cast<size_t>(r["sweep"]["points"].Integer()))
+      r["sweep"]["points"].Fail(Msg() << "sweep.bin holds " << cloud.size() << " points");
+    o.edit.points = std::move(cloud);
+  }
+  for (size_t i = 0; i < r["lidar_object_points"].Size(); ++i) {
+    const JsonReader p = r["lidar_object_points"][i];
+    o.lidar_object_points.push_back({static_cast<int>(p[0].Integer()), static_cast<int>(p[1].Integer())});
+  }
+  if (for_report && frame.lidar) {
+    o.sweep_before = ReadLidar(*frame.lidar);
+    o.ground = EstimateFrameGround(frame, PointsInEgo(frame, o.sweep_before), in.scenario);
+  }
+  return o;
+}
+
+struct FrameFailure {
+  size_t frame = 0;
+  std::exception_ptr error;
+};
+
+struct ShardRun {
+  SynthShardSummary summary;
+  std::vector<FrameFailure> failures;
+};
+
+// The shard loop shared by `--shard` and the local run.
+ShardRun SynthesizeParts(const SynthInputs& in, const SynthRequest& request, const ShardSpec& shard, bool log_failures) {
+  ShardRun run;
+  SynthShardSummary& summary = run.summary;
+  summary.parts = SynthPartsDir(request.out);
+  std::vector<size_t> owned;
+  for (size_t i = 0; i < in.selected.size(); ++i)
+    if (shard.Owns(i)) owned.push_back(in.selected[i]);
+  summary.owned = owned.size();
+  std::error_code ec;
+  fs::create_directories(summary.parts, ec);
+  if (ec) throw InputError(summary.parts, "cannot create directory: " + ec.message());
+
+  // Parts already there must be of this request; staging folders of our frames are what a killed run left
+  // (other shards' frames are not touched: they may be running now).
+  std::set<std::string> names;
+  for (size_t fi : owned) names.insert(PartName(in.log, fi));
+  for (const auto& entry : fs::directory_iterator(summary.parts)) {
+    const std::string name = entry.path().filename().string();
+    const size_t tmp = name.find(".tmp-");
+    if (tmp != std::string::npos && names.count(name.substr(0, tmp))) {
+      SD_LOG(Debug, "removing the unfinished part " << entry.path().string());
+      fs::remove_all(entry.path(), ec);
+    }
+  }
+  for (size_t fi : owned) {
+    const fs::path part = summary.parts / PartName(in.log, fi);
+    if (fs::exists(part)) CheckPartRequest(part / "part.json", ReadJsonFile(part / "part.json"), in);
+  }
+
+  summary.run_log = summary.parts / ("log-" + std::to_string(shard.index) + "-of-" + std::to_string(shard.count) + ".jsonl");
+  std::ofstream run_log(summary.run_log, std::ios::app);
+  if (!run_log) throw InputError(summary.run_log, "cannot open for appending");
+  Progress progress("synthesising frames (shard " + shard.ToString() + ")", owned.size());
+  for (size_t fi : owned) {
+    const auto start = std::chrono::steady_clock::now();
+    const std::string& token = in.log.frames[fi].token;
+    const fs::path part = summary.parts / PartName(in.log, fi);
+    json line = {{"frame", fi}, {"token", token}};
+    if (fs::exists(part)) {
+      ++summary.skipped;
+      line["status"] = "skipped";
+      line["error"] = "";
+    } else {
+      try {
+        const FrameOutcome outcome = SynthesizeFrame(in.log, fi, in.assets, in.scenario, request.options);
+        StagingDirectory staging(part, false);
+        WritePart(staging.path(), outcome, in, request.options);
+        staging.Commit();
+        ++summary.done;
+        line["status"] = "done";
+        line["error"] = "";
+      } catch (const std::exception& e) {
+        summary.failed.push_back(fi);
+        run.failures.push_back({fi, std::current_exception()});
+        line["status"] = "failed";
+        line["error"] = e.what();
+        if (log_failures) SD_LOG(Error, "frame " << fi << " (" << token << "): " << e.what());
+      }
+    }
+    line["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    run_log << line.dump() << '\n' << std::flush;
     progress.Advance();
   }
   progress.Finish();
+  return run;
+}
+
+// The derivative dataset, synth.json and report.html from the frames' outcomes, published by one rename.
+SynthSummary WriteSynthOutput(const SynthInputs& in, const SynthRequest& request, const std::vector<FrameOutcome>& outcomes) {
+  const Log& log = in.log;
+  StagingDirectory staging(request.out, request.options.overwrite);
+  std::vector<FrameEdit> edits;
+  for (const auto& o : outcomes) edits.push_back(o.edit);
   WriteDerivative(log, edits, staging.path(), request.options.write);
 
-  // Provenance and placements, machine-readable.
+  // Provenance and placements, machine-readable. No wall-clock fields: a merge writes the same bytes as a
+  // local run.
   nlohmann::json j;
   j["tool"] = "synthdrive synth";
   j["log"] = fs::absolute(request.log).string();
@@ -338,6 +730,72 @@ SynthSummary RunSynth(const SynthRequest& request) {
   summary.out = staging.final_path();
   summary.report = summary.out / "report.html";
   summary.frames = outcomes.size();
+  return summary;
+}
+
+SynthSummary Merge(const SynthInputs& in, const SynthRequest& request) {
+  const fs::path parts = SynthPartsDir(request.out);
+  std::vector<size_t> missing;
+  for (size_t fi : in.selected)
+    if (!fs::is_directory(parts / PartName(in.log, fi))) missing.push_back(fi);
+  if (!missing.empty()) {
+    Msg m;
+    m << "no part for " << missing.size() << " of the " << in.selected.size() << " selected frame(s): ";
+    for (size_t i = 0; i < missing.size() && i < 20; ++i) m << (i ? ", " : "") << missing[i];
+    if (missing.size() > 20) m << " and " << missing.size() - 20 << " more";
+    m << " (run the shards that own them, --shard K/N, first)";
+    throw InputError(parts, m.str());
+  }
+  std::vector<FrameOutcome> outcomes;
+  Progress progress("reading parts", in.selected.size());
+  for (size_t fi : in.selected) {
+    outcomes.push_back(ReadPart(parts / PartName(in.log, fi), fi, in, request.options.report));
+    progress.Advance();
+  }
+  progress.Finish();
+  return WriteSynthOutput(in, request, outcomes);
+}
+
+}  // namespace
+
+fs::path SynthPartsDir(const fs::path& out) {
+  const fs::path p = NormalOut(out);
+  return p.parent_path() / (p.filename().string() + ".parts");
+}
+
+SynthShardSummary RunSynthShard(const SynthRequest& request, const ShardSpec& shard) {
+  const SynthInputs in = LoadInputs(request);
+  CheckOutputFree(request);
+  ShardRun run = SynthesizeParts(in, request, shard, true);
+  return run.summary;
+}
+
+SynthSummary MergeSynthParts(const SynthRequest& request) {
+  const SynthInputs in = LoadInputs(request);
+  CheckOutputFree(request);
+  return Merge(in, request);
+}
+
+SynthSummary RunSynth(const SynthRequest& request) {
+  const SynthInputs in = LoadInputs(request);
+  CheckOutputFree(request);
+  const ShardRun run = SynthesizeParts(in, request, ShardSpec{}, false);
+  std::error_code ec;
+  if (!run.failures.empty()) {
+    for (size_t i = 1; i < run.failures.size(); ++i) {
+      try {
+        std::rethrow_exception(run.failures[i].error);
+      } catch (const std::exception& e) {
+        SD_LOG(Error, "frame " << run.failures[i].frame << " (" << in.log.frames[run.failures[i].frame].token << "): " << e.what());
+      }
+    }
+    // Keep finished parts for a rerun to resume from; a folder of logs only is no use to anyone.
+    if (run.summary.done + run.summary.skipped == 0) fs::remove_all(run.summary.parts, ec);
+    else SD_LOG(Info, "parts of the frames that worked are kept in " << run.summary.parts.string() << "; a rerun resumes from them");
+    std::rethrow_exception(run.failures.front().error);
+  }
+  SynthSummary summary = Merge(in, request);
+  fs::remove_all(run.summary.parts, ec);
   return summary;
 }
 

@@ -1,12 +1,19 @@
 #pragma once
 // `synthdrive synth`: insert assets into a real driving log, camera and LiDAR, with labels, written as a
 // derivative dataset in the input's own format.
+//
+// A batch command (DESIGN.md): the work list is the selected frames. Each frame is synthesised into a *part*,
+// `<out>.parts/<index>-<token>/` (written through a StagingDirectory, so it exists complete or not at all), and
+// the merge turns the parts of every selected frame into the derivative dataset. A local run is exactly
+// "shard 0/1, then merge" (RunSynth), so shards + merge write the same bytes as a local run by construction.
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <vector>
 
 #include "assetgen/asset.h"
 #include "core/image.h"
+#include "core/shard.h"
 #include "datasets/readers.h"
 #include "datasets/writers.h"
 #include "synth/ground.h"
@@ -22,6 +29,9 @@ struct SynthOptions {
   WriteOptions write;
   bool overwrite = false;
   bool report = true;
+  // Tests only: called while a part is half written (its images and sweep are in the staging folder, its
+  // part.json is not), so a test can kill the process mid-part.
+  std::function<void(size_t frame_index, const std::filesystem::path& staging)> part_written_hook;
 };
 
 struct SynthRequest {
@@ -68,7 +78,32 @@ struct SynthSummary {
 };
 
 // The whole command: loads everything, synthesises the selected frames, writes the derivative dataset,
-// synth.json (placements and provenance) and report.html into `out` atomically.
+// synth.json (placements and provenance) and report.html into `out` atomically. It is RunSynthShard(0/1)
+// followed by MergeSynthParts; the parts folder is removed once the output is committed (and kept when a
+// frame failed and others have parts, so a rerun resumes). A frame's failure does not stop the others; the
+// first failure is rethrown at the end.
 SynthSummary RunSynth(const SynthRequest& request);
+
+// Where the parts of `out` live: "<out>.parts" (a sibling, so the output folder itself only ever appears
+// complete). Besides one folder per frame it holds each shard's run log, log-<K>-of-<N>.jsonl: one line per
+// frame, {"frame", "token", "status": done|skipped|failed, "error", "seconds"} (seconds: wall clock).
+std::filesystem::path SynthPartsDir(const std::filesystem::path& out);
+
+struct SynthShardSummary {
+  std::filesystem::path parts, run_log;
+  size_t owned = 0, done = 0, skipped = 0;  // skipped: its part was already there
+  std::vector<size_t> failed;               // frame indices whose synthesis failed (errors are in the run log)
+};
+
+// `synth --shard K/N`: synthesises the frames at positions i of the selection with i % N == K into parts,
+// skipping frames whose part exists (a killed shard resumes; staging folders it left are removed). A frame
+// that fails is logged and the others go on. Refuses (InputError) when `out` exists without --overwrite, or
+// when an existing part was made for a different request (log, scenario, assets or render options).
+SynthShardSummary RunSynthShard(const SynthRequest& request, const ShardSpec& shard);
+
+// `synth --merge`: the parts of every selected frame -> `out`, exactly as a local run writes it. InputError,
+// before anything is created, listing the frames that have no part, or naming a part of a different request.
+// The parts folder is left in place.
+SynthSummary MergeSynthParts(const SynthRequest& request);
 
 }  // namespace sd

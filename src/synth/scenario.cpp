@@ -1,5 +1,7 @@
 #include "synth/scenario.h"
 
+#include <algorithm>
+
 #include <cmath>
 
 #include "core/error.h"
@@ -46,6 +48,13 @@ Scenario ReadScenario(const std::filesystem::path& path) {
     if (std::abs(loc.latitude_deg) > 90) r["location"]["latitude_deg"].Fail("must be within [-90, 90]");
     if (std::abs(loc.longitude_deg) > 180) r["location"]["longitude_deg"].Fail("must be within [-180, 180]");
     s.location = loc;
+  }
+  if (r.Has("assets_from_bank")) {
+    const nlohmann::json& q = j["assets_from_bank"];
+    if (q.is_object()) s.bank_queries.push_back(q);
+    else if (q.is_array() && !q.empty() && std::all_of(q.begin(), q.end(), [](const auto& e) { return e.is_object(); }))
+      s.bank_queries.assign(q.begin(), q.end());
+    else r["assets_from_bank"].Fail("expected a bank query object or a non-empty list of them");
   }
   const JsonReader objects = r["objects"];
   if (objects.Size() == 0) objects.Fail("no objects requested");

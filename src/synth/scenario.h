@@ -12,12 +12,17 @@
 //     ]
 //   }
 // An object names either an asset id (one of the --asset folders) or a category (any --asset of that
-// category, picked by the seed). distance_m is along the ego x axis (ahead), lateral_m along ego y (left).
+// category, picked by the seed). The assets can also come from the bank instead of (or besides) --asset:
+//     "assets_from_bank": {"bank": "bank.sqlite", "category": "traffic_cone", "min_quality": {...}, "limit": 5}
+// (one query or a list of them, in the JSON shape of bank/bank.h BankQueryFromJson; a relative bank path is
+// relative to the scenario file, no "bank" means $SYNTHDRIVE_BANK or ./bank.sqlite). distance_m is along the ego x axis (ahead), lateral_m along ego y (left).
 // yaw: "aligned" (along the ego heading, +-10 deg), "random", or a number in degrees in the ego frame.
 #include <filesystem>
 #include <optional>
 #include <string>
 #include <vector>
+
+#include <nlohmann/json.hpp>
 
 #include "datasets/log.h"
 
@@ -44,6 +49,7 @@ struct Scenario {
   std::optional<SunSpec> sun;
   std::optional<GeoLocation> location;  // overrides the log's location for the sun ephemeris
   std::vector<ObjectRequest> objects;
+  std::vector<nlohmann::json> bank_queries;  // "assets_from_bank", resolved by the pipeline (synth/pipeline.h)
 };
 
 // InputError naming the file for malformed JSON, unknown fields' bad values, count < 1, empty ranges.

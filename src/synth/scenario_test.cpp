@@ -50,6 +50,22 @@ void ExpectError(const std::string& text, const std::string& fragment) {
   }
 }
 
+TEST(Scenario, BankQueriesAreKeptForThePipeline) {
+  testing::TempDir dir;
+  Scenario s = ReadScenario(Write(dir, R"({"assets_from_bank": {"bank": "b.sqlite", "category": "barrier"},
+                                           "objects": [{"category": "barrier"}]})"));
+  ASSERT_EQ(s.bank_queries.size(), 1u);
+  EXPECT_EQ(s.bank_queries[0]["category"], "barrier");
+  s = ReadScenario(Write(dir, R"({"assets_from_bank": [{"category": "barrier"}, {"category": "car", "limit": 2}],
+                                  "objects": [{"category": "car"}]})"));
+  ASSERT_EQ(s.bank_queries.size(), 2u);
+  EXPECT_EQ(s.bank_queries[1]["limit"], 2);
+  EXPECT_TRUE(ReadScenario(testing::RepoData("scenarios/demo.json")).bank_queries.empty());
+  for (const char* bad : {R"({"assets_from_bank": "b.sqlite", "objects": []})",
+                          R"({"assets_from_bank": [], "objects": []})", R"({"assets_from_bank": [3], "objects": []})"})
+    EXPECT_THROW(ReadScenario(Write(dir, bad)), InputError) << bad;
+}
+
 TEST(Scenario, BadInputNamesTheFileAndTheProblem) {
   ExpectError("{\"objects\": [", "malformed JSON");
   ExpectError(R"({"objects":[]})", "no objects");

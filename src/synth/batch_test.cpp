@@ -1,0 +1,356 @@
+// `synthdrive synth` as a batch: shards write parts, the merge writes the dataset, and the result is the same
+// bytes as a local run; a shard killed mid-part resumes; merges refuse missing parts and parts of another
+// request; a failing frame does not stop the others. On the repo's 3-frame KITTI log, so a 2-shard split is
+// uneven (frames 0, 2 | 1).
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <thread>
+
+#include <gtest/gtest.h>
+
+#include "assetgen/canonical.h"
+#include "io/files.h"
+#include "io/json.h"
+#include "io/mesh_io.h"
+#include "synth/pipeline.h"
+#include "synth/report.h"
+#include "testing/testing.h"
+
+namespace sd {
+namespace {
+
+namespace fs = std::filesystem;
+
+const char* kCrashChildEnv = "SD_SYNTH_CRASH_CHILD";
+
+void Import(const fs::path& dir, const std::string& mesh, const std::string& id, const std::string& category,
+            const std::string& front, double scale, double height) {
+  CanonicalizeOptions o;
+  o.up = "+y";
+  o.front = front;
+  o.scale = scale;
+  if (height > 0) o.target_height = height;
+  const CanonicalizeResult c = Canonicalize(LoadMesh(testing::RepoData(mesh)), o);
+  Asset a;
+  a.mesh = c.mesh;
+  a.mesh.ComputeVertexNormals();
+  a.info.id = id;
+  a.info.category = category;
+  a.info.extent = c.extent;
+  SaveAsset(a, dir / id, false);
+}
+
+// The pipeline tests' assets, a scenario that fits on all three KITTI frames (the demo's car finds no room in
+// frame 0), cheap render settings.
+const char* kKittiScenario = R"({"seed": 7, "margin_m": 0.5, "objects": [
+  {"category": "traffic_cone", "count": 2, "distance_m": [5, 20], "lateral_m": [-4, 4], "yaw": "random"},
+  {"category": "barrier", "count": 1, "distance_m": [5, 25], "lateral_m": [-5, 5], "yaw": "aligned"},
+  {"category": "car", "count": 1, "distance_m": [5, 30], "lateral_m": [-6, 6], "yaw": "aligned"}]})";
+
+SynthRequest KittiRequest(const fs::path& dir, const fs::path& out) {
+  SynthRequest r;
+  r.log = testing::RepoData("driving/kitti-object");
+  r.assets = {dir / "cone", dir / "barrier", dir / "car"};
+  r.scenario = dir / "kitti.json";
+  r.out = out;
+  r.options.samples_per_pixel = 1;
+  r.options.ao_samples = 2;
+  return r;
+}
+
+std::map<std::string, std::string> ReadTree(const fs::path& root) {
+  std::map<std::string, std::string> files;
+  for (const auto& e : fs::recursive_directory_iterator(root))
+    if (e.is_regular_file()) files[fs::relative(e.path(), root).string()] = ReadFileToString(e.path());
+  return files;
+}
+
+// Every file under both trees, byte for byte (synth.json has no wall-clock fields, so nothing is excluded).
+void ExpectSameTree(const fs::path& a, const fs::path& b) {
+  const auto fa = ReadTree(a), fb = ReadTree(b);
+  std::vector<std::string> na, nb;
+  for (const auto& [k, v] : fa) na.push_back(k);
+  for (const auto& [k, v] : fb) nb.push_back(k);
+  ASSERT_EQ(na, nb) << a << " vs " << b;
+  size_t differ = 0;
+  for (const auto& [k, v] : fa)
+    if (v != fb.at(k)) {
+      ++differ;
+      ADD_FAILURE() << k << " differs between " << a << " and " << b;
+    }
+  EXPECT_EQ(differ, 0u);
+  EXPECT_GE(fa.size(), 5u);  // images, sweeps, labels, synth.json, report...
+}
+
+std::vector<nlohmann::json> ReadRunLog(const fs::path& file) {
+  std::vector<nlohmann::json> lines;
+  std::istringstream in(ReadFileToString(file));
+  for (std::string line; std::getline(in, line);) lines.push_back(nlohmann::json::parse(line));
+  return lines;
+}
+
+size_t Lines(const std::string& text) {
+  std::istringstream in(text);
+  size_t n = 0;
+  for (std::string line; std::getline(in, line);) n += !line.empty();
+  return n;
+}
+
+template <typename F>
+std::string InputErrorOf(F&& f) {
+  try {
+    f();
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "(no InputError)";
+}
+
+class SynthBatchTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new testing::TempDir();
+    Import(dir_->path(), "assets/metadrive_traffic_cone/scene.gltf", "cone", "traffic_cone", "+x", 0, 0.7);
+    Import(dir_->path(), "assets/metadrive_road_barrier/scene.gltf", "barrier", "barrier", "+z", 1.0, 0);
+    Import(dir_->path(), "assets/torcs_p406/obj/torcs_p406.obj", "car", "car", "+x", 1.0, 0);
+    WriteFileAtomic(dir_->path() / "kitti.json", kKittiScenario);
+    local_ = new SynthSummary(RunSynth(KittiRequest(dir_->path(), dir_->path() / "local")));
+    // Shards 0/2 and 1/2, in the order a scheduler may happen to run them.
+    const SynthRequest r = KittiRequest(dir_->path(), dir_->path() / "sharded");
+    shard1_ = new SynthShardSummary(RunSynthShard(r, ShardSpec{1, 2}));
+    shard0_ = new SynthShardSummary(RunSynthShard(r, ShardSpec{0, 2}));
+  }
+  static void TearDownTestSuite() {
+    delete shard0_;
+    delete shard1_;
+    delete local_;
+    delete dir_;
+  }
+  static fs::path Dir() { return dir_->path(); }
+  static testing::TempDir* dir_;
+  static SynthSummary* local_;
+  static SynthShardSummary *shard0_, *shard1_;
+};
+testing::TempDir* SynthBatchTest::dir_ = nullptr;
+SynthSummary* SynthBatchTest::local_ = nullptr;
+SynthShardSummary* SynthBatchTest::shard0_ = nullptr;
+SynthShardSummary* SynthBatchTest::shard1_ = nullptr;
+
+TEST_F(SynthBatchTest, LocalRunWritesTheDatasetAndRemovesItsParts) {
+  EXPECT_EQ(local_->frames, 3u);
+  EXPECT_EQ(local_->objects, 12u);  // 4 objects per frame
+  EXPECT_FALSE(fs::exists(SynthPartsDir(Dir() / "local")));
+  for (const char* f : {"000000", "000001", "000002"}) {
+    const std::string in = ReadFileToString(testing::RepoData(std::string("driving/kitti-object/training/label_2/") + f + ".txt"));
+    const std::string out = ReadFileToString(Dir() / "local" / "label_2" / (std::string(f) + ".txt"));
+    EXPECT_EQ(out.substr(0, in.size()), in) << f;  // real labels kept, 4 lines added
+    EXPECT_EQ(Lines(out), Lines(in) + 4) << f;
+  }
+}
+
+TEST_F(SynthBatchTest, TwoShardsAndAMergeWriteTheSameBytesAsALocalRun) {
+  EXPECT_EQ(shard0_->owned, 2u);  // selection positions 0 and 2
+  EXPECT_EQ(shard0_->done, 2u);
+  EXPECT_EQ(shard1_->owned, 1u);
+  EXPECT_EQ(shard1_->done, 1u);
+  EXPECT_TRUE(shard0_->failed.empty());
+  const fs::path parts = SynthPartsDir(Dir() / "sharded");
+  for (const char* p : {"0-000000", "1-000001", "2-000002"}) EXPECT_TRUE(fs::exists(parts / p / "part.json")) << p;
+  const auto log0 = ReadRunLog(parts / "log-0-of-2.jsonl");
+  ASSERT_EQ(log0.size(), 2u);
+  EXPECT_EQ(log0[0]["frame"], 0);
+  EXPECT_EQ(log0[1]["frame"], 2);
+  for (const auto& l : log0) EXPECT_EQ(l["status"], "done");
+  ASSERT_EQ(ReadRunLog(parts / "log-1-of-2.jsonl").size(), 1u);
+
+  const SynthSummary merged = MergeSynthParts(KittiRequest(Dir(), Dir() / "sharded"));
+  EXPECT_EQ(merged.frames, 3u);
+  EXPECT_EQ(merged.objects, local_->objects);
+  ExpectSameTree(Dir() / "local", Dir() / "sharded");
+  EXPECT_TRUE(fs::exists(parts / "0-000000"));  // the merge leaves the parts
+
+  // A rerun of a finished shard does nothing but log the skips.
+  fs::copy(parts, SynthPartsDir(Dir() / "rerun"), fs::copy_options::recursive);
+  const SynthShardSummary rerun = RunSynthShard(KittiRequest(Dir(), Dir() / "rerun"), ShardSpec{0, 2});
+  EXPECT_EQ(rerun.done, 0u);
+  EXPECT_EQ(rerun.skipped, 2u);
+  const auto log = ReadRunLog(SynthPartsDir(Dir() / "rerun") / "log-0-of-2.jsonl");
+  ASSERT_EQ(log.size(), 4u);  // appended
+  EXPECT_EQ(log[2]["status"], "skipped");
+  EXPECT_EQ(log[3]["status"], "skipped");
+}
+
+TEST_F(SynthBatchTest, MergeWithAMissingPartNamesTheFramesAndCreatesNothing) {
+  const fs::path out = Dir() / "missing";
+  fs::copy(SynthPartsDir(Dir() / "sharded"), SynthPartsDir(out), fs::copy_options::recursive);
+  fs::remove_all(SynthPartsDir(out) / "1-000001");
+  const std::string err = InputErrorOf([&] { MergeSynthParts(KittiRequest(Dir(), out)); });
+  EXPECT_NE(err.find("no part for 1 of the 3 selected frame(s): 1 ("), std::string::npos) << err;
+  EXPECT_FALSE(fs::exists(out));
+  for (const auto& e : fs::directory_iterator(Dir())) EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
+}
+
+TEST_F(SynthBatchTest, PartsOfAnotherScenarioAreRefused) {
+  const fs::path out = Dir() / "other";
+  fs::copy(SynthPartsDir(Dir() / "sharded"), SynthPartsDir(out), fs::copy_options::recursive);
+  nlohmann::json scenario = ReadJsonFile(Dir() / "kitti.json");
+  scenario["seed"] = 8;
+  WriteJsonFile(Dir() / "seed8.json", scenario);
+  SynthRequest r = KittiRequest(Dir(), out);
+  r.scenario = Dir() / "seed8.json";
+  std::string err = InputErrorOf([&] { MergeSynthParts(r); });
+  EXPECT_NE(err.find("part of a different synth request (scenario_fnv1a64"), std::string::npos) << err;
+  EXPECT_FALSE(fs::exists(out));
+  // A shard does not mix its parts in either (before synthesising anything).
+  err = InputErrorOf([&] { RunSynthShard(r, ShardSpec{0, 2}); });
+  EXPECT_NE(err.find("part of a different synth request"), std::string::npos) << err;
+  // Nor parts rendered with other settings.
+  r = KittiRequest(Dir(), out);
+  r.options.samples_per_pixel = 2;
+  err = InputErrorOf([&] { MergeSynthParts(r); });
+  EXPECT_NE(err.find("samples_per_pixel is 1, this run's is 2"), std::string::npos) << err;
+}
+
+// Shards + merge equal a local run by construction, because a local run goes through parts too; this checks
+// that the parts lose nothing: the dataset and report written straight from the in-memory outcomes (the way
+// RunSynth wrote them before parts existed) are the bytes RunSynth writes. On KITTI (labels with 2-6
+// decimals) and on the nuScenes mmdet3d info (labels as full-precision JSON doubles).
+void ExpectPartsLoseNothing(const SynthRequest& r, const fs::path& direct) {
+  const Log log = OpenLog(r.log);
+  std::vector<Asset> assets;
+  for (const auto& a : r.assets) assets.push_back(LoadAsset(a));
+  const Scenario scenario = ReadScenario(r.scenario);
+  std::vector<FrameOutcome> outcomes;
+  std::vector<FrameEdit> edits;
+  for (size_t i = 0; i < log.frames.size(); ++i) {
+    outcomes.push_back(SynthesizeFrame(log, i, assets, scenario, r.options));
+    edits.push_back(outcomes.back().edit);
+  }
+  fs::create_directories(direct);
+  WriteDerivative(log, edits, direct, r.options.write);
+  WriteSynthReport(log, outcomes, direct / "report.html");
+  fs::copy_file(r.out / "synth.json", direct / "synth.json");  // written by RunSynth only
+  ExpectSameTree(r.out, direct);
+}
+
+TEST_F(SynthBatchTest, PartsLoseNothingKitti) {
+  ExpectPartsLoseNothing(KittiRequest(Dir(), Dir() / "local"), Dir() / "direct_kitti");
+}
+
+TEST_F(SynthBatchTest, PartsLoseNothingNuScenesMmdet3d) {
+  SynthRequest r = KittiRequest(Dir(), Dir() / "nuscenes");
+  r.log = testing::RepoData("driving/nuscenes-scene0061-kf0/mmdet3d_info/n015-2018-07-24-11-22-45+0800.json");
+  r.scenario = testing::RepoData("scenarios/demo.json");
+  const SynthSummary s = RunSynth(r);
+  EXPECT_EQ(s.objects, 5u);
+  ExpectPartsLoseNothing(r, Dir() / "direct_nuscenes");
+}
+
+// The crash test's child (run by KilledShardResumes through exec of this binary): a shard whose hook stops
+// for good half way through frame 1's part, until the parent kills it.
+TEST(SynthCrashChild, ShardHangingMidPart) {
+  const char* dir = std::getenv(kCrashChildEnv);
+  if (!dir) GTEST_SKIP() << "only run by SynthBatchTest.KilledShardResumesAndMergesToTheSameResult";
+  SynthRequest r = KittiRequest(dir, fs::path(dir) / "killed");
+  r.options.part_written_hook = [&](size_t frame, const fs::path& staging) {
+    if (frame != 1) return;
+    WriteFileAtomic(fs::path(dir) / "hook_reached", staging.string());
+    std::this_thread::sleep_for(std::chrono::hours(1));
+  };
+  RunSynthShard(r, ShardSpec{0, 1});
+  FAIL() << "the shard was not killed";
+}
+
+TEST_F(SynthBatchTest, KilledShardResumesAndMergesToTheSameResult) {
+  const fs::path out = Dir() / "killed", parts = SynthPartsDir(out);
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    setenv(kCrashChildEnv, Dir().c_str(), 1);
+    execl("/proc/self/exe", "batch_test", "--gtest_filter=SynthCrashChild.*", static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  // Wait for the hook (no time limit of our own: CTest's timeout bounds a hung child).
+  int status = 0;
+  bool exited = false;
+  while (!fs::exists(Dir() / "hook_reached")) {
+    if (waitpid(pid, &status, WNOHANG) == pid) {
+      exited = true;
+      break;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  ASSERT_FALSE(exited) << "child exited before its hook, status " << status;
+  ASSERT_EQ(kill(pid, SIGKILL), 0);
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL);
+
+  // Frame 0's part is complete; frame 1 has only a staging folder, with the sweep but no part.json.
+  EXPECT_TRUE(fs::exists(parts / "0-000000" / "part.json"));
+  EXPECT_FALSE(fs::exists(parts / "1-000001"));
+  const fs::path staging = ReadFileToString(Dir() / "hook_reached");
+  EXPECT_EQ(staging.parent_path(), parts);
+  EXPECT_EQ(staging.filename().string().rfind("1-000001.tmp-", 0), 0u) << staging;
+  EXPECT_TRUE(fs::exists(staging / "sweep.bin"));
+  EXPECT_FALSE(fs::exists(staging / "part.json"));
+  EXPECT_FALSE(fs::exists(out));
+
+  // The merge refuses; the rerun cleans the staging folder up, skips frame 0 and finishes 1 and 2.
+  const std::string err = InputErrorOf([&] { MergeSynthParts(KittiRequest(Dir(), out)); });
+  EXPECT_NE(err.find("selected frame(s): 1, 2 ("), std::string::npos) << err;
+  const SynthShardSummary rerun = RunSynthShard(KittiRequest(Dir(), out), ShardSpec{0, 1});
+  EXPECT_EQ(rerun.skipped, 1u);
+  EXPECT_EQ(rerun.done, 2u);
+  EXPECT_FALSE(fs::exists(staging));
+  for (const auto& e : fs::directory_iterator(parts)) EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
+  const auto log = ReadRunLog(parts / "log-0-of-1.jsonl");
+  ASSERT_EQ(log.size(), 4u);  // the killed run's frame 0, then the rerun's three frames
+  EXPECT_EQ(log[1]["status"], "skipped");
+  EXPECT_EQ(log[2]["status"], "done");
+  MergeSynthParts(KittiRequest(Dir(), out));
+  ExpectSameTree(Dir() / "local", out);
+}
+
+TEST_F(SynthBatchTest, AFailingFrameDoesNotStopTheOthers) {
+  // A copy of the log whose frame 1 sweep is truncated mid-record.
+  const fs::path log = Dir() / "kitti_bad";
+  fs::copy(testing::RepoData("driving/kitti-object"), log, fs::copy_options::recursive);
+  const fs::path sweep = log / "training/velodyne/000001.bin";
+  fs::permissions(sweep, fs::perms::owner_write, fs::perm_options::add);
+  fs::resize_file(sweep, 1003);
+  SynthRequest r = KittiRequest(Dir(), Dir() / "bad_out");
+  r.log = log;
+  r.options.frames = {"1", "0"};
+  const SynthShardSummary s = RunSynthShard(r, ShardSpec{0, 1});
+  EXPECT_EQ(s.done, 1u);
+  EXPECT_EQ(s.failed, std::vector<size_t>{1});
+  EXPECT_TRUE(fs::exists(s.parts / "0-000000" / "part.json"));
+  const auto lines = ReadRunLog(s.run_log);
+  ASSERT_EQ(lines.size(), 2u);
+  EXPECT_EQ(lines[0]["frame"], 1);
+  EXPECT_EQ(lines[0]["status"], "failed");
+  EXPECT_NE(lines[0]["error"].get<std::string>().find("000001.bin: size 1003 B is not a whole number"), std::string::npos) << lines[0];
+  EXPECT_EQ(lines[1]["frame"], 0);
+  EXPECT_EQ(lines[1]["status"], "done");
+  EXPECT_GT(lines[1]["seconds"].get<double>(), 0.0);
+  const std::string err = InputErrorOf([&] { MergeSynthParts(r); });
+  EXPECT_NE(err.find("selected frame(s): 1 ("), std::string::npos) << err;
+
+  // A local run of the failing frame alone rethrows its error and leaves nothing behind.
+  r.out = Dir() / "bad_local";
+  r.options.frames = {"1"};
+  const std::string local_err = InputErrorOf([&] { RunSynth(r); });
+  EXPECT_NE(local_err.find("not a whole number of 16-byte records"), std::string::npos) << local_err;
+  EXPECT_FALSE(fs::exists(r.out));
+  EXPECT_FALSE(fs::exists(SynthPartsDir(r.out)));
+}
+
+}  // namespace
+}  // namespace sd

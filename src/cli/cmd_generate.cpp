@@ -1,5 +1,7 @@
 // `synthdrive generate`: object views (or, with the learned models, one object image) → a finished asset folder.
+#include <chrono>
 #include <filesystem>
+#include <fstream>
 #include <optional>
 #include <memory>
 #include <vector>
@@ -159,11 +161,19 @@ int RunManifest(const Args& a, const fs::path& model_dir) {
   RequireSingleImageModels(manifest, model_dir);
   const ImageFrontEnd front_end(model_dir, a.segmenter, a.diffusion_steps, a.guidance, a.seed);
   fs::create_directories(a.out);
+  // One line per hit (done / failed with the reason, seconds), appended as it happens, so a killed or failed
+  // shard says what it did; the same shape as synth's run logs.
+  const fs::path log_file = fs::path(a.out) / ("generate-log-" + std::to_string(shard.index) + "-of-" +
+                                               std::to_string(shard.count) + ".jsonl");
+  std::ofstream run_log(log_file, std::ios::app);
+  if (!run_log) throw InputError(log_file, "cannot open for appending");
   Progress progress("generate", todo.size());
   size_t failed = 0;
   for (size_t i : todo) {
     const mining::ManifestEntry& e = entries[i];
     const std::string where = manifest.string() + ":" + std::to_string(i + 1);
+    const auto start = std::chrono::steady_clock::now();
+    nlohmann::json line = {{"hit", i + 1}, {"id", e.item.id}, {"status", "done"}, {"error", ""}};
     try {
       const MinedObject object = LoadMinedObject(e);
       const std::optional<CategoryInfo> category = object.category.empty() ? fallback : FindCategory(object.category);
@@ -193,12 +203,16 @@ int RunManifest(const Args& a, const fs::path& model_dir) {
       ++failed;
       const std::string what = err.what();
       SD_LOG(Error, (what.rfind(where, 0) == 0 ? what : where + ": " + what));
+      line["status"] = "failed";
+      line["error"] = what;
     }
+    line["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    run_log << line.dump() << '\n' << std::flush;
     progress.Advance();
   }
   progress.Finish();
   SD_LOG(Info, "generate: " << todo.size() - failed << " assets built, " << failed << " failed, " << done
-                            << " already there -> " << a.out);
+                            << " already there -> " << a.out << " (run log " << log_file.string() << ")");
   return failed == 0 ? 0 : 1;
 }
 

@@ -172,12 +172,12 @@ IndexHeader EnsureIndexHeader(const fs::path& dir, const IndexBuildOptions& opti
   const fs::path file = dir / "index.json";
   if (!fs::exists(file)) {
     if (fs::exists(dir) && !fs::is_directory(dir)) throw InputError(dir, "exists and is not an index folder");
-    // Shard processes started together all get here: besides shards/ and index.json temporaries (another
+    // Shard processes started together all get here: besides shards/, logs/ and index.json temporaries (another
     // process creating the index right now), anything in the folder means it is not ours to write into.
     if (fs::exists(dir))
       for (const auto& e : fs::directory_iterator(dir)) {
         const std::string name = e.path().filename().string();
-        if (name != "shards" && name != "index.json" && name.rfind("index.json.tmp-", 0) != 0)
+        if (name != "shards" && name != "logs" && name != "index.json" && name.rfind("index.json.tmp-", 0) != 0)
           throw InputError(dir, "exists, is not empty and holds no index.json: refusing to write an index into it");
       }
     fs::create_directories(dir / "shards");
@@ -512,13 +512,27 @@ IndexBuildReport BuildIndex(const fs::path& index_dir, const IndexBuildOptions& 
   std::unique_ptr<Progress> progress;
   if (options.progress && !todo.empty()) progress = std::make_unique<Progress>("mine index", todo.size());
   const fs::path shards = index_dir / "shards";
+  // One line per chunk built, appended as it happens (the chunk's own chunk.json lists its failed images).
+  const fs::path log_file = index_dir / "logs" / ("index-" + std::to_string(options.shard.index) + "-of-" +
+                                                  std::to_string(options.shard.count) + ".jsonl");
+  std::ofstream run_log;
+  if (!todo.empty()) {
+    fs::create_directories(log_file.parent_path());
+    run_log.open(log_file, std::ios::app);
+    if (!run_log) throw InputError(log_file, "cannot open for appending");
+  }
   for (const Chunk* chunk : todo) {
+    const auto chunk_start = std::chrono::steady_clock::now();
     RemoveStaleStaging(shards, chunk->name);
     StagingDirectory staging(shards / chunk->name, /*overwrite=*/false);
     const SourceState& s = sources[chunk->source];
     const ChunkOutput out = BuildChunk(s, *chunk, options, staging.path());
     WriteChunk(s, *chunk, header, out, staging.path());
     staging.Commit();
+    run_log << json{{"chunk", chunk->name}, {"source", s.source.path.string()}, {"begin", chunk->begin},
+                    {"end", chunk->end}, {"items", out.items.size()}, {"failures", out.failures.size()},
+                    {"seconds", Seconds(chunk_start)}}.dump()
+            << '\n' << std::flush;
     ++report.chunks_built;
     report.items += out.items.size();
     report.failures += out.failures.size();

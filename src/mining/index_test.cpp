@@ -145,6 +145,12 @@ TEST(MiningIndex, GrowsIncrementallyResumesAndSplitsIntoShards) {
   EXPECT_EQ(add.chunks_built, 3u);
   const std::set<std::string> all = Ids(MiningIndex::Open(tmp / "index"));
   EXPECT_EQ(all.size(), 11u);
+  // The run log has one line per chunk built, over both runs.
+  std::vector<std::string> logged;
+  ForEachJsonLine(tmp / "index" / "logs" / "index-0-of-1.jsonl", [&](const nlohmann::json& j, const std::string&) {
+    logged.push_back(j["chunk"].get<std::string>());
+  });
+  EXPECT_EQ(logged.size(), 6u);
 
   // A killed run: one shard missing, a staging folder left behind. The rerun rebuilds just that chunk, and an
   // open index never sees the staging folder.
@@ -194,7 +200,9 @@ TEST(MiningIndex, ShardsCreatingTheSameNewIndexTogetherAllSucceed) {
     EXPECT_EQ(failed, 0);
     EXPECT_EQ(MiningIndex::Open(out).size(), 8u);
     for (const auto& e : fs::directory_iterator(out))
-      EXPECT_TRUE(e.path().filename() == "index.json" || e.path().filename() == "shards") << e.path();
+      EXPECT_TRUE(e.path().filename() == "index.json" || e.path().filename() == "shards" ||
+                  e.path().filename() == "logs")
+          << e.path();
   }
 }
 

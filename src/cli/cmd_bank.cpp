@@ -94,6 +94,17 @@ void PrintTable(const std::vector<bank::BankEntry>& entries) {
   }
 }
 
+// `list` and `query` output: a table, or with --json an array of entries (without their file lists).
+void PrintEntries(const std::vector<bank::BankEntry>& entries, bool json) {
+  if (!json) {
+    PrintTable(entries);
+    return;
+  }
+  nlohmann::json j = nlohmann::json::array();
+  for (const bank::BankEntry& e : entries) j.push_back(bank::BankEntryToJson(e, false));
+  std::printf("%s\n", j.dump(2).c_str());
+}
+
 std::map<std::string, double> ParseFigures(const std::vector<std::string>& items, const char* option) {
   std::map<std::string, double> out;
   for (const std::string& item : items) {
@@ -165,13 +176,7 @@ Runner AddList(CLI::App& app) {
   app.add_flag("--json", *json, "Print a JSON array instead of a table");
   return [bank_path, json]() {
     const std::vector<bank::BankEntry> entries = bank::Bank::Open(BankPath(*bank_path), false).Query({});
-    if (*json) {
-      nlohmann::json j = nlohmann::json::array();
-      for (const bank::BankEntry& e : entries) j.push_back(bank::BankEntryToJson(e, false));
-      std::printf("%s\n", j.dump(2).c_str());
-    } else {
-      PrintTable(entries);
-    }
+    PrintEntries(entries, *json);
     return 0;
   };
 }
@@ -216,13 +221,7 @@ Runner AddQuery(CLI::App& app) {
     std::optional<models::ClipEncoder> clip;
     if (!q.text.empty()) clip = LoadBankClip(a->clip, a->device);
     const std::vector<bank::BankEntry> entries = b.Query(q, clip ? &*clip : nullptr);
-    if (a->json) {
-      nlohmann::json j = nlohmann::json::array();
-      for (const bank::BankEntry& e : entries) j.push_back(bank::BankEntryToJson(e, false));
-      std::printf("%s\n", j.dump(2).c_str());
-    } else {
-      PrintTable(entries);
-    }
+    PrintEntries(entries, a->json);
     return 0;
   };
 }

@@ -21,6 +21,7 @@
 #include "io/mesh_io.h"
 #include "synth/pipeline.h"
 #include "synth/report.h"
+#include "synth/test_assets.h"
 #include "testing/testing.h"
 
 namespace sd {
@@ -29,23 +30,6 @@ namespace {
 namespace fs = std::filesystem;
 
 const char* kCrashChildEnv = "SD_SYNTH_CRASH_CHILD";
-
-void Import(const fs::path& dir, const std::string& mesh, const std::string& id, const std::string& category,
-            const std::string& front, double scale, double height) {
-  CanonicalizeOptions o;
-  o.up = "+y";
-  o.front = front;
-  o.scale = scale;
-  if (height > 0) o.target_height = height;
-  const CanonicalizeResult c = Canonicalize(LoadMesh(testing::RepoData(mesh)), o);
-  Asset a;
-  a.mesh = c.mesh;
-  a.mesh.ComputeVertexNormals();
-  a.info.id = id;
-  a.info.category = category;
-  a.info.extent = c.extent;
-  SaveAsset(a, dir / id, false);
-}
 
 // The pipeline tests' assets, a scenario that fits on all three KITTI frames (the demo's car finds no room in
 // frame 0), cheap render settings.
@@ -117,9 +101,7 @@ class SynthBatchTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     dir_ = new testing::TempDir();
-    Import(dir_->path(), "assets/metadrive_traffic_cone/scene.gltf", "cone", "traffic_cone", "+x", 0, 0.7);
-    Import(dir_->path(), "assets/metadrive_road_barrier/scene.gltf", "barrier", "barrier", "+z", 1.0, 0);
-    Import(dir_->path(), "assets/torcs_p406/obj/torcs_p406.obj", "car", "car", "+x", 1.0, 0);
+    testing::ImportDemoAssets(dir_->path());
     WriteFileAtomic(dir_->path() / "kitti.json", kKittiScenario);
     local_ = new SynthSummary(RunSynth(KittiRequest(dir_->path(), dir_->path() / "local")));
     // Shards 0/2 and 1/2, in the order a scheduler may happen to run them.

@@ -9,6 +9,7 @@
 
 #include "assetgen/canonical.h"
 #include "io/mesh_io.h"
+#include "synth/test_assets.h"
 #include "testing/testing.h"
 
 namespace sd {
@@ -16,29 +17,7 @@ namespace {
 
 const char* kInfo = "driving/nuscenes-scene0061-kf0/mmdet3d_info/n015-2018-07-24-11-22-45+0800.json";
 
-Asset Import(const testing::TempDir& dir, const std::string& mesh, const std::string& id, const std::string& category,
-             const std::string& front, double scale, double height) {
-  CanonicalizeOptions o;
-  o.up = "+y";
-  o.front = front;
-  o.scale = scale;
-  if (height > 0) o.target_height = height;
-  const CanonicalizeResult c = Canonicalize(LoadMesh(testing::RepoData(mesh)), o);
-  Asset a;
-  a.mesh = c.mesh;
-  a.mesh.ComputeVertexNormals();
-  a.info.id = id;
-  a.info.category = category;
-  a.info.extent = c.extent;
-  SaveAsset(a, dir / id, false);
-  return LoadAsset(dir / id);
-}
-
-std::vector<Asset> DemoAssets(const testing::TempDir& dir) {
-  return {Import(dir, "assets/metadrive_traffic_cone/scene.gltf", "cone", "traffic_cone", "+x", 0, 0.7),
-          Import(dir, "assets/metadrive_road_barrier/scene.gltf", "barrier", "barrier", "+z", 1.0, 0),
-          Import(dir, "assets/torcs_p406/obj/torcs_p406.obj", "car", "car", "+x", 1.0, 0)};
-}
+std::vector<Asset> DemoAssets(const testing::TempDir& dir) { return testing::ImportDemoAssets(dir.path()); }
 
 // Distance from p to triangle abc (Ericson, Real-Time Collision Detection 5.1.5).
 double PointTriangleDistance(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {

@@ -158,7 +158,9 @@ expect_error "eval: missing prediction" "nothing.glb: no such file" "$T/nothing.
   | grep -q "0 new chunks (2 already done" && ok || bad "mine index resumes: nothing rebuilt"
 "$BIN" -q mine query --index "$T/mi" --prompt car --prompt "orange traffic cone" --k 5 --out "$T/mr" \
   && [ -s "$T/mr/manifest.jsonl" ] && [ -f "$T/mr/index.html" ] \
-  && [ "$(grep -c '"category":"car"' "$T/mr/manifest.jsonl")" -eq "$(wc -l < "$T/mr/manifest.jsonl")" ] \
+  && [ "$(grep -c '"category":"car".*"prompt":"car"' "$T/mr/manifest.jsonl")" -eq "$(grep -c '"prompt":"car"' "$T/mr/manifest.jsonl")" ] \
+  && [ "$(grep -c '"category":"traffic_cone".*"prompt":"orange traffic cone"' "$T/mr/manifest.jsonl")" -eq "$(grep -c '"prompt":"orange traffic cone"' "$T/mr/manifest.jsonl")" ] \
+  && [ "$(grep -c '"prompt":"car"' "$T/mr/manifest.jsonl")" -gt 0 ] \
   && ok || bad "mine query by label"
 for k in 0 1; do "$BIN" -q mine index --log "$INFO" --log "$DATA/driving/kitti-object" --out "$T/mi_split" --clip none --shard $k/2; done
 [ "$(ls "$T/mi_split/shards" | sort)" = "$(ls "$T/mi/shards" | sort)" ] && ok || bad "mine index --shard 0/2 + 1/2 = the whole index"

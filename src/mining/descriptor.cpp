@@ -396,11 +396,14 @@ int HammingDistance(uint64_t a, uint64_t b) { return std::popcount(a ^ b); }
 double Sharpness(const ImageU8& image, const ImageU8* mask) {
   CheckImage(image, "Sharpness");
   const int w = image.width(), h = image.height();
+  // Larger images are brought down to a shorter side of 128 so the figure does not grow with resolution;
+  // smaller ones (distant objects) are measured as they are: upsampling them would interpolate their detail
+  // away and judge every small crop blurred.
   constexpr int kShort = 128;
-  const double scale = static_cast<double>(kShort) / std::min(w, h);
-  const int ow = w <= h ? kShort : std::max(kShort, static_cast<int>(std::lround(w * scale)));
-  const int oh = h < w ? kShort : std::max(kShort, static_cast<int>(std::lround(h * scale)));
-  const Filter filter = scale < 1 ? Filter::kArea : Filter::kLinear;
+  const double scale = std::min(1.0, static_cast<double>(kShort) / std::min(w, h));
+  const int ow = scale == 1.0 ? w : w <= h ? kShort : std::max(kShort, static_cast<int>(std::lround(w * scale)));
+  const int oh = scale == 1.0 ? h : h < w ? kShort : std::max(kShort, static_cast<int>(std::lround(h * scale)));
+  const Filter filter = Filter::kArea;
   const std::vector<float> grey = Resample(GreyOf(image), w, h, ow, oh, filter);
 
   const bool masked = (mask && !mask->empty()) || image.channels() == 4;

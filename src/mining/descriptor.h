@@ -29,8 +29,9 @@ std::vector<float> ImageDescriptor(const ImageU8& image, const ImageU8* mask = n
 uint64_t PerceptualHash(const ImageU8& image);
 int HammingDistance(uint64_t a, uint64_t b);
 
-// Variance of the 4-neighbour Laplacian of the grey image (0..255 scale) after resizing so the shorter side
-// is 128 pixels, so the figure does not depend on crop size; over the mask's pixels when a mask is given (an
+// Variance of the 4-neighbour Laplacian of the grey image (0..255 scale), after shrinking images whose shorter
+// side is over 128 pixels to 128 (so the figure does not grow with resolution; smaller crops are measured as
+// they are, never upsampled); over the mask's pixels when a mask is given (an
 // RGBA image's alpha acts as the mask). Measured on real camera crops: nuScenes 80-100, KITTI about 1000; a
 // Gaussian blur of sigma 2 at that scale brings them to 4-9 (descriptor_test.cpp), so ~10 separates blurred.
 double Sharpness(const ImageU8& image, const ImageU8* mask = nullptr);

@@ -439,6 +439,28 @@ TEST(Sharpness, IndependentOfSize) {
   }
 }
 
+// A distant object's crop (shorter side under 128 px) is measured at its own resolution, never upsampled: the
+// figure is then the plain variance of its Laplacian, computed here independently.
+TEST(Sharpness, SmallCropsAreMeasuredAsTheyAre) {
+  const std::vector<ImageU8> images = RepoImages();
+  const ImageU8 rgb = Crop(images[0], 700, 420, 40, 40);
+  ImageU8 grey(40, 52, 1);
+  for (int y = 0; y < 52; ++y)
+    for (int x = 0; x < 40; ++x) grey.at(x, y) = images[0].at(700 + x, 420 + y, 1);
+  double sum = 0, sum2 = 0, n = 0;
+  for (int y = 1; y + 1 < 52; ++y)
+    for (int x = 1; x + 1 < 40; ++x) {
+      const double lap = grey.at(x - 1, y) + grey.at(x + 1, y) + grey.at(x, y - 1) + grey.at(x, y + 1) - 4.0 * grey.at(x, y);
+      sum += lap;
+      sum2 += lap * lap;
+      ++n;
+    }
+  const double expected = sum2 / n - (sum / n) * (sum / n);
+  EXPECT_NEAR(Sharpness(grey), expected, 1e-3 * expected);
+  // The same region upsampled 4x (what measuring small crops at a fixed 128 px would do) reads far blurrier.
+  EXPECT_GT(Sharpness(rgb), 4 * Sharpness(Upscale2(Upscale2(rgb))));
+}
+
 TEST(Sharpness, MaskedLooksOnlyAtMaskPixels) {
   const std::vector<ImageU8> images = RepoImages();
   const ImageU8 sharp = Crop(images[0], 600, 300, 256, 256);

@@ -12,6 +12,7 @@
 // process's peak resident set after the object (it only grows).
 //
 // Usage: bench_generate [--objects a,b] [--sr auto|none|bicubic|esrgan-slim|esrgan-medium] [--steps N]
+//                       [--device cpu|cuda]
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
@@ -28,10 +29,12 @@
 #include "assetgen/generate.h"
 #include "assetgen/texture_eval.h"
 #include "assetgen/views.h"
+#include "core/device.h"
 #include "core/error.h"
 #include "core/log.h"
 #include "geometry/metrics.h"
 #include "io/json.h"
+#include "raster/raster.h"
 #include "io/mesh_io.h"
 
 #include "bench_objects.h"
@@ -70,6 +73,8 @@ int main(int argc, char** argv) {
       sr = next();
     } else if (a == "--steps") {
       steps = std::max(1, std::atoi(next().c_str()));
+    } else if (a == "--device") {
+      SetDevice(ParseDevice(next()));
     } else {
       std::fprintf(stderr, "bench_generate: unknown argument %s\n", a.c_str());
       return 2;
@@ -88,6 +93,8 @@ int main(int argc, char** argv) {
   objects.push_back({"torcs_155_dtm", "road", "car/torcs_155_dtm/obj/torcs_155_dtm.obj", "+y"});
 
   const geometry::GeometryMetricsOptions metric_options;
+  std::printf("device: %s%s\n", ToString(CurrentDevice()),
+              CurrentDevice() == Device::kCuda ? (" (" + raster::CudaDeviceDescription() + ")").c_str() : "");
   std::printf("geometry protocol: %s\ntexture protocol: %s\n", geometry::DescribeProtocol(metric_options).c_str(),
               DescribeTextureProtocol().c_str());
   std::printf("views: 6 Zero123++ rig views 320x320 (oracle); refinement %d steps; super-resolution: %s\n\n", steps,

@@ -9,6 +9,7 @@
 // renders of GT / coarse / refined (--html, default bench/results/refine.html).
 //
 // Usage: bench_refine [--objects name,name] [--conditions clean,degraded] [--repeats N] [--steps N] [--iters N]
+//                     [--device cpu|cuda]
 //                     [--hull N] [--lambda-normal X] [--lambda-lap X] [--lambda-mask X] [--lr X] [--edge-min X] [--edge-max X]
 // Seconds per object are the median of --repeats runs of the refinement (visual hull and metrics excluded).
 #include <algorithm>
@@ -26,12 +27,14 @@
 #include "assetgen/canonical.h"
 #include "assetgen/refine.h"
 #include "assetgen/views.h"
+#include "core/device.h"
 #include "core/error.h"
 #include "core/log.h"
 #include "geometry/metrics.h"
 #include "io/files.h"
 #include "io/image_io.h"
 #include "io/json.h"
+#include "raster/raster.h"
 #include "io/mesh_io.h"
 
 #include "bench_objects.h"
@@ -128,6 +131,7 @@ int main(int argc, char** argv) {
     else if (a == "--hull") hull_resolution = std::atoi(next().c_str());
     else if (a == "--json") json_out = next();
     else if (a == "--html") html_out = next();
+    else if (a == "--device") SetDevice(ParseDevice(next()));
     else {
       std::fprintf(stderr, "bench_refine: unknown argument %s\n", a.c_str());
       return 2;
@@ -143,6 +147,8 @@ int main(int argc, char** argv) {
   if (html_out.empty()) html_out = root / "bench" / "results" / "refine.html";
 
   const geometry::GeometryMetricsOptions metric_options;
+  std::printf("device: %s%s\n", ToString(CurrentDevice()),
+              CurrentDevice() == Device::kCuda ? (" (" + raster::CudaDeviceDescription() + ")").c_str() : "");
   std::printf("protocol: %s\n", geometry::DescribeProtocol(metric_options).c_str());
   std::printf("refine: %d steps x %d iterations, lambda normal %.2f mask %.2f lap %.2f, lr %.2f, edge %.3f..%.3f\n\n",
               options.steps, options.iterations_per_step, options.lambda_normal, options.lambda_mask, options.lambda_lap,

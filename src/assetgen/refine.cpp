@@ -1,16 +1,21 @@
 #include "assetgen/refine.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <exception>
 #include <limits>
+#include <memory>
 #include <optional>
 
 #include "core/error.h"
 #include "core/log.h"
+#include "core/parallel.h"
 #include "geometry/laplacian.h"
 #include "geometry/normals.h"
 #include "geometry/topology.h"
 #include "geometry/visual_hull.h"
+#include "raster/normal_mask_loss.h"
 #include "raster/raster.h"
 
 namespace sd {
@@ -59,6 +64,10 @@ void CheckOptions(const RefineOptions& o) {
                            << ", " << o.remesh.edge_length_max << ")");
 }
 
+struct Losses {
+  double normal = 0, mask = 0, lap = 0;
+};
+
 // Per-view constant data and scratch buffers, reused across iterations.
 struct ViewState {
   Eigen::Matrix4f clip_from_world;
@@ -67,93 +76,132 @@ struct ViewState {
   std::vector<float> clip, grad_clip, normal_img, grad_normal_img, grad_bary, coverage, aa, grad_aa, grad_coverage;
   raster::RasterBuffer rast;
   raster::AntialiasRecord aa_record;
+  // This view's share of the last evaluation.
+  Losses losses;
+  std::vector<Eigen::Vector3f> grad_positions, grad_normals;
 };
 
-struct Losses {
-  double normal = 0, mask = 0, lap = 0;
-};
-
-// One evaluation of the loss and its gradient with respect to the vertex positions.
 // What depends only on the connectivity: rebuilt after each remeshing pass, not per iteration.
 struct TopologyCache {
   raster::EdgeTopology edges;
   Eigen::SparseMatrix<float> laplacian;
 };
 
+// One view's share of the loss: its terms, and its gradients with respect to the positions (through the clip
+// transform) and to the vertex normals. Writes only `s` and the view's own outputs, so views run in parallel.
+void ViewLossAndGradient(const std::vector<Eigen::Vector3f>& positions, const std::vector<Eigen::Vector3f>& vertex_normals,
+                         std::span<const int32_t> tris, const raster::EdgeTopology& topology, const MultiView& view,
+                         ViewState& s, const RefineOptions& o, float view_weight) {
+  const size_t nv = positions.size();
+  const int w = view.view.camera.width, h = view.view.camera.height;
+  const size_t np = static_cast<size_t>(w) * h;
+  s.losses = Losses{};
+  s.grad_positions.assign(nv, Eigen::Vector3f::Zero());
+  s.grad_normals.assign(nv, Eigen::Vector3f::Zero());
+  s.clip.resize(4 * nv);
+  raster::TransformToClip(Floats(positions), s.clip_from_world, s.clip);
+  raster::Rasterize(s.clip, tris, w, h, &s.rast);
+
+  s.grad_clip.assign(4 * nv, 0.0f);
+  s.grad_bary.assign(2 * np, 0.0f);
+
+  // Normal term: re-normalised interpolated normals against the target where both cover the pixel.
+  if (o.lambda_normal > 0 && s.valid_normal_pixels > 0) {
+    s.normal_img.resize(3 * np);
+    raster::Interpolate(Floats(vertex_normals), 3, tris, s.rast, s.normal_img);
+    s.grad_normal_img.assign(3 * np, 0.0f);
+    const float scale = o.lambda_normal * view_weight / static_cast<float>(s.valid_normal_pixels);
+    double sum = 0;
+    for (size_t p = 0; p < np; ++p) {
+      if (s.rast.triangle[p] < 0) continue;
+      const int x = static_cast<int>(p % w), y = static_cast<int>(p / w);
+      if (view.mask.at(x, y) <= 0.5f) continue;
+      const Eigen::Vector3f target(view.normals.pixel(x, y));
+      if (target.squaredNorm() < 0.5f) continue;
+      const Eigen::Vector3f n(&s.normal_img[3 * p]);
+      const float len = n.norm();
+      if (len < 1e-8f) continue;
+      const Eigen::Vector3f nh = n / len;
+      const Eigen::Vector3f d = nh - target;
+      sum += d.squaredNorm();
+      // d/dn of |n/|n| - t|^2 = (I - nh nh^T) * 2 d / |n|.
+      const Eigen::Vector3f g = scale * 2.0f * (d - nh * nh.dot(d)) / len;
+      for (int c = 0; c < 3; ++c) s.grad_normal_img[3 * p + c] = g[c];
+    }
+    s.losses.normal = sum / static_cast<double>(s.valid_normal_pixels) * view_weight;
+    raster::InterpolateBackward(Floats(vertex_normals), 3, tris, s.rast, s.grad_normal_img,
+                                MutableFloats(s.grad_normals), s.grad_bary);
+    raster::RasterizeBackward(s.clip, tris, s.rast, s.grad_bary, {}, s.grad_clip);
+  }
+
+  // Silhouette term: antialiased coverage against the target mask.
+  if (o.lambda_mask > 0) {
+    s.coverage.resize(np);
+    for (size_t p = 0; p < np; ++p) s.coverage[p] = s.rast.triangle[p] >= 0 ? 1.0f : 0.0f;
+    s.aa.resize(np);
+    raster::Antialias(s.coverage, 1, s.rast, s.clip, tris, topology, s.aa, &s.aa_record, /*color_gradient=*/false);
+    s.grad_aa.resize(np);
+    double sum = 0;
+    const float scale = o.lambda_mask * view_weight / s.mask_area;
+    const float* target = view.mask.data();
+    for (size_t p = 0; p < np; ++p) {
+      const float d = s.aa[p] - target[p];
+      sum += d * d;
+      s.grad_aa[p] = scale * 2.0f * d;
+    }
+    s.losses.mask = sum / s.mask_area * view_weight;
+    s.grad_coverage.assign(np, 0.0f);
+    raster::AntialiasBackward(s.coverage, 1, s.rast, s.clip, tris, topology, s.aa_record, s.grad_aa, s.grad_coverage,
+                              s.grad_clip);
+  }
+  raster::TransformToClipBackward(s.clip_from_world, s.grad_clip, MutableFloats(s.grad_positions));
+}
+
+// One evaluation of the loss and its gradient with respect to the vertex positions. The views are evaluated
+// in parallel (on CUDA each host thread has its own stream, so their transfers and kernels overlap) and their
+// shares summed in view order, so the result does not depend on the threads.
+// On CUDA (`gpu` set) the views' terms come from one device-resident pass each (raster/normal_mask_loss.h)
+// instead of the ops one at a time.
 Losses LossAndGradient(const std::vector<Eigen::Vector3f>& positions, const std::vector<Eigen::Vector3i>& faces,
                        const TopologyCache& cache, const MultiViewSet& views, std::vector<ViewState>& state,
-                       const RefineOptions& o, float lap_scale, std::vector<Eigen::Vector3f>* grad) {
+                       const RefineOptions& o, float lap_scale, raster::NormalMaskLoss* gpu,
+                       std::vector<Eigen::Vector3f>* grad) {
   const size_t nv = positions.size();
-  grad->assign(nv, Eigen::Vector3f::Zero());
   const std::vector<Eigen::Vector3f> vertex_normals = geometry::VertexNormals(positions, faces);
-  std::vector<Eigen::Vector3f> grad_vn(nv, Eigen::Vector3f::Zero());
   const std::span<const int32_t> tris(reinterpret_cast<const int32_t*>(faces.data()), 3 * faces.size());
-  const raster::EdgeTopology& topology = cache.edges;
   const float view_weight = 1.0f / static_cast<float>(views.size());
+  if (gpu != nullptr) {
+    std::vector<float> grad_positions(3 * nv * views.size()), grad_normals(grad_positions.size());
+    const std::vector<raster::NormalMaskLoss::Terms> terms =
+        gpu->Evaluate(Floats(positions), Floats(vertex_normals), tris, cache.edges, grad_positions, grad_normals);
+    for (size_t vi = 0; vi < views.size(); ++vi) {
+      ViewState& s = state[vi];
+      s.losses = Losses{terms[vi].normal, terms[vi].mask, 0};
+      s.grad_positions.resize(nv);
+      s.grad_normals.resize(nv);
+      std::copy_n(&grad_positions[3 * nv * vi], 3 * nv, MutableFloats(s.grad_positions).data());
+      std::copy_n(&grad_normals[3 * nv * vi], 3 * nv, MutableFloats(s.grad_normals).data());
+    }
+  } else {
+    std::vector<std::exception_ptr> errors(views.size());
+    ParallelFor(0, views.size(), [&](size_t vi) {
+      try {
+        ViewLossAndGradient(positions, vertex_normals, tris, cache.edges, views[vi], state[vi], o, view_weight);
+      } catch (...) {
+        errors[vi] = std::current_exception();
+      }
+    });
+    for (const std::exception_ptr& e : errors)
+      if (e) std::rethrow_exception(e);
+  }
 
   Losses losses;
-  for (size_t vi = 0; vi < views.size(); ++vi) {
-    const MultiView& view = views[vi];
-    ViewState& s = state[vi];
-    const int w = view.view.camera.width, h = view.view.camera.height;
-    const size_t np = static_cast<size_t>(w) * h;
-    s.clip.resize(4 * nv);
-    raster::TransformToClip(Floats(positions), s.clip_from_world, s.clip);
-    raster::Rasterize(s.clip, tris, w, h, &s.rast);
-
-    s.grad_clip.assign(4 * nv, 0.0f);
-    s.grad_bary.assign(2 * np, 0.0f);
-
-    // Normal term: re-normalised interpolated normals against the target where both cover the pixel.
-    if (o.lambda_normal > 0 && s.valid_normal_pixels > 0) {
-      s.normal_img.resize(3 * np);
-      raster::Interpolate(Floats(vertex_normals), 3, tris, s.rast, s.normal_img);
-      s.grad_normal_img.assign(3 * np, 0.0f);
-      const float scale = o.lambda_normal * view_weight / static_cast<float>(s.valid_normal_pixels);
-      double sum = 0;
-      for (size_t p = 0; p < np; ++p) {
-        if (s.rast.triangle[p] < 0) continue;
-        const int x = static_cast<int>(p % w), y = static_cast<int>(p / w);
-        if (view.mask.at(x, y) <= 0.5f) continue;
-        const Eigen::Vector3f target(view.normals.pixel(x, y));
-        if (target.squaredNorm() < 0.5f) continue;
-        const Eigen::Vector3f n(&s.normal_img[3 * p]);
-        const float len = n.norm();
-        if (len < 1e-8f) continue;
-        const Eigen::Vector3f nh = n / len;
-        const Eigen::Vector3f d = nh - target;
-        sum += d.squaredNorm();
-        // d/dn of |n/|n| - t|^2 = (I - nh nh^T) * 2 d / |n|.
-        const Eigen::Vector3f g = scale * 2.0f * (d - nh * nh.dot(d)) / len;
-        for (int c = 0; c < 3; ++c) s.grad_normal_img[3 * p + c] = g[c];
-      }
-      losses.normal += sum / static_cast<double>(s.valid_normal_pixels) * view_weight;
-      raster::InterpolateBackward(Floats(vertex_normals), 3, tris, s.rast, s.grad_normal_img, MutableFloats(grad_vn),
-                                  s.grad_bary);
-      raster::RasterizeBackward(s.clip, tris, s.rast, s.grad_bary, {}, s.grad_clip);
-    }
-
-    // Silhouette term: antialiased coverage against the target mask.
-    if (o.lambda_mask > 0) {
-      s.coverage.resize(np);
-      for (size_t p = 0; p < np; ++p) s.coverage[p] = s.rast.triangle[p] >= 0 ? 1.0f : 0.0f;
-      s.aa.resize(np);
-      raster::Antialias(s.coverage, 1, s.rast, s.clip, tris, topology, s.aa, &s.aa_record, /*color_gradient=*/false);
-      s.grad_aa.resize(np);
-      double sum = 0;
-      const float scale = o.lambda_mask * view_weight / s.mask_area;
-      const float* target = view.mask.data();
-      for (size_t p = 0; p < np; ++p) {
-        const float d = s.aa[p] - target[p];
-        sum += d * d;
-        s.grad_aa[p] = scale * 2.0f * d;
-      }
-      losses.mask += sum / s.mask_area * view_weight;
-      s.grad_coverage.assign(np, 0.0f);
-      raster::AntialiasBackward(s.coverage, 1, s.rast, s.clip, tris, topology, s.aa_record, s.grad_aa, s.grad_coverage,
-                                s.grad_clip);
-    }
-    raster::TransformToClipBackward(s.clip_from_world, s.grad_clip, MutableFloats(*grad));
+  grad->assign(nv, Eigen::Vector3f::Zero());
+  std::vector<Eigen::Vector3f> grad_vn(nv, Eigen::Vector3f::Zero());
+  for (const ViewState& s : state) {
+    losses.normal += s.losses.normal;
+    losses.mask += s.losses.mask;
+    for (size_t v = 0; v < nv; ++v) (*grad)[v] += s.grad_positions[v], grad_vn[v] += s.grad_normals[v];
   }
   geometry::VertexNormalsBackward(positions, faces, grad_vn, grad);
   if (o.lambda_lap > 0) {
@@ -248,6 +296,28 @@ RefineResult RefineMesh(const TriangleMesh& coarse_in, const MultiViewSet& views
           ++state[i].valid_normal_pixels;
   }
 
+  std::unique_ptr<raster::NormalMaskLoss> gpu_loss;
+  if (raster::UseCuda()) {
+    const float view_weight = 1.0f / static_cast<float>(views.size());
+    std::vector<raster::NormalMaskView> targets(views.size());
+    for (size_t i = 0; i < views.size(); ++i) {
+      raster::NormalMaskView& t = targets[i];
+      const ViewState& s = state[i];
+      t.clip_from_world = s.clip_from_world;
+      t.width = views[i].view.camera.width, t.height = views[i].view.camera.height;
+      t.normals = views[i].normals.vector();
+      t.mask = views[i].mask.vector();
+      if (options.lambda_normal > 0 && s.valid_normal_pixels > 0) {
+        t.normal_grad_scale = options.lambda_normal * view_weight / static_cast<float>(s.valid_normal_pixels);
+        t.normal_loss_scale = view_weight / static_cast<float>(s.valid_normal_pixels);
+      }
+      if (options.lambda_mask > 0) {
+        t.mask_grad_scale = options.lambda_mask * view_weight / s.mask_area;
+        t.mask_loss_scale = view_weight / s.mask_area;
+      }
+    }
+    gpu_loss = std::make_unique<raster::NormalMaskLoss>(targets);
+  }
   geometry::ContinuousRemesher remesher(coarse.positions, coarse.faces, remesh);
   RefineResult result;
   std::optional<Progress> progress;
@@ -265,7 +335,8 @@ RefineResult RefineMesh(const TriangleMesh& coarse_in, const MultiViewSet& views
     for (int it = 0; it < options.iterations_per_step; ++it) {
       // The smoothness weight is per squared edge length so that it means the same at every resolution.
       const float edge = std::max(remesher.MeanTargetEdgeLength(), 1e-6f);
-      last = LossAndGradient(remesher.positions(), remesher.faces(), cache, views, state, options, 1.0f / (edge * edge), &grad);
+      last = LossAndGradient(remesher.positions(), remesher.faces(), cache, views, state, options, 1.0f / (edge * edge),
+                             gpu_loss.get(), &grad);
       remesher.Step(grad);
     }
     RefineStepLog log;

@@ -6,6 +6,7 @@
 #include <CLI/CLI.hpp>
 
 #include "cli/commands.h"
+#include "core/device.h"
 #include "core/error.h"
 #include "core/log.h"
 #include "core/parallel.h"
@@ -20,6 +21,11 @@ int main(int argc, char** argv) {
   app.add_flag("-v,--verbose", verbose, "Print debug details");
   app.add_flag("-q,--quiet", quiet, "Print errors only");
   app.add_option("--threads", threads, "Worker threads (default: all cores)")->check(CLI::NonNegativeNumber);
+  std::string device;
+  app.add_option("--device", device,
+                 "cpu or cuda: where differentiable rendering and the learned models run (default: "
+                 "$SYNTHDRIVE_DEVICE, else cpu)")
+      ->check(CLI::IsMember({"cpu", "cuda"}));
 
   std::map<CLI::App*, sd::cli::Runner> runners;
   auto add = [&](const char* name, const char* help, sd::cli::Runner (*factory)(CLI::App&)) {
@@ -53,6 +59,7 @@ int main(int argc, char** argv) {
   }
   sd::SetLogLevel(quiet ? sd::LogLevel::kError : verbose ? sd::LogLevel::kDebug : sd::LogLevel::kInfo);
   if (threads > 0) sd::SetMaxThreads(threads);
+  if (!device.empty()) sd::SetDevice(sd::ParseDevice(device));
   try {
     for (auto& [sub, run] : runners)
       if (sub->parsed()) return run();

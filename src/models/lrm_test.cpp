@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include "core/device.h"
 #include "core/error.h"
 #include "testing/testing.h"
 
@@ -76,9 +77,12 @@ TEST_F(LrmTest, ChunkSizeDoesNotChangeTheMesh) {
   const TriangleMesh b = Load(25, 1 << 20).Reconstruct(img);
   ASSERT_EQ(a.NumVertices(), b.NumVertices());
   ASSERT_EQ(a.NumFaces(), b.NumFaces());
+  // Equal on the CPU. On a GPU the decoder's matrix products pick kernels by batch size, which sum in another
+  // order: last-bit differences (seen on an H100), never a different surface.
+  const float tolerance = CurrentDevice() == Device::kCuda ? 1e-5f : 0.0f;
   for (size_t v = 0; v < a.NumVertices(); ++v) {
-    EXPECT_EQ(a.positions[v], b.positions[v]);
-    EXPECT_EQ(a.colors[v], b.colors[v]);
+    EXPECT_LE((a.positions[v] - b.positions[v]).cwiseAbs().maxCoeff(), tolerance);
+    EXPECT_LE((a.colors[v] - b.colors[v]).cwiseAbs().maxCoeff(), tolerance);
   }
   for (size_t f = 0; f < a.NumFaces(); ++f) EXPECT_EQ(a.faces[f], b.faces[f]);
 }

@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "core/device.h"
 #include "core/error.h"
 #include "testing/testing.h"
 
@@ -168,7 +169,9 @@ TEST(MultiViewGenerator, GuidanceAboveOneChangesTheResultAndAtMostOneIsCondition
   const ImageF g1 = gen.GenerateGrid(object, 3, 1.0f, 5);
   const ImageF g05 = gen.GenerateGrid(object, 3, 0.5f, 5);
   const ImageF g4 = gen.GenerateGrid(object, 3, 4.0f, 5);
-  EXPECT_EQ(MaxAbsDiff(g1, g05), 0.0);  // diffusers: no CFG unless guidance > 1
+  // diffusers: no CFG unless guidance > 1, so both runs take the same path: equal on the CPU; on a GPU some
+  // kernels sum in a varying order (1.2e-7 seen on an H100 with deterministic cuDNN).
+  EXPECT_LE(MaxAbsDiff(g1, g05), CurrentDevice() == Device::kCuda ? 1e-6 : 0.0);
   EXPECT_GT(MaxAbsDiff(g1, g4), 1e-3);
   // The condition image matters.
   ImageU8 blank(64, 64, 3, 10);

@@ -25,6 +25,8 @@
 #include <string_view>
 #include <vector>
 
+#include "core/device.h"
+
 namespace sd::models {
 
 // A dense float32 tensor, row-major, in the layout its contract names (images: NCHW).
@@ -63,7 +65,9 @@ struct ModelContract {
 };
 
 struct RuntimeOptions {
-  std::string device = "cpu";  // "cpu", "cuda" or "cuda:N" (needs a CUDA build of LibTorch)
+  // "cpu", "cuda" or "cuda:N" (needs a CUDA build of LibTorch); by default the process's device
+  // (core/device.h: --device, $SYNTHDRIVE_DEVICE).
+  std::string device = ToString(CurrentDevice());
   bool half = false;           // float16 weights and activations (CUDA only; inputs and outputs stay float32)
 };
 

@@ -77,7 +77,7 @@ TEST(Runtime, RunsATinyModelAsItsReferenceDid) {
   SD_REQUIRE_TEST_MODEL(file, "sr_tiny_x2.pt");
   const Model model = Model::Load(file, "super_resolution");
   EXPECT_EQ(model.contract().name, "sr-tiny-x2");
-  EXPECT_EQ(model.device(), "cpu");
+  EXPECT_EQ(model.device(), ToString(CurrentDevice()));  // the process's device (SYNTHDRIVE_DEVICE)
   const Tensor input = ReadRaw(testing::TestModel("sr_tiny_x2_input.f32"));
   const Tensor expected = ReadRaw(testing::TestModel("sr_tiny_x2_output.f32"));
   const std::vector<Tensor> out = model.Run({input});
@@ -132,8 +132,31 @@ TEST(Runtime, RejectsDevicesItCannotUse) {
   bogus.device = "tpu:7";
   EXPECT_THROW(Model::Load(file, "super_resolution", bogus), InputError);
   RuntimeOptions half_on_cpu;
+  half_on_cpu.device = "cpu";
   half_on_cpu.half = true;
   EXPECT_THROW(Model::Load(file, "super_resolution", half_on_cpu), InputError);
+}
+
+// The same model on the GPU: float32 results equal the CPU's to rounding, float16 to half precision.
+TEST(Runtime, CudaAgreesWithCpu) {
+  SD_REQUIRE_TEST_MODEL(file, "sr_tiny_x2.pt");
+  if (RuntimeDescription().find("CUDA available") == std::string::npos)
+    GTEST_SKIP() << "this LibTorch sees no CUDA device: " << RuntimeDescription();
+  const Tensor input = ReadRaw(testing::TestModel("sr_tiny_x2_input.f32"));
+  RuntimeOptions cpu, cuda, cuda_half;
+  cpu.device = "cpu";
+  cuda.device = cuda_half.device = "cuda";
+  cuda_half.half = true;
+  const Tensor reference = Model::Load(file, "super_resolution", cpu).Run({input})[0];
+  const Model on_gpu = Model::Load(file, "super_resolution", cuda);
+  EXPECT_EQ(on_gpu.device().rfind("cuda", 0), 0u) << on_gpu.device();
+  for (const auto& [options, tolerance] : {std::pair{cuda, 1e-3f}, std::pair{cuda_half, 0.5f}}) {
+    const Tensor out = Model::Load(file, "super_resolution", options).Run({input})[0];
+    ASSERT_EQ(out.shape, reference.shape);
+    float worst = 0;
+    for (size_t i = 0; i < out.values.size(); ++i) worst = std::max(worst, std::abs(out.values[i] - reference.values[i]));
+    EXPECT_LT(worst, tolerance) << (options.half ? "float16" : "float32");  // of a 0..255 range
+  }
 }
 
 }  // namespace

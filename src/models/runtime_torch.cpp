@@ -1,5 +1,6 @@
 // The LibTorch half of the runtime. The only translation unit that includes LibTorch headers: they cost ~15 s
 // of compile time each, and the rest of the code base should not care which framework runs the models.
+#include <ATen/Context.h>
 #include <ATen/Parallel.h>
 #include <torch/cuda.h>
 #include <torch/script.h>
@@ -72,6 +73,16 @@ Model Model::Load(const std::filesystem::path& file, std::string_view stage, con
   auto impl = std::make_unique<Impl>();
   impl->file = file;
   impl->device = ParseDevice(options.device, file);
+  if (impl->device.is_cuda()) {
+    // float32 means float32: LibTorch would otherwise run convolutions in TF32 on recent GPUs (10 mantissa
+    // bits), several hundred times the CPU's error, and the contracts' verification figures would not hold.
+    // `half` is the opt-in for speed. Deterministic cuDNN algorithms: the same input gives the same output run
+    // after run, as on the CPU (a dataset made twice must not differ).
+    at::globalContext().setAllowTF32CuDNN(false);
+    at::globalContext().setAllowTF32CuBLAS(false);
+    at::globalContext().setDeterministicCuDNN(true);
+    at::globalContext().setBenchmarkCuDNN(false);
+  }
   impl->half = options.half;
   if (impl->half && !impl->device.is_cuda())
     throw InputError(file, "half precision is for CUDA devices only");

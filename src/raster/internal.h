@@ -6,6 +6,10 @@
 
 #include "core/error.h"
 #include "raster/raster.h"
+#include "raster/shared.h"
+#if SYNTHDRIVE_WITH_CUDA
+#include "raster/cuda/raster_cuda.h"
+#endif
 
 namespace sd::raster::internal {
 
@@ -15,12 +19,8 @@ inline constexpr int kBandRows = 8;
 
 inline int NumBands(int height) { return (height + kBandRows - 1) / kBandRows; }
 
-// Pixel centre (i + 0.5) in normalised device coordinates: the inverse of u = (x/w + 1) * W / 2. Every
-// triangle evaluates its edge functions at exactly these doubles, which the shared-edge rule relies on.
-inline double PixelCentreNdc(int i, int size) { return (2.0 * i + 1.0) / size - 1.0; }
-
-// Continuous pixel coordinate of a clip-space coordinate: u = (x/w + 1) * W / 2.
-inline double ClipToPixel(double x, double w, int size) { return (x / w + 1.0) * 0.5 * size; }
+using shared::ClipToPixel;
+using shared::PixelCentreNdc;
 
 inline size_t NumVertices(std::span<const float> clip_pos) { return clip_pos.size() / 4; }
 
@@ -36,14 +36,14 @@ inline void CheckRaster(const RasterBuffer& rast) {
            << "RasterBuffer buffers do not match " << rast.width << "x" << rast.height);
 }
 
-// A triangle is drawn only when all its vertices are in front of the eye (w > 0, see raster.h); the other
-// ops must skip the same triangles.
 inline bool TriangleDrawable(std::span<const float> clip_pos, std::span<const int32_t> tris, size_t t) {
-  for (int k = 0; k < 3; ++k) {
-    const float w = clip_pos[4 * static_cast<size_t>(tris[3 * t + k]) + 3];
-    if (!(w > 0.0f)) return false;
-  }
-  return true;
+  return shared::TriangleDrawable(clip_pos.data(), tris.data(), t);
 }
+
+#if SYNTHDRIVE_WITH_CUDA
+inline cuda::RasterView View(const RasterBuffer& rast) {
+  return {rast.width, rast.height, rast.bary.data(), rast.depth.data(), rast.triangle.data()};
+}
+#endif
 
 }  // namespace sd::raster::internal

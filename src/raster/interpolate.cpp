@@ -27,21 +27,18 @@ void Interpolate(std::span<const float> attr, int channels, std::span<const int3
   CheckInterpolateArgs(attr, channels, tris, rast);
   const size_t C = static_cast<size_t>(channels);
   SD_CHECK(out.size() == C * rast.NumPixels(), << "out: " << out.size());
+  if (UseCuda()) {
+#if SYNTHDRIVE_WITH_CUDA
+    cuda::Interpolate(attr.data(), attr.size() / C, channels, tris.data(), tris.size() / 3, internal::View(rast),
+                      out.data());
+    return;
+#endif
+  }
   const size_t width = static_cast<size_t>(rast.width);
   ParallelForRange(0, static_cast<size_t>(rast.height), kRowsPerTask, [&](size_t row0, size_t row1) {
-    for (size_t pixel = row0 * width; pixel < row1 * width; ++pixel) {
-      float* o = &out[C * pixel];
-      const int32_t t = rast.triangle[pixel];
-      if (t < 0) {
-        for (size_t c = 0; c < C; ++c) o[c] = 0.0f;
-        continue;
-      }
-      const float b0 = rast.bary[2 * pixel], b1 = rast.bary[2 * pixel + 1], b2 = 1.0f - b0 - b1;
-      const float* a0 = &attr[C * static_cast<size_t>(tris[3 * static_cast<size_t>(t)])];
-      const float* a1 = &attr[C * static_cast<size_t>(tris[3 * static_cast<size_t>(t) + 1])];
-      const float* a2 = &attr[C * static_cast<size_t>(tris[3 * static_cast<size_t>(t) + 2])];
-      for (size_t c = 0; c < C; ++c) o[c] = b0 * a0[c] + b1 * a1[c] + b2 * a2[c];
-    }
+    for (size_t pixel = row0 * width; pixel < row1 * width; ++pixel)
+      shared::InterpolatePixel(attr.data(), C, tris.data(), rast.triangle[pixel], rast.bary[2 * pixel],
+                               rast.bary[2 * pixel + 1], &out[C * pixel]);
   });
 }
 
@@ -55,21 +52,24 @@ void InterpolateBackward(std::span<const float> attr, int channels, std::span<co
   SD_CHECK(grad_attr.size() == attr.size(), << "grad_attr: " << grad_attr.size());
   SD_CHECK(grad_bary.empty() || grad_bary.size() == 2 * num_pixels, << "grad_bary: " << grad_bary.size());
 
+  std::vector<double> sum(grad_attr.size(), 0.0);
+  if (UseCuda()) {
+#if SYNTHDRIVE_WITH_CUDA
+    cuda::InterpolateBackward(attr.data(), attr.size() / C, channels, tris.data(), tris.size() / 3,
+                              internal::View(rast), grad_out.data(), sum.data(),
+                              grad_bary.empty() ? nullptr : grad_bary.data());
+    for (size_t n = 0; n < sum.size(); ++n) grad_attr[n] += static_cast<float>(sum[n]);
+    return;
+#endif
+  }
   const size_t width = static_cast<size_t>(rast.width);
   if (!grad_bary.empty()) {
     ParallelForRange(0, static_cast<size_t>(rast.height), kRowsPerTask, [&](size_t row0, size_t row1) {
       for (size_t pixel = row0 * width; pixel < row1 * width; ++pixel) {
         const int32_t t = rast.triangle[pixel];
         if (t < 0) continue;
-        const float* a0 = &attr[C * static_cast<size_t>(tris[3 * static_cast<size_t>(t)])];
-        const float* a1 = &attr[C * static_cast<size_t>(tris[3 * static_cast<size_t>(t) + 1])];
-        const float* a2 = &attr[C * static_cast<size_t>(tris[3 * static_cast<size_t>(t) + 2])];
-        const float* g = &grad_out[C * pixel];
-        float d0 = 0.0f, d1 = 0.0f;
-        for (size_t c = 0; c < C; ++c) {
-          d0 += g[c] * (a0[c] - a2[c]);
-          d1 += g[c] * (a1[c] - a2[c]);
-        }
+        float d0, d1;
+        shared::InterpolateBaryGradient(attr.data(), C, tris.data(), t, &grad_out[C * pixel], &d0, &d1);
         grad_bary[2 * pixel] += d0;
         grad_bary[2 * pixel + 1] += d1;
       }
@@ -77,7 +77,6 @@ void InterpolateBackward(std::span<const float> attr, int channels, std::span<co
   }
 
   // Scatter to vertices serially in pixel order (deterministic), summing in double.
-  std::vector<double> sum(grad_attr.size(), 0.0);
   for (size_t pixel = 0; pixel < num_pixels; ++pixel) {
     const int32_t t = rast.triangle[pixel];
     if (t < 0) continue;

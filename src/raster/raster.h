@@ -4,10 +4,11 @@
 // The ops follow one pattern (one file per op: rasterize.cpp, interpolate.cpp, antialias.cpp, clip.cpp):
 // `Op(inputs..., outputs*)` computes, `OpBackward(inputs..., forward outputs, grad_outputs, grad_inputs*)`
 // ACCUMULATES (+=) into the gradients it is given, so callers can sum several views into one buffer.
-// Buffers are flat float / int32 arrays (std::span), structure of arrays, so the same code structure maps
-// onto CUDA later; nothing here depends on a tensor framework. One image per call; loops over views are
-// the caller's. Work is spread over threads with core/parallel.h and is deterministic (no float atomics:
-// per-thread partial gradients are summed in a fixed order).
+// Buffers are flat float / int32 arrays (std::span), structure of arrays; nothing here depends on a tensor
+// framework. One image per call; loops over views are the caller's. On the CPU, work is spread over threads
+// with core/parallel.h and is deterministic (no float atomics: per-thread partial gradients are summed in a
+// fixed order). Every op also runs on CUDA (device.cpp: one switch for the process), with the same
+// per-triangle and per-pixel code (shared.h) and results that agree with the CPU's (see SetDevice).
 //
 // Conventions
 //  - Clip space: 4 floats (x, y, z, w) per vertex. Pixel coordinates follow OpenCV / core/camera.h:
@@ -19,11 +20,13 @@
 //  - Barycentrics are perspective-correct, (b0, b1) of the triangle's vertices 0 and 1; b2 = 1 - b0 - b1.
 #include <cstdint>
 #include <span>
+#include <string>
 #include <vector>
 
 #include <Eigen/Core>
 
 #include "core/camera.h"
+#include "core/device.h"
 #include "core/rigid3.h"
 
 namespace sd::raster {
@@ -37,6 +40,18 @@ struct RasterBuffer {
 
   size_t NumPixels() const { return static_cast<size_t>(width) * height; }
 };
+
+// --- device.cpp ----------------------------------------------------------------------------------------
+// Where the ops run: the process's device (core/device.h: SetDevice, --device, $SYNTHDRIVE_DEVICE). On
+// Device::kCuda every op below runs its CUDA kernels on the same host buffers (inputs are uploaded, outputs
+// downloaded), so callers do not change. CPU and CUDA agree: Rasterize, Interpolate, Antialias and the
+// antialias backward bit for bit; the gradient scatters of RasterizeBackward and InterpolateBackward sum in
+// another order (double atomics), so their float results may differ in the last bit (relative 1e-6 is the
+// tested bound, raster_cuda_test.cpp).
+bool CudaAvailable();                 // built with CUDA (SYNTHDRIVE_WITH_CUDA) and a GPU is visible
+std::string CudaDeviceDescription();  // "NVIDIA H100 80GB HBM3, 132 SMs, 79 GiB"; empty without one
+// True when the ops run on CUDA; InputError when the device is kCuda but CUDA cannot run them.
+bool UseCuda();
 
 // --- rasterize.cpp -------------------------------------------------------------------------------------
 // Per pixel centre: the nearest covering triangle (smallest z/w, ties to the lower triangle index), its

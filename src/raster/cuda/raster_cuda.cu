@@ -1,0 +1,684 @@
+// CUDA kernels of the raster ops (see raster_cuda.h for how the work is spread). Built with --fmad=false so
+// that the arithmetic of raster/shared.h rounds as on the CPU.
+#include "raster/cuda/raster_cuda.h"
+
+#include <algorithm>
+#include <memory>
+#include <stdexcept>
+#include <string>
+
+#include <cub/device/device_scan.cuh>
+#include <cuda_runtime.h>
+
+namespace sd::raster::cuda {
+namespace {
+
+void Check(cudaError_t status, const char* what) {
+  if (status != cudaSuccess)
+    throw std::runtime_error(std::string("CUDA ") + what + ": " + cudaGetErrorString(status));
+}
+#define SD_CUDA(call) Check((call), #call)
+
+constexpr int kThreads = 256;
+inline unsigned Blocks(size_t n) { return static_cast<unsigned>((n + kThreads - 1) / kThreads); }
+
+// Device memory that grows and is never given back while its owner lives: the ops run many times on images
+// and meshes of similar size, and cudaMalloc per call would cost more than the kernels.
+template <typename T>
+class Scratch {
+ public:
+  Scratch() = default;
+  Scratch(const Scratch&) = delete;
+  Scratch& operator=(const Scratch&) = delete;
+  ~Scratch() {
+    if (ptr_) cudaFree(ptr_);  // may run after the context is gone at exit: nothing to report then
+  }
+  T* Get(size_t n) {
+    if (n > capacity_) {
+      if (ptr_) SD_CUDA(cudaFree(ptr_));
+      ptr_ = nullptr;
+      const size_t grown = n + n / 4;
+      SD_CUDA(cudaMalloc(&ptr_, grown * sizeof(T)));
+      capacity_ = grown;
+    }
+    return ptr_;
+  }
+  T* Upload(const T* host, size_t n) {
+    T* d = Get(n);
+    if (n) SD_CUDA(cudaMemcpy(d, host, n * sizeof(T), cudaMemcpyHostToDevice));
+    return d;
+  }
+
+ private:
+  T* ptr_ = nullptr;
+  size_t capacity_ = 0;
+};
+
+template <typename T>
+void Download(T* host, const T* device, size_t n) {
+  if (n) SD_CUDA(cudaMemcpy(host, device, n * sizeof(T), cudaMemcpyDeviceToHost));
+}
+
+// Per host thread: the ops may be called from several threads at once (views in parallel), each then works
+// on its own buffers and, with per-thread default streams, its own stream.
+struct Workspace {
+  Scratch<float> clip, attr, color, grad_a, grad_b, out;
+  Scratch<int32_t> tris, neighbour, pair_offset;
+  Scratch<double> sum;
+  Scratch<shared::TriangleSetup> setup;
+  Scratch<unsigned long long> area, key;
+  Scratch<uint8_t> scan_temp;
+  Scratch<shared::ScreenVertex> screen;
+  Scratch<int8_t> facing;
+  Scratch<PairRecord> pairs, compact_pairs;
+  Scratch<shared::PairGeometry> geometry, compact_geometry;
+  Scratch<float> r_bary, r_depth;  // a rasterization
+  Scratch<int32_t> r_triangle;
+};
+thread_local Workspace workspace;
+
+// ---- rasterize ---------------------------------------------------------------------------------------------
+
+__global__ void SetUpKernel(const float* clip, const int32_t* tris, size_t num_tris, int width, int height,
+                            shared::TriangleSetup* setup, unsigned long long* area) {
+  const size_t t = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  if (t >= num_tris) return;
+  const shared::TriangleSetup s = shared::SetUpTriangle(clip, tris, t, width, height);
+  setup[t] = s;
+  area[t] = s.Empty() ? 0ull : static_cast<unsigned long long>(s.x1 - s.x0 + 1) * (s.y1 - s.y0 + 1);
+}
+
+// Monotone map of a float to unsigned bits (negative floats reversed), with -0 folded onto +0 as the CPU's
+// comparison treats them.
+__device__ __forceinline__ unsigned OrderedBits(float f) {
+  if (f == 0.0f) f = 0.0f;
+  const unsigned bits = __float_as_uint(f);
+  return (bits & 0x80000000u) ? ~bits : (bits | 0x80000000u);
+}
+
+__global__ void CoverKernel(const shared::TriangleSetup* setup, const unsigned long long* inclusive_area,
+                            size_t num_tris, unsigned long long total, int width, int height,
+                            unsigned long long* key) {
+  for (unsigned long long idx = blockIdx.x * static_cast<unsigned long long>(blockDim.x) + threadIdx.x; idx < total;
+       idx += static_cast<unsigned long long>(gridDim.x) * blockDim.x) {
+    // The triangle whose range of the prefix sum holds idx: the first with inclusive_area > idx.
+    size_t lo = 0, hi = num_tris;
+    while (lo < hi) {
+      const size_t mid = (lo + hi) / 2;
+      if (inclusive_area[mid] > idx) hi = mid;
+      else lo = mid + 1;
+    }
+    const size_t t = lo;
+    const shared::TriangleSetup& s = setup[t];
+    const unsigned long long local = idx - (t ? inclusive_area[t - 1] : 0ull);
+    const int box_width = s.x1 - s.x0 + 1;
+    const int i = s.x0 + static_cast<int>(local % box_width), j = s.y0 + static_cast<int>(local / box_width);
+    const double px = shared::PixelCentreNdc(i, width), py = shared::PixelCentreNdc(j, height);
+    float depth_f;
+    double e[3];
+    if (!shared::CoverPixel(s, px, shared::EdgeRow(s.edge[0], py), shared::EdgeRow(s.edge[1], py),
+                            shared::EdgeRow(s.edge[2], py), &depth_f, e))
+      continue;
+    const unsigned long long k = (static_cast<unsigned long long>(OrderedBits(depth_f)) << 32) | static_cast<unsigned>(t);
+    atomicMin(&key[static_cast<size_t>(j) * width + i], k);
+  }
+}
+
+__global__ void ResolveKernel(const shared::TriangleSetup* setup, const unsigned long long* key, int width,
+                              int height, float* bary, float* depth, int32_t* triangle) {
+  const size_t pixel = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  if (pixel >= static_cast<size_t>(width) * height) return;
+  const unsigned long long k = key[pixel];
+  if (k == ~0ull) {
+    triangle[pixel] = -1, depth[pixel] = 1.0f, bary[2 * pixel] = 0.0f, bary[2 * pixel + 1] = 0.0f;
+    return;
+  }
+  const int32_t t = static_cast<int32_t>(k & 0xffffffffull);
+  const shared::TriangleSetup& s = setup[t];
+  const int i = static_cast<int>(pixel % width), j = static_cast<int>(pixel / width);
+  const double px = shared::PixelCentreNdc(i, width), py = shared::PixelCentreNdc(j, height);
+  float depth_f;
+  double e[3];
+  shared::CoverPixel(s, px, shared::EdgeRow(s.edge[0], py), shared::EdgeRow(s.edge[1], py),
+                     shared::EdgeRow(s.edge[2], py), &depth_f, e);
+  triangle[pixel] = t;
+  depth[pixel] = depth_f;
+  shared::Barycentrics(e, &bary[2 * pixel], &bary[2 * pixel + 1]);
+}
+
+// Device copy of a host raster.
+struct DeviceRaster {
+  const float* bary;
+  const float* depth;
+  const int32_t* triangle;
+};
+DeviceRaster Resident(const RasterView& rast) {
+  Workspace& ws = workspace;
+  const size_t np = static_cast<size_t>(rast.width) * rast.height;
+  return {ws.r_bary.Upload(rast.bary, 2 * np), ws.r_depth.Upload(rast.depth, np), ws.r_triangle.Upload(rast.triangle, np)};
+}
+
+// ---- rasterize backward / interpolate -----------------------------------------------------------------------
+
+__global__ void RasterizeBackwardKernel(const float* clip, const int32_t* tris, int width, int height,
+                                        DeviceRaster rast, const float* grad_bary, const float* grad_depth,
+                                        double* sum) {
+  const size_t pixel = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  if (pixel >= static_cast<size_t>(width) * height) return;
+  const int32_t t = rast.triangle[pixel];
+  if (t < 0) return;
+  const float gb0 = grad_bary[2 * pixel], gb1 = grad_bary[2 * pixel + 1];
+  const float gd = grad_depth ? grad_depth[pixel] : 0.0f;
+  if (gb0 == 0.0f && gb1 == 0.0f && gd == 0.0f) return;
+  const int i = static_cast<int>(pixel % width), j = static_cast<int>(pixel / width);
+  float g[12];
+  if (!shared::PixelGradient(clip, tris, t, shared::PixelCentreNdc(i, width), shared::PixelCentreNdc(j, height), gb0,
+                             gb1, gd, g))
+    return;
+  for (int k = 0; k < 3; ++k) {
+    double* s = &sum[4 * static_cast<size_t>(tris[3 * static_cast<size_t>(t) + k])];
+    for (int c = 0; c < 4; ++c) atomicAdd(&s[c], static_cast<double>(g[4 * k + c]));
+  }
+}
+
+__global__ void InterpolateKernel(const float* attr, int channels, const int32_t* tris, size_t num_pixels,
+                                  DeviceRaster rast, float* out) {
+  const size_t pixel = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  if (pixel >= num_pixels) return;
+  const size_t C = static_cast<size_t>(channels);
+  shared::InterpolatePixel(attr, C, tris, rast.triangle[pixel], rast.bary[2 * pixel], rast.bary[2 * pixel + 1],
+                           &out[C * pixel]);
+}
+
+__global__ void InterpolateBackwardKernel(const float* attr, int channels, const int32_t* tris, size_t num_pixels,
+                                          DeviceRaster rast, const float* grad_out, double* sum, float* grad_bary) {
+  const size_t pixel = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  if (pixel >= num_pixels) return;
+  const int32_t t = rast.triangle[pixel];
+  if (t < 0) return;
+  const size_t C = static_cast<size_t>(channels);
+  const float* g = &grad_out[C * pixel];
+  if (grad_bary) {
+    float d0, d1;
+    shared::InterpolateBaryGradient(attr, C, tris, t, g, &d0, &d1);
+    grad_bary[2 * pixel] += d0;
+    grad_bary[2 * pixel + 1] += d1;
+  }
+  const float b0 = rast.bary[2 * pixel], b1 = rast.bary[2 * pixel + 1];
+  const float b[3] = {b0, b1, 1.0f - b0 - b1};
+  for (int k = 0; k < 3; ++k) {
+    double* s = &sum[C * static_cast<size_t>(tris[3 * static_cast<size_t>(t) + k])];
+    for (size_t c = 0; c < C; ++c) atomicAdd(&s[c], static_cast<double>(b[k]) * g[c]);
+  }
+}
+
+// ---- antialias ---------------------------------------------------------------------------------------------
+
+__global__ void ProjectKernel(const float* clip, size_t num_vertices, int width, int height,
+                              shared::ScreenVertex* screen) {
+  const size_t v = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  if (v < num_vertices) screen[v] = shared::Project(clip, static_cast<int32_t>(v), width, height);
+}
+
+__global__ void FacingKernel(const float* clip, const int32_t* tris, size_t num_tris, int8_t* facing) {
+  const size_t t = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  if (t < num_tris) facing[t] = static_cast<int8_t>(shared::ScreenFacing(clip, tris, t));
+}
+
+// Slot 2 * pixel + 0: the pair with the right neighbour, + 1: with the lower one (the CPU's order).
+__global__ void PairKernel(shared::AntialiasScene sc, const float* color, int channels, bool skip_equal_colors,
+                           int32_t* found, PairRecord* pairs, shared::PairGeometry* geometry) {
+  const size_t a_index = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  if (a_index >= static_cast<size_t>(sc.width) * sc.height) return;
+  const int32_t a = static_cast<int32_t>(a_index);
+  const int i = a % sc.width, j = a / sc.width;
+  for (int dir = 0; dir < 2; ++dir) {
+    const size_t slot = 2 * a_index + dir;
+    found[slot] = 0;
+    const int32_t b = dir == 0 ? (i + 1 < sc.width ? a + 1 : -1) : (j + 1 < sc.height ? a + sc.width : -1);
+    if (b < 0 || sc.triangle[a] == sc.triangle[b]) continue;
+    if (skip_equal_colors) {
+      bool same = true;
+      for (int c = 0; c < channels; ++c)
+        if (color[static_cast<size_t>(channels) * a + c] != color[static_cast<size_t>(channels) * b + c]) same = false;
+      if (same) continue;
+    }
+    shared::PairGeometry g;
+    if (!shared::ExaminePair(sc, a, b, &g)) continue;
+    found[slot] = 1;
+    pairs[slot] = {a, b, g.triangle, g.edge, shared::BlendOf(g).alpha};
+    geometry[slot] = g;
+  }
+}
+
+__global__ void CompactKernel(const int32_t* found, const int32_t* offset, size_t num_slots, const PairRecord* pairs,
+                              const shared::PairGeometry* geometry, PairRecord* out_pairs,
+                              shared::PairGeometry* out_geometry) {
+  const size_t slot = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  if (slot >= num_slots || !found[slot]) return;
+  out_pairs[offset[slot]] = pairs[slot];
+  out_geometry[offset[slot]] = geometry[slot];
+}
+
+__global__ void RecordedGeometryKernel(shared::AntialiasScene sc, const PairRecord* pairs, size_t num_pairs,
+                                       shared::PairGeometry* geometry, int32_t* mismatch) {
+  const size_t n = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  if (n >= num_pairs) return;
+  const PairRecord& p = pairs[n];
+  if (!shared::RecordedPair(sc, p.pixel_a, p.pixel_b, p.triangle, p.edge, &geometry[n])) atomicExch(mismatch, 1);
+}
+
+// Scene tables on the device: projected vertices and facings, for the pair kernels.
+shared::AntialiasScene DeviceScene(const RasterView& rast, const float* clip, size_t num_vertices,
+                                   const int32_t* tris, size_t num_tris, const int32_t* neighbour) {
+  Workspace& ws = workspace;
+  const DeviceRaster r = Resident(rast);
+  const float* d_clip = ws.clip.Upload(clip, 4 * num_vertices);
+  const int32_t* d_tris = ws.tris.Upload(tris, 3 * num_tris);
+  const int32_t* d_neighbour = ws.neighbour.Upload(neighbour, 3 * num_tris);
+  shared::ScreenVertex* screen = ws.screen.Get(num_vertices);
+  int8_t* facing = ws.facing.Get(num_tris);
+  if (num_vertices) ProjectKernel<<<Blocks(num_vertices), kThreads>>>(d_clip, num_vertices, rast.width, rast.height, screen);
+  if (num_tris) FacingKernel<<<Blocks(num_tris), kThreads>>>(d_clip, d_tris, num_tris, facing);
+  SD_CUDA(cudaGetLastError());
+  return {rast.width, rast.height, r.triangle, r.depth, d_tris, d_neighbour, screen, facing};
+}
+
+}  // namespace
+
+bool Available() {
+  static const bool available = [] {
+    int count = 0;
+    return cudaGetDeviceCount(&count) == cudaSuccess && count > 0;
+  }();
+  return available;
+}
+
+const char* DeviceDescription() {
+  static const std::string description = [] {
+    if (!Available()) return std::string();
+    int device = 0;
+    cudaDeviceProp prop{};
+    if (cudaGetDevice(&device) != cudaSuccess || cudaGetDeviceProperties(&prop, device) != cudaSuccess) return std::string();
+    const long long gib = static_cast<long long>(static_cast<double>(prop.totalGlobalMem) / (1024.0 * 1024.0 * 1024.0) + 0.5);
+    return std::string(prop.name) + ", " + std::to_string(prop.multiProcessorCount) + " SMs, " + std::to_string(gib) + " GiB";
+  }();
+  return description.c_str();
+}
+
+void Rasterize(const float* clip, size_t num_vertices, const int32_t* tris, size_t num_tris, RasterOut out) {
+  Workspace& ws = workspace;
+  const int width = out.width, height = out.height;
+  const size_t np = static_cast<size_t>(width) * height;
+  if (np == 0) return;
+  const float* d_clip = ws.clip.Upload(clip, 4 * num_vertices);
+  const int32_t* d_tris = ws.tris.Upload(tris, 3 * num_tris);
+  unsigned long long* key = ws.key.Get(np);
+  SD_CUDA(cudaMemset(key, 0xff, np * sizeof(unsigned long long)));
+  if (num_tris > 0) {
+    shared::TriangleSetup* setup = ws.setup.Get(num_tris);
+    unsigned long long* area = ws.area.Get(2 * num_tris);  // [0, n): areas, [n, 2n): inclusive prefix sums
+    SetUpKernel<<<Blocks(num_tris), kThreads>>>(d_clip, d_tris, num_tris, width, height, setup, area);
+    SD_CUDA(cudaGetLastError());
+    size_t temp_bytes = 0;
+    SD_CUDA(cub::DeviceScan::InclusiveSum(nullptr, temp_bytes, area, area + num_tris, static_cast<int64_t>(num_tris)));
+    SD_CUDA(cub::DeviceScan::InclusiveSum(ws.scan_temp.Get(temp_bytes), temp_bytes, area, area + num_tris,
+                                          static_cast<int64_t>(num_tris)));
+    unsigned long long total = 0;
+    Download(&total, area + 2 * num_tris - 1, 1);
+    if (total > 0) {
+      const unsigned blocks = static_cast<unsigned>(std::min<unsigned long long>((total + kThreads - 1) / kThreads, 1u << 20));
+      CoverKernel<<<blocks, kThreads>>>(setup, area + num_tris, num_tris, total, width, height, key);
+      SD_CUDA(cudaGetLastError());
+    }
+  }
+  float* bary = ws.r_bary.Get(2 * np);
+  float* depth = ws.r_depth.Get(np);
+  int32_t* triangle = ws.r_triangle.Get(np);
+  ResolveKernel<<<Blocks(np), kThreads>>>(ws.setup.Get(std::max<size_t>(num_tris, 1)), key, width, height, bary, depth,
+                                          triangle);
+  SD_CUDA(cudaGetLastError());
+  Download(out.bary, bary, 2 * np);
+  Download(out.depth, depth, np);
+  Download(out.triangle, triangle, np);
+}
+
+void RasterizeBackward(const float* clip, size_t num_vertices, const int32_t* tris, size_t num_tris,
+                       const RasterView& rast, const float* grad_bary, const float* grad_depth, double* grad_clip_sum) {
+  Workspace& ws = workspace;
+  const size_t np = static_cast<size_t>(rast.width) * rast.height;
+  const DeviceRaster r = Resident(rast);
+  const float* d_clip = ws.clip.Upload(clip, 4 * num_vertices);
+  const int32_t* d_tris = ws.tris.Upload(tris, 3 * num_tris);
+  const float* d_grad_bary = ws.grad_a.Upload(grad_bary, 2 * np);
+  const float* d_grad_depth = grad_depth ? ws.grad_b.Upload(grad_depth, np) : nullptr;
+  double* sum = ws.sum.Get(4 * num_vertices);
+  SD_CUDA(cudaMemset(sum, 0, 4 * num_vertices * sizeof(double)));
+  if (np) {
+    RasterizeBackwardKernel<<<Blocks(np), kThreads>>>(d_clip, d_tris, rast.width, rast.height, r, d_grad_bary,
+                                                      d_grad_depth, sum);
+    SD_CUDA(cudaGetLastError());
+  }
+  Download(grad_clip_sum, sum, 4 * num_vertices);
+}
+
+void Interpolate(const float* attr, size_t num_attr_vertices, int channels, const int32_t* tris, size_t num_tris,
+                 const RasterView& rast, float* out) {
+  Workspace& ws = workspace;
+  const size_t np = static_cast<size_t>(rast.width) * rast.height, C = static_cast<size_t>(channels);
+  if (np == 0) return;
+  const DeviceRaster r = Resident(rast);
+  const float* d_attr = ws.attr.Upload(attr, C * num_attr_vertices);
+  const int32_t* d_tris = ws.tris.Upload(tris, 3 * num_tris);
+  float* d_out = ws.out.Get(C * np);
+  InterpolateKernel<<<Blocks(np), kThreads>>>(d_attr, channels, d_tris, np, r, d_out);
+  SD_CUDA(cudaGetLastError());
+  Download(out, d_out, C * np);
+}
+
+void InterpolateBackward(const float* attr, size_t num_attr_vertices, int channels, const int32_t* tris,
+                         size_t num_tris, const RasterView& rast, const float* grad_out, double* grad_attr_sum,
+                         float* grad_bary) {
+  Workspace& ws = workspace;
+  const size_t np = static_cast<size_t>(rast.width) * rast.height, C = static_cast<size_t>(channels);
+  const DeviceRaster r = Resident(rast);
+  const float* d_attr = ws.attr.Upload(attr, C * num_attr_vertices);
+  const int32_t* d_tris = ws.tris.Upload(tris, 3 * num_tris);
+  const float* d_grad_out = ws.grad_a.Upload(grad_out, C * np);
+  float* d_grad_bary = grad_bary ? ws.grad_b.Upload(grad_bary, 2 * np) : nullptr;
+  double* sum = ws.sum.Get(C * num_attr_vertices);
+  SD_CUDA(cudaMemset(sum, 0, C * num_attr_vertices * sizeof(double)));
+  if (np) {
+    InterpolateBackwardKernel<<<Blocks(np), kThreads>>>(d_attr, channels, d_tris, np, r, d_grad_out, sum, d_grad_bary);
+    SD_CUDA(cudaGetLastError());
+  }
+  Download(grad_attr_sum, sum, C * num_attr_vertices);
+  if (grad_bary) Download(grad_bary, d_grad_bary, 2 * np);
+}
+
+void FindAntialiasPairs(const float* color, int channels, const RasterView& rast, const float* clip,
+                        size_t num_vertices, const int32_t* tris, size_t num_tris, const int32_t* neighbour,
+                        bool skip_equal_colors, std::vector<PairRecord>* pairs,
+                        std::vector<shared::PairGeometry>* geometry) {
+  Workspace& ws = workspace;
+  const size_t np = static_cast<size_t>(rast.width) * rast.height, slots = 2 * np;
+  pairs->clear();
+  geometry->clear();
+  if (np == 0) return;
+  const shared::AntialiasScene sc = DeviceScene(rast, clip, num_vertices, tris, num_tris, neighbour);
+  const float* d_color = skip_equal_colors ? ws.color.Upload(color, static_cast<size_t>(channels) * np) : nullptr;
+  int32_t* found = ws.pair_offset.Get(2 * slots);  // [0, slots): found flags, [slots, 2 slots): offsets
+  int32_t* offset = found + slots;
+  PairRecord* slot_pairs = ws.pairs.Get(slots);
+  shared::PairGeometry* slot_geometry = ws.geometry.Get(slots);
+  PairKernel<<<Blocks(np), kThreads>>>(sc, d_color, channels, skip_equal_colors, found, slot_pairs, slot_geometry);
+  SD_CUDA(cudaGetLastError());
+  size_t temp_bytes = 0;
+  SD_CUDA(cub::DeviceScan::ExclusiveSum(nullptr, temp_bytes, found, offset, static_cast<int64_t>(slots)));
+  SD_CUDA(cub::DeviceScan::ExclusiveSum(ws.scan_temp.Get(temp_bytes), temp_bytes, found, offset,
+                                        static_cast<int64_t>(slots)));
+  int32_t last_offset = 0, last_found = 0;
+  Download(&last_offset, offset + slots - 1, 1);
+  Download(&last_found, found + slots - 1, 1);
+  const size_t count = static_cast<size_t>(last_offset) + static_cast<size_t>(last_found);
+  if (count == 0) return;
+  PairRecord* out_pairs = ws.compact_pairs.Get(count);
+  shared::PairGeometry* out_geometry = ws.compact_geometry.Get(count);
+  CompactKernel<<<Blocks(slots), kThreads>>>(found, offset, slots, slot_pairs, slot_geometry, out_pairs, out_geometry);
+  SD_CUDA(cudaGetLastError());
+  pairs->resize(count);
+  geometry->resize(count);
+  Download(pairs->data(), out_pairs, count);
+  Download(geometry->data(), out_geometry, count);
+}
+
+bool RecordedPairGeometry(const RasterView& rast, const float* clip, size_t num_vertices, const int32_t* tris,
+                          size_t num_tris, const int32_t* neighbour, const PairRecord* pairs, size_t num_pairs,
+                          std::vector<shared::PairGeometry>* geometry) {
+  Workspace& ws = workspace;
+  geometry->resize(num_pairs);
+  if (num_pairs == 0) return true;
+  const shared::AntialiasScene sc = DeviceScene(rast, clip, num_vertices, tris, num_tris, neighbour);
+  const PairRecord* d_pairs = ws.pairs.Upload(pairs, num_pairs);
+  shared::PairGeometry* d_geometry = ws.geometry.Get(num_pairs);
+  int32_t* mismatch = ws.pair_offset.Get(1);
+  SD_CUDA(cudaMemset(mismatch, 0, sizeof(int32_t)));
+  RecordedGeometryKernel<<<Blocks(num_pairs), kThreads>>>(sc, d_pairs, num_pairs, d_geometry, mismatch);
+  SD_CUDA(cudaGetLastError());
+  int32_t host_mismatch = 0;
+  Download(&host_mismatch, mismatch, 1);
+  Download(geometry->data(), d_geometry, num_pairs);
+  return host_mismatch == 0;
+}
+
+}  // namespace sd::raster::cuda
+
+// ---- the refinement loss, device-resident ------------------------------------------------------------------
+namespace sd::raster::cuda {
+namespace {
+
+__global__ void ToClipKernel(const float* positions, size_t num_vertices, const float* M, float* clip) {
+  const size_t v = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  if (v >= num_vertices) return;
+  const float x = positions[3 * v], y = positions[3 * v + 1], z = positions[3 * v + 2];
+  for (int r = 0; r < 4; ++r) clip[4 * v + r] = M[4 * r] * x + M[4 * r + 1] * y + M[4 * r + 2] * z + M[4 * r + 3];
+}
+
+// grad_positions = M^T grad_clip (the first three columns), per vertex.
+__global__ void ToClipBackwardKernel(const double* grad_clip, size_t num_vertices, const float* M, float* grad_positions) {
+  const size_t v = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  if (v >= num_vertices) return;
+  for (int k = 0; k < 3; ++k) {
+    double g = 0;
+    for (int r = 0; r < 4; ++r) g += static_cast<double>(M[4 * r + k]) * grad_clip[4 * v + r];
+    grad_positions[3 * v + k] = static_cast<float>(g);
+  }
+}
+
+// The normal term per pixel (assetgen/refine.cpp): |n/|n| - t|^2 where the pixel is covered, inside the mask
+// and has a target; its gradient with respect to the interpolated (unnormalised) normal.
+__global__ void NormalLossKernel(const float* normal_img, const int32_t* triangle, const float* target,
+                                 const float* mask, size_t num_pixels, float grad_scale, float* grad_img,
+                                 double* loss_sum) {
+  const size_t p = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  double local = 0;
+  if (p < num_pixels) {
+    grad_img[3 * p] = grad_img[3 * p + 1] = grad_img[3 * p + 2] = 0.0f;
+    const float t0 = target[3 * p], t1 = target[3 * p + 1], t2 = target[3 * p + 2];
+    const float n0 = normal_img[3 * p], n1 = normal_img[3 * p + 1], n2 = normal_img[3 * p + 2];
+    const float len = sqrtf(n0 * n0 + n1 * n1 + n2 * n2);
+    if (triangle[p] >= 0 && mask[p] > 0.5f && t0 * t0 + t1 * t1 + t2 * t2 >= 0.5f && len >= 1e-8f) {
+      const float h0 = n0 / len, h1 = n1 / len, h2 = n2 / len;
+      const float d0 = h0 - t0, d1 = h1 - t1, d2 = h2 - t2;
+      local = d0 * d0 + d1 * d1 + d2 * d2;
+      const float hd = h0 * d0 + h1 * d1 + h2 * d2;
+      grad_img[3 * p] = grad_scale * 2.0f * (d0 - h0 * hd) / len;
+      grad_img[3 * p + 1] = grad_scale * 2.0f * (d1 - h1 * hd) / len;
+      grad_img[3 * p + 2] = grad_scale * 2.0f * (d2 - h2 * hd) / len;
+    }
+  }
+  // One atomic per warp, not per pixel.
+  for (int offset = 16; offset > 0; offset /= 2) local += __shfl_down_sync(0xffffffffu, local, offset);
+  if ((threadIdx.x & 31) == 0 && local != 0) atomicAdd(loss_sum, local);
+}
+
+__global__ void CoverageKernel(const int32_t* triangle, size_t num_pixels, float* coverage, float* aa) {
+  const size_t p = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  if (p >= num_pixels) return;
+  coverage[p] = aa[p] = triangle[p] >= 0 ? 1.0f : 0.0f;
+}
+
+__global__ void BlendKernel(const int32_t* found, const shared::PairGeometry* geometry, size_t num_slots,
+                            const float* coverage, float* aa) {
+  const size_t slot = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  if (slot >= num_slots || !found[slot]) return;
+  const shared::Blend b = shared::BlendOf(geometry[slot]);
+  atomicAdd(&aa[b.receiver], b.alpha * (coverage[b.source] - coverage[b.receiver]));
+}
+
+__global__ void MaskLossKernel(const float* aa, const float* target, size_t num_pixels, float grad_scale,
+                               float* grad_aa, double* loss_sum) {
+  const size_t p = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  double local = 0;
+  if (p < num_pixels) {
+    const float d = aa[p] - target[p];
+    local = d * d;
+    grad_aa[p] = grad_scale * 2.0f * d;
+  }
+  for (int offset = 16; offset > 0; offset /= 2) local += __shfl_down_sync(0xffffffffu, local, offset);
+  if ((threadIdx.x & 31) == 0 && local != 0) atomicAdd(loss_sum, local);
+}
+
+__global__ void AntialiasBackwardKernel(const int32_t* found, const shared::PairGeometry* geometry, size_t num_slots,
+                                        const float* coverage, const float* grad_aa, int width, double* grad_clip) {
+  const size_t slot = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  if (slot >= num_slots || !found[slot]) return;
+  const shared::PairGeometry& g = geometry[slot];
+  const shared::Blend b = shared::BlendOf(g);
+  const double dL_dalpha = static_cast<double>(grad_aa[b.receiver]) * (coverage[b.source] - coverage[b.receiver]);
+  const double dL_dt = dL_dalpha * b.dalpha_dt;
+  if (dL_dt == 0) return;
+  double d[2][3];
+  shared::CrossingClipGradient(g, width, dL_dt, d);
+  for (int e = 0; e < 2; ++e) {
+    double* out = &grad_clip[4 * static_cast<size_t>(g.end_vertices[e])];
+    atomicAdd(&out[0], d[e][0]);
+    atomicAdd(&out[1], d[e][1]);
+    atomicAdd(&out[3], d[e][2]);
+  }
+}
+
+__global__ void ToFloatKernel(const double* in, size_t n, float* out) {
+  const size_t i = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  if (i < n) out[i] = static_cast<float>(in[i]);
+}
+
+}  // namespace
+
+class LossTargets {
+ public:
+  struct View {
+    LossViewHost host;  // scales and size; the pointers are not used after the upload
+    float* M = nullptr;
+    float* normals = nullptr;
+    float* mask = nullptr;
+  };
+  std::vector<View> views;
+  ~LossTargets() {
+    for (View& v : views) cudaFree(v.M), cudaFree(v.normals), cudaFree(v.mask);
+  }
+};
+
+LossTargets* UploadLossTargets(const LossViewHost* views, size_t num_views) {
+  auto targets = std::make_unique<LossTargets>();
+  for (size_t i = 0; i < num_views; ++i) {
+    LossTargets::View v;
+    v.host = views[i];
+    const size_t np = static_cast<size_t>(v.host.width) * v.host.height;
+    targets->views.push_back(v);
+    LossTargets::View& d = targets->views.back();
+    SD_CUDA(cudaMalloc(&d.M, 16 * sizeof(float)));
+    SD_CUDA(cudaMalloc(&d.normals, 3 * np * sizeof(float)));
+    SD_CUDA(cudaMalloc(&d.mask, np * sizeof(float)));
+    SD_CUDA(cudaMemcpy(d.M, views[i].clip_from_world, 16 * sizeof(float), cudaMemcpyHostToDevice));
+    SD_CUDA(cudaMemcpy(d.normals, views[i].normals, 3 * np * sizeof(float), cudaMemcpyHostToDevice));
+    SD_CUDA(cudaMemcpy(d.mask, views[i].mask, np * sizeof(float), cudaMemcpyHostToDevice));
+  }
+  return targets.release();
+}
+
+void FreeLossTargets(LossTargets* targets) { delete targets; }
+
+void EvaluateLoss(LossTargets& targets, const float* positions, const float* normals, size_t num_vertices,
+                  const int32_t* tris, size_t num_tris, const int32_t* neighbour, double* losses,
+                  float* grad_positions, float* grad_normals) {
+  Workspace& ws = workspace;
+  const size_t nv = num_vertices, nt = num_tris, num_views = targets.views.size();
+  const float* d_positions = ws.attr.Upload(positions, 3 * nv);
+  const float* d_normals = ws.color.Upload(normals, 3 * nv);
+  const int32_t* d_tris = ws.tris.Upload(tris, 3 * nt);
+  const int32_t* d_neighbour = ws.neighbour.Upload(neighbour, 3 * nt);
+  static thread_local Scratch<double> loss_sums, grad_clip, grad_normals_sum;
+  static thread_local Scratch<float> normal_img, grad_img, grad_bary, coverage, aa, grad_aa, out_positions, out_normals;
+  double* d_losses = loss_sums.Get(2 * num_views);
+  SD_CUDA(cudaMemset(d_losses, 0, 2 * num_views * sizeof(double)));
+  float* d_out_positions = out_positions.Get(3 * nv * num_views);
+  float* d_out_normals = out_normals.Get(3 * nv * num_views);
+  float* d_clip = ws.clip.Get(4 * nv);
+  for (size_t vi = 0; vi < num_views; ++vi) {
+    const LossTargets::View& view = targets.views[vi];
+    const int width = view.host.width, height = view.host.height;
+    const size_t np = static_cast<size_t>(width) * height;
+    ToClipKernel<<<Blocks(nv), kThreads>>>(d_positions, nv, view.M, d_clip);
+    // Rasterize (as cuda::Rasterize, without the transfers).
+    unsigned long long* key = ws.key.Get(np);
+    SD_CUDA(cudaMemsetAsync(key, 0xff, np * sizeof(unsigned long long), cudaStreamPerThread));
+    shared::TriangleSetup* setup = ws.setup.Get(std::max<size_t>(nt, 1));
+    if (nt > 0) {
+      unsigned long long* area = ws.area.Get(2 * nt);
+      SetUpKernel<<<Blocks(nt), kThreads>>>(d_clip, d_tris, nt, width, height, setup, area);
+      size_t temp_bytes = 0;
+      SD_CUDA(cub::DeviceScan::InclusiveSum(nullptr, temp_bytes, area, area + nt, static_cast<int64_t>(nt)));
+      SD_CUDA(cub::DeviceScan::InclusiveSum(ws.scan_temp.Get(temp_bytes), temp_bytes, area, area + nt,
+                                            static_cast<int64_t>(nt), cudaStreamPerThread));
+      // The total decides the grid: the one host sync of a view.
+      unsigned long long total = 0;
+      Download(&total, area + 2 * nt - 1, 1);
+      if (total > 0) {
+        const unsigned blocks = static_cast<unsigned>(std::min<unsigned long long>((total + kThreads - 1) / kThreads, 1u << 20));
+        CoverKernel<<<blocks, kThreads>>>(setup, area + nt, nt, total, width, height, key);
+      }
+    }
+    float* bary = ws.r_bary.Get(2 * np);
+    float* depth = ws.r_depth.Get(np);
+    int32_t* triangle = ws.r_triangle.Get(np);
+    ResolveKernel<<<Blocks(np), kThreads>>>(setup, key, width, height, bary, depth, triangle);
+    const DeviceRaster rast{bary, depth, triangle};
+
+    double* d_grad_clip = grad_clip.Get(4 * nv);
+    SD_CUDA(cudaMemsetAsync(d_grad_clip, 0, 4 * nv * sizeof(double), cudaStreamPerThread));
+    double* d_grad_normals = grad_normals_sum.Get(3 * nv);
+    SD_CUDA(cudaMemsetAsync(d_grad_normals, 0, 3 * nv * sizeof(double), cudaStreamPerThread));
+    if (view.host.normal_grad_scale > 0) {
+      float* img = normal_img.Get(3 * np);
+      float* gimg = grad_img.Get(3 * np);
+      float* gbary = grad_bary.Get(2 * np);
+      SD_CUDA(cudaMemsetAsync(gbary, 0, 2 * np * sizeof(float), cudaStreamPerThread));
+      InterpolateKernel<<<Blocks(np), kThreads>>>(d_normals, 3, d_tris, np, rast, img);
+      NormalLossKernel<<<Blocks(np), kThreads>>>(img, triangle, view.normals, view.mask, np, view.host.normal_grad_scale,
+                                                 gimg, &d_losses[2 * vi]);
+      InterpolateBackwardKernel<<<Blocks(np), kThreads>>>(d_normals, 3, d_tris, np, rast, gimg, d_grad_normals, gbary);
+      RasterizeBackwardKernel<<<Blocks(np), kThreads>>>(d_clip, d_tris, width, height, rast, gbary, nullptr, d_grad_clip);
+    }
+    if (view.host.mask_grad_scale > 0) {
+      float* cov = coverage.Get(np);
+      float* d_aa = aa.Get(np);
+      float* gaa = grad_aa.Get(np);
+      CoverageKernel<<<Blocks(np), kThreads>>>(triangle, np, cov, d_aa);
+      shared::ScreenVertex* screen = ws.screen.Get(nv);
+      int8_t* facing = ws.facing.Get(std::max<size_t>(nt, 1));
+      ProjectKernel<<<Blocks(nv), kThreads>>>(d_clip, nv, width, height, screen);
+      if (nt) FacingKernel<<<Blocks(nt), kThreads>>>(d_clip, d_tris, nt, facing);
+      const shared::AntialiasScene sc{width, height, triangle, depth, d_tris, d_neighbour, screen, facing};
+      const size_t slots = 2 * np;
+      int32_t* found = ws.pair_offset.Get(slots);
+      shared::PairGeometry* geometry = ws.geometry.Get(slots);
+      PairKernel<<<Blocks(np), kThreads>>>(sc, cov, 1, /*skip_equal_colors=*/true, found, ws.pairs.Get(slots), geometry);
+      BlendKernel<<<Blocks(slots), kThreads>>>(found, geometry, slots, cov, d_aa);
+      MaskLossKernel<<<Blocks(np), kThreads>>>(d_aa, view.mask, np, view.host.mask_grad_scale, gaa, &d_losses[2 * vi + 1]);
+      AntialiasBackwardKernel<<<Blocks(slots), kThreads>>>(found, geometry, slots, cov, gaa, width, d_grad_clip);
+    }
+    ToClipBackwardKernel<<<Blocks(nv), kThreads>>>(d_grad_clip, nv, view.M, d_out_positions + 3 * nv * vi);
+    ToFloatKernel<<<Blocks(3 * nv), kThreads>>>(d_grad_normals, 3 * nv, d_out_normals + 3 * nv * vi);
+    SD_CUDA(cudaGetLastError());
+  }
+  Download(losses, d_losses, 2 * num_views);
+  for (size_t vi = 0; vi < num_views; ++vi) {
+    losses[2 * vi] *= targets.views[vi].host.normal_loss_scale;
+    losses[2 * vi + 1] *= targets.views[vi].host.mask_loss_scale;
+  }
+  Download(grad_positions, d_out_positions, 3 * nv * num_views);
+  Download(grad_normals, d_out_normals, 3 * nv * num_views);
+}
+
+}  // namespace sd::raster::cuda

@@ -189,6 +189,29 @@ expect_error "synth: bad shard" "--shard '2/2'" "$T/k_bad" -- synth "${SY[@]}" -
 synth "${SY[@]}" --out "$T/k_half" --shard 1/2 || bad "synth --shard 1/2"
 expect_error "synth: merge with a missing part" "selected frame(s): 0, 2 (" "$T/k_half" -- synth "${SY[@]}" --out "$T/k_half" --merge
 
+# Synth with arrangements: --dry-run plans the world-fixed objects without assets or rendering (plan.json +
+# plan.html); a real run renders the plan (synth.json ties labels to plan objects); --coco adds coco_2d.json.
+cat > "$T/closure.json" <<'J'
+{"seed": 5, "arrangements": [{"type": "lane_closure", "category": "traffic_cone", "count": 3, "spacing_m": 3, "distance_m": [8, 30]}]}
+J
+synth --log "$INFO" --scenario "$T/closure.json" --out "$T/dry" --dry-run > "$T/dry.txt" \
+  && [ -f "$T/dry/plan.html" ] && [ "$(grep -c '"role": "cone"' "$T/dry/plan.json")" -eq 3 ] \
+  && grep -q "3 object(s) planned" "$T/dry.txt" && grep -q "arrangements.0. lane_closure: 1 placed (3 object(s))" "$T/dry.txt" \
+  && [ "$(ls "$T/dry" | wc -l)" -eq 2 ] && ok || bad "synth --dry-run: $(cat "$T/dry.txt")"
+synth --log "$INFO" --asset "$T/cone" --scenario "$T/closure.json" --out "$T/wf" --spp 1 --ao-samples 2 --coco \
+  && [ "$(grep -c '"plan_object"' "$T/wf/synth.json")" -ge 1 ] && [ -f "$T/wf/plan.json" ] && [ -f "$T/wf/plan.html" ] \
+  && grep -q '"synthetic":true' "$T/wf/coco_2d.json" && ok || bad "synth of a world-fixed plan with --coco"
+synth --log "$INFO" --asset "$T/cone" --scenario "$T/one_cone.json" --out "$T/coco" --spp 1 --ao-samples 2 --coco \
+  && [ "$(grep -o '"synthetic":true' "$T/coco/coco_2d.json" | wc -l)" -ge 1 ] && [ ! -e "$T/coco/plan.json" ] \
+  && ok || bad "synth --coco"
+expect_error "synth: --dry-run with --merge" "cannot be combined with --merge" "$T/dry2" -- synth --log "$INFO" --scenario "$T/closure.json" --out "$T/dry2" --dry-run --merge
+printf '{"arrangements": [{"type": "lane_closure", "count": 80, "spacing_m": 3, "distance_m": [8, 9]}]}\n' > "$T/long_closure.json"
+expect_error "synth: unsatisfiable arrangement" "long_closure.json: impossible scenario: arrangements.0. (lane_closure" "$T/dry3" -- synth --log "$INFO" --scenario "$T/long_closure.json" --out "$T/dry3" --dry-run
+printf '{"arrangements": [{"type": "ego_lane_object", "category": "debris", "distance_m": [10, 30]}]}\n' > "$T/debris.json"
+expect_error "synth: arrangement without an asset of its category" "debris.json: arrangements.0. places a debris" "$T/wf2" -- synth --log "$INFO" --asset "$T/cone" --scenario "$T/debris.json" --out "$T/wf2"
+printf '{"world_fixed": "yes", "objects": [{"category": "traffic_cone"}]}\n' > "$T/wf_bad.json"
+expect_error "synth: world_fixed not a boolean" "wf_bad.json: .world_fixed: expected true or false" "$T/wf3" -- synth --log "$INFO" --asset "$T/cone" --scenario "$T/wf_bad.json" --out "$T/wf3"
+
 # Bank: catalogue a folder of asset folders, reruns are no-ops, queries, verify finds changed files, one-line errors.
 BANK=$T/bank.sqlite
 "$BIN" -q asset import --mesh "$DATA/assets/metadrive_traffic_cone/scene.gltf" --up +y --height 0.7 \

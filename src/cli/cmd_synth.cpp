@@ -1,6 +1,9 @@
+#include <iostream>
+
 #include <CLI/CLI.hpp>
 
 #include "cli/commands.h"
+#include "core/error.h"
 #include "core/log.h"
 #include "core/shard.h"
 #include "synth/pipeline.h"
@@ -14,6 +17,7 @@ Runner AddSynthCommand(CLI::App& app) {
   auto symlink = std::make_shared<bool>(false);
   auto shard = std::make_shared<std::string>();
   auto merge = std::make_shared<bool>(false);
+  auto dry_run = std::make_shared<bool>(false);
   app.add_option("--log", req->log, "Driving log: a dataset root (nuScenes tables, KITTI) or an info file (mmdet3d .json)")
       ->required();
   app.add_option("--asset", req->assets,
@@ -36,6 +40,10 @@ Runner AddSynthCommand(CLI::App& app) {
                                    "<out>.parts/ (resumable); then --merge");
   app.add_flag("--merge", *merge, "Write <out> from the parts the --shard runs left in <out>.parts/ (same arguments)")
       ->excludes(shard_opt);
+  app.add_flag("--dry-run", *dry_run,
+               "Plan only: place the scenario's objects once for the selected frames (world-fixed, "
+               "docs/sequence_placement.md), write <out>/plan.json and plan.html, render nothing; needs no sensor files");
+  app.add_flag("--coco", req->options.coco, "Also write coco_2d.json (COCO 2D boxes of the edited frames) into <out>");
   return [=]() {
     SynthRequest r = *req;
     if (*format == "kitti") r.log_options.format = LogFormat::kKitti;
@@ -43,6 +51,16 @@ Runner AddSynthCommand(CLI::App& app) {
     else if (*format == "mmdet3d") r.log_options.format.reset();  // v1 vs v0 is probed from the file
     if (!data_root->empty()) r.log_options.data_root = *data_root;
     if (*symlink) r.options.write.unchanged = UnchangedFiles::kSymlink;
+    if (*dry_run) {
+      // Checked here rather than with CLI11's excludes so the message is the usual one line naming the output.
+      if (*merge || !shard->empty() || r.options.coco)
+        throw InputError(r.out, "--dry-run writes a plan, not a dataset: it cannot be combined with --merge, --shard or --coco");
+      const DryRunSummary s = RunSynthDryRun(r);
+      for (const std::string& line : s.lines) std::cout << line << '\n';
+      std::cout << s.objects << " object(s) planned -> " << (s.out / "plan.json").string() << ", "
+                << (s.out / "plan.html").string() << std::endl;
+      return 0;
+    }
     if (!shard->empty()) {
       const SynthShardSummary s = RunSynthShard(r, ParseShard(*shard));
       SD_LOG(Info, "shard " << *shard << ": " << s.owned << " frame(s), " << s.done << " synthesised, " << s.skipped

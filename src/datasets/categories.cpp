@@ -51,6 +51,21 @@ std::optional<CategoryInfo> FindCategory(const std::string& name) {
       {"movable_object.debris", "debris"},
       {"traffic cone", "traffic_cone"},
       {"trafficcone", "traffic_cone"},
+      // Argoverse 2 sensor-dataset classes with a canonical counterpart of the same shape (TRUCK, BUS,
+      // BICYCLE, MOTORCYCLE, PEDESTRIAN match canonical names already). The rest stay unmapped: BOLLARD is a
+      // fixed post, not a 2.5 m barrier; CONSTRUCTION_BARREL, STROLLER, SIGN, ...
+      {"regular_vehicle", "car"},
+      {"large_vehicle", "truck"},
+      {"box_truck", "truck"},
+      {"truck_cab", "truck"},
+      {"vehicular_trailer", "trailer"},
+      {"articulated_bus", "bus"},
+      {"school_bus", "bus"},
+      {"bicyclist", "bicycle"},
+      {"motorcyclist", "motorcycle"},
+      {"official_signaler", "pedestrian"},
+      {"construction_cone", "traffic_cone"},
+      {"mobile_pedestrian_crossing_sign", "a_frame_sign"},
   };
   for (const auto& [alias, canonical] : kAliases)
     if (n == alias) return FindCategory(canonical);
@@ -62,7 +77,8 @@ std::string DatasetCategoryName(const CategoryInfo& category, LogFormat format) 
     case LogFormat::kNuScenesTables: return category.nuscenes_name;
     case LogFormat::kKitti: return category.kitti_name;
     case LogFormat::kMmdet3dV1:
-    case LogFormat::kMmdet3dV0: return category.name;
+    case LogFormat::kMmdet3dV0:
+    case LogFormat::kArgoverse2: return category.name;
   }
   return category.name;
 }

@@ -38,6 +38,21 @@ TEST(Categories, FindsEveryDatasetNameCaseInsensitively) {
   }
 }
 
+TEST(Categories, Argoverse2Names) {
+  EXPECT_EQ(FindCategory("REGULAR_VEHICLE")->name, "car");
+  EXPECT_EQ(FindCategory("BOX_TRUCK")->name, "truck");
+  EXPECT_EQ(FindCategory("TRUCK_CAB")->name, "truck");
+  EXPECT_EQ(FindCategory("VEHICULAR_TRAILER")->name, "trailer");
+  EXPECT_EQ(FindCategory("PEDESTRIAN")->name, "pedestrian");
+  EXPECT_EQ(FindCategory("BICYCLE")->name, "bicycle");
+  EXPECT_EQ(FindCategory("MOTORCYCLE")->name, "motorcycle");
+  EXPECT_EQ(FindCategory("CONSTRUCTION_CONE")->name, "traffic_cone");
+  EXPECT_EQ(FindCategory("ARTICULATED_BUS")->name, "bus");
+  EXPECT_FALSE(FindCategory("STROLLER"));  // no canonical counterpart of that shape
+  EXPECT_FALSE(FindCategory("BOLLARD"));
+  EXPECT_FALSE(FindCategory("SIGN"));
+}
+
 TEST(Categories, DatasetNames) {
   const CategoryInfo ped = *FindCategory("pedestrian");
   EXPECT_EQ(DatasetCategoryName(ped, LogFormat::kKitti), "Pedestrian");

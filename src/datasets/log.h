@@ -78,7 +78,8 @@ struct GeoLocation {
   std::string name;  // e.g. "singapore-onenorth"
 };
 
-enum class LogFormat { kNuScenesTables, kMmdet3dV1, kMmdet3dV0, kKitti };
+// kArgoverse2 is read (for sequences: poses, tracks, sweeps) but not written: its tables are Arrow files.
+enum class LogFormat { kNuScenesTables, kMmdet3dV1, kMmdet3dV0, kKitti, kArgoverse2 };
 const char* ToString(LogFormat f);
 
 struct Log {

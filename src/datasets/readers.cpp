@@ -25,6 +25,7 @@ const char* ToString(LogFormat f) {
     case LogFormat::kMmdet3dV1: return "mmdet3d-v1";
     case LogFormat::kMmdet3dV0: return "mmdet3d-v0";
     case LogFormat::kKitti: return "kitti";
+    case LogFormat::kArgoverse2: return "argoverse2";
   }
   return "unknown";
 }
@@ -787,6 +788,7 @@ Log OpenLog(const fs::path& path, const OpenLogOptions& options) {
       case LogFormat::kMmdet3dV1:
       case LogFormat::kMmdet3dV0: return ReadMmdet3dInfo(path, options);
       case LogFormat::kKitti: return ReadKitti(path, options);
+      case LogFormat::kArgoverse2: return ReadArgoverse2(path, options);
     }
   }
   if (!fs::exists(path)) throw InputError(path, "no such file or directory");
@@ -800,12 +802,17 @@ Log OpenLog(const fs::path& path, const OpenLogOptions& options) {
       {[](const fs::path& p) { return fs::is_regular_file(p) && p.extension() == ".json"; }, &ReadMmdet3dInfo},
       {[](const fs::path& p) { return fs::is_directory(p) && !FindVersionDir(p).empty(); }, &ReadNuScenesTables},
       {[](const fs::path& p) { return fs::is_directory(p) && !KittiSplitDir(p).empty(); }, &ReadKitti},
+      {[](const fs::path& p) {
+         return fs::is_regular_file(p / "city_SE3_egovehicle.json") && fs::is_regular_file(p / "annotations.json");
+       },
+       &ReadArgoverse2},
   };
   for (const Probe& probe : kProbes)
     if (probe.matches(path)) return probe.read(path, options);
   if (fs::is_regular_file(path)) throw InputError(path, "unrecognised dataset file (expected an mmdet3d info .json)");
   throw InputError(path, "unrecognised dataset directory: no nuScenes tables (v1.0-*/sample.json), no KITTI "
-                         "calib/label_2 (or training/); for mmdet3d pass the info .json");
+                         "calib/label_2 (or training/), no Argoverse 2 "
+                         "city_SE3_egovehicle.json + annotations.json; for mmdet3d pass the info .json");
 }
 
 }  // namespace sd

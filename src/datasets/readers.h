@@ -19,7 +19,8 @@ struct OpenLogOptions {
 // `path`: a dataset root directory (nuScenes tables, KITTI object layout) or an info file (mmdet3d .json).
 // Probes the format unless forced: *.json -> ReadMmdet3dInfo; a directory holding sample.json, or a
 // version directory (or, Lyft, version/version) that does -> ReadNuScenesTables; calib/ + label_2/ (or
-// training/) -> ReadKitti. InputError (naming the path) when no reader recognises it. docs/datasets.md
+// training/) -> ReadKitti; a directory holding city_SE3_egovehicle.json and annotations.json ->
+// ReadArgoverse2. InputError (naming the path) when no reader recognises it. docs/datasets.md
 // tabulates every format's conventions.
 Log OpenLog(const std::filesystem::path& path, const OpenLogOptions& options = {});
 
@@ -43,6 +44,16 @@ Log ReadMmdet3dInfo(const std::filesystem::path& info_json, const OpenLogOptions
 // labels (bottom centre in rectified cam0, h w l, rotation_y) -> geometric-centre boxes (l, w, h) in the
 // Velodyne frame; DontCare skipped; truncation and occlusion kept.
 Log ReadKitti(const std::filesystem::path& root, const OpenLogOptions& options = {});
+
+// Argoverse 2 sensor log directory, from the JSON / float32 conversions of its Arrow tables
+// (city_SE3_egovehicle.json, annotations.json, sensors/lidar/<ts_ns>.xyzil.f32.bin: N x 5 float32 x y z
+// intensity laser_number, already in the ego frame, so T_ego_lidar = identity). Frames: every sweep on disk and
+// every annotated timestamp, in time order (token = the timestamp in ns; frames without a sweep file have
+// lidar = nullopt). T_world_ego (world = city) is interpolated from the ~170 Hz poses at the frame time
+// (translation linear, rotation slerp). Boxes: centre in the ego frame, (length, width, height), rotation
+// ego <- object; category = the AV2 name (REGULAR_VEHICLE, ...; datasets/categories.h maps them),
+// instance_token = track_uuid, num_lidar_pts = num_interior_pts. No cameras (no images are converted).
+Log ReadArgoverse2(const std::filesystem::path& log_dir, const OpenLogOptions& options = {});
 
 // Reads the frame's sweep in its own layout (sensor frame). InputError naming the file when it is missing or
 // not a whole number of records.

@@ -51,6 +51,10 @@ struct WriteOptions {
 // Box rotations: nuScenes tables keep the full rotation; mmdet3d infos keep only yaw about LiDAR +z and
 // KITTI labels only rotation_y about rectified cam0's y axis, so any tilt of an added box relative to
 // that axis (the sensor's mounting tilt, about 0.3-1.4 degrees) is dropped on writing.
+// Byte identity: annotation files are edited as text, so every record the edit does not touch (other tables,
+// other samples' annotations, every existing field and list element of an edited frame's record, existing
+// KITTI label lines) keeps its exact bytes; added records are laid out like their neighbours
+// (docs/datasets.md, "Byte identity of derivatives").
 std::vector<std::filesystem::path> WriteDerivative(const Log& log, const std::vector<FrameEdit>& edits,
                                                    const std::filesystem::path& out_dir, const WriteOptions& options = {});
 

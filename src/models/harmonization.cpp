@@ -91,8 +91,10 @@ Harmonizer Harmonizer::Classical(const HarmonizeOptions& options) {
   if (options.ring_px < 0) throw InputError({}, Msg() << "harmonisation ring must be >= 0 pixels, got " << options.ring_px);
   if (!(options.min_ratio > 0 && options.min_ratio <= 1 && options.max_ratio >= 1))
     throw InputError({}, "harmonisation std ratio bounds must satisfy 0 < min <= 1 <= max");
-  for (float s : {options.lightness_strength, options.chroma_strength})
+  for (float s : {options.lightness_strength, options.chroma_strength, options.cast_strength})
     if (!(s >= 0 && s <= 1)) throw InputError({}, Msg() << "harmonisation strengths are 0..1, got " << s);
+  if (!(options.max_cast >= 0) || !(options.grey_chroma >= 0))
+    throw InputError({}, "harmonisation max_cast and grey_chroma must be >= 0");
   return Harmonizer(nullptr, options);
 }
 
@@ -132,7 +134,7 @@ Harmonizer Harmonizer::Resolve(const std::string& choice, const RuntimeOptions& 
 std::string Harmonizer::Describe() const {
   if (!model_) {
     return Msg() << "Lab statistics transfer (classical; lightness " << options_.lightness_strength << ", chroma "
-                 << options_.chroma_strength << ")";
+                 << options_.chroma_strength << ", cast " << options_.cast_strength << ")";
   }
   const ModelContract& c = model_->contract();
   Msg m;
@@ -203,16 +205,34 @@ ImageF Harmonizer::HarmonizeClassical(const ImageF& composite, const ImageF& mas
                                           options_.chroma_strength};
   for (int c = 0; c < 3; ++c)
     ratio[c] = f.std[c] < 1e-6 ? 1.0 : std::clamp(b.std[c] / f.std[c], double(options_.min_ratio), double(options_.max_ratio));
+  // Mean shift per channel: lightness as Reinhard; a*b* as cast difference (cast_strength, bounded) + own-colour
+  // difference (chroma_strength). See the header.
+  const auto cast_of = [&](const std::vector<std::array<float, 3>>& lab) {
+    std::array<double, 2> sum{};
+    size_t n = 0;
+    for (const auto& v : lab)
+      if (std::hypot(v[1], v[2]) < options_.grey_chroma) sum[0] += v[1], sum[1] += v[2], ++n;
+    if (n < std::max<size_t>(8, lab.size() / 10)) return std::array<double, 2>{0, 0};
+    return std::array<double, 2>{sum[0] / n, sum[1] / n};
+  };
+  const std::array<double, 2> cast_fg = cast_of(fg_lab), cast_ring = cast_of(ring_lab);
+  std::array<double, 3> shift{};
+  shift[0] = options_.lightness_strength * (b.mean[0] - f.mean[0]);
+  double cast_shift[2];
+  for (int c = 0; c < 2; ++c) cast_shift[c] = options_.cast_strength * (cast_ring[c] - cast_fg[c]);
+  const double cast_len = std::hypot(cast_shift[0], cast_shift[1]);
+  if (cast_len > options_.max_cast) cast_shift[0] *= options_.max_cast / cast_len, cast_shift[1] *= options_.max_cast / cast_len;
+  for (int c = 1; c < 3; ++c)
+    shift[c] = cast_shift[c - 1] +
+               options_.chroma_strength * ((b.mean[c] - cast_ring[c - 1]) - (f.mean[c] - cast_fg[c - 1]));
   // Every pixel the mask touches (soft edges included) gets the transfer; BlendByMask weighs it by coverage.
   ImageF harmonised = composite;
   for (int y = by0; y <= by1; ++y)
     for (int x = bx0; x <= bx1; ++x) {
       if (mask.at(x, y) <= 0) continue;
       std::array<float, 3> lab = SrgbToLab(rgb_at(x, y));
-      for (int c = 0; c < 3; ++c) {
-        const double matched = b.mean[c] + (lab[c] - f.mean[c]) * ratio[c];
-        lab[c] = static_cast<float>(lab[c] + strength[c] * (matched - lab[c]));
-      }
+      for (int c = 0; c < 3; ++c)
+        lab[c] = static_cast<float>(lab[c] + shift[c] + strength[c] * (ratio[c] - 1) * (lab[c] - f.mean[c]));
       const std::array<float, 3> rgb = LabToSrgb(lab);
       for (int c = 0; c < 3; ++c) harmonised.at(x, y, c) = rgb[c];
     }
@@ -247,6 +267,25 @@ ImageF Harmonizer::HarmonizeLearned(const ImageF& composite, const ImageF& mask)
   ImageF harmonised = composite;
   for (size_t i = 0; i < harmonised.size(); ++i) harmonised.vector()[i] += delta.vector()[i];
   return BlendByMask(composite, mask, harmonised);
+}
+
+ImageF HarmonizeInsert(const ImageF& image, const ImageF& object_rgb, const ImageF& object_alpha,
+                       const InsertOptions& options) {
+  if (image.empty() || image.channels() != 3 || object_rgb.channels() != 3 || object_rgb.width() != image.width() ||
+      object_rgb.height() != image.height())
+    throw InputError({}, Msg() << "harmonised insert: the photograph and the object colour must be RGB images of one size, got "
+                               << image.width() << "x" << image.height() << "x" << image.channels() << " and "
+                               << object_rgb.width() << "x" << object_rgb.height() << "x" << object_rgb.channels());
+  CheckInputs(image, object_alpha);
+  ImageF composite = image;
+  for (int y = 0; y < image.height(); ++y)
+    for (int x = 0; x < image.width(); ++x) {
+      const float a = std::clamp(object_alpha.at(x, y), 0.0f, 1.0f);
+      if (a <= 0) continue;
+      for (int c = 0; c < 3; ++c) composite.at(x, y, c) = image.at(x, y, c) * (1 - a) + object_rgb.at(x, y, c) * a;
+    }
+  if (options.harmonizer) return options.harmonizer->Harmonize(composite, object_alpha);
+  return Harmonizer::Classical(options.classical).Harmonize(composite, object_alpha);
 }
 
 }  // namespace sd::models

@@ -16,9 +16,17 @@
 //
 // Classical path (Reinhard et al. 2001, "Color transfer between images", here in CIELAB): the object's
 // per-channel Lab mean and standard deviation are moved towards those of a ring of background around it
-// (pixels within `ring_px` of the mask). Full transfer would also give a red car the grey of the road, so
-// lightness (which carries the exposure mismatch) and chroma (which mostly carries the object's own colour)
-// have separate strengths, and the contrast ratio is bounded.
+// (pixels within `ring_px` of the mask, not the whole image: the light where the object stands). Full transfer
+// would also give a red car the grey of the road, so lightness (which carries the exposure mismatch) and
+// chroma have separate strengths, and the contrast ratio is bounded. Chroma is split further: each region's
+// mean a*b* = its colour cast (the mean a*b* of its near-grey pixels, chroma < `grey_chroma`: road, tyres,
+// windows; 0 when under 10% of the region is grey) + its own colour (the rest). The cast difference is
+// transferred with `cast_strength` (a warm evening light reaches the object fully; bounded by `max_cast`, in
+// case the ring's grey pixels are not neutral), the own-colour difference with `chroma_strength` (kept low, so
+// a red cone stays red). With cast_strength == chroma_strength this is the plain Reinhard transfer.
+//
+// HarmonizeInsert composites an object (straight, not premultiplied, colour + alpha) into a photograph and
+// harmonises it: the one call the synth pipeline needs.
 #include <array>
 #include <filesystem>
 #include <memory>
@@ -35,7 +43,10 @@ constexpr const char* kHarmonizerFile = "harmonizer.pt";  // the installed defau
 struct HarmonizeOptions {
   int ring_px = 0;                 // background ring width; 0: max(4, 0.25 * sqrt(object pixel count))
   float lightness_strength = 0.8f; // 0: keep the object's L* statistics, 1: take the ring's
-  float chroma_strength = 0.3f;    // the same for a*, b*
+  float chroma_strength = 0.1f;    // the same for the object's own colour (a*, b* beyond the cast) and the a*b* std
+  float cast_strength = 1.0f;      // the same for the colour cast (a*b* of the grey pixels)
+  float max_cast = 15.0f;          // bound (a*b* units) of the cast change applied
+  float grey_chroma = 25.0f;       // pixels under this Lab chroma count as grey for the cast estimate (casts reach ~15)
   float min_ratio = 0.5f, max_ratio = 2.0f;  // bounds of the std ratio (contrast change)
 };
 
@@ -72,5 +83,17 @@ class Harmonizer {
   HarmonizeOptions options_;
   int image_size_ = 0;  // learned: 0 = full resolution
 };
+
+struct InsertOptions {
+  const Harmonizer* harmonizer = nullptr;  // learned or classical; nullptr: Harmonizer::Classical(classical)
+  HarmonizeOptions classical;
+};
+
+// `image`: the photograph, sRGB 0..1, 3 channels; `object_rgb`: the object's colour, sRGB 0..1, 3 channels, same
+// size, straight (not premultiplied); `object_alpha`: its coverage 0..1 (antialiased, occlusion applied), 1
+// channel. Returns the composite image * (1 - alpha) + object * alpha, harmonised: equal to `image` wherever
+// alpha is 0. InputError on mismatched sizes or channel counts.
+ImageF HarmonizeInsert(const ImageF& image, const ImageF& object_rgb, const ImageF& object_alpha,
+                       const InsertOptions& options = {});
 
 }  // namespace sd::models

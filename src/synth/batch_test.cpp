@@ -16,6 +16,7 @@
 #include <gtest/gtest.h>
 
 #include "assetgen/canonical.h"
+#include "datasets/coco.h"
 #include "io/files.h"
 #include "io/json.h"
 #include "io/mesh_io.h"
@@ -334,5 +335,71 @@ TEST_F(SynthBatchTest, AFailingFrameDoesNotStopTheOthers) {
   EXPECT_FALSE(fs::exists(SynthPartsDir(r.out)));
 }
 
+
+// World-fixed scenarios (one plan per sequence; each KITTI object frame is its own sequence): every shard
+// computes the same plan from the whole selection, so shards + merge still write a local run's bytes, plan.json
+// and coco_2d.json included.
+TEST(SynthBatchWorldFixed, ShardsAndAMergeWriteTheSameBytesAsALocalRunWithPlanAndCoco) {
+  testing::TempDir dir;
+  testing::ImportDemoAssets(dir.path());
+  nlohmann::json scenario = nlohmann::json::parse(kKittiScenario);
+  scenario["world_fixed"] = true;
+  WriteFileAtomic(dir / "kitti.json", scenario.dump());
+  SynthRequest local = KittiRequest(dir.path(), dir / "local");
+  local.options.coco = true;
+  const SynthSummary s = RunSynth(local);
+  EXPECT_EQ(s.frames, 3u);
+  SynthRequest sharded = KittiRequest(dir.path(), dir / "sharded");
+  sharded.options.coco = true;
+  RunSynthShard(sharded, ShardSpec{1, 2});
+  RunSynthShard(sharded, ShardSpec{0, 2});
+  const SynthSummary merged = MergeSynthParts(sharded);
+  EXPECT_EQ(merged.objects, s.objects);
+  ExpectSameTree(dir / "local", dir / "sharded");
+
+  // plan.json: one sequence per KITTI frame, 4 objects each; synth.json ties every label to its plan object.
+  const nlohmann::json plan = ReadJsonFile(dir / "local" / "plan.json");
+  ASSERT_EQ(plan["sequences"].size(), 3u);
+  for (const auto& seq : plan["sequences"]) {
+    EXPECT_EQ(seq["objects"].size(), 4u);
+    EXPECT_EQ(seq["surface"], "road_surface");
+  }
+  const nlohmann::json synth = ReadJsonFile(dir / "local" / "synth.json");
+  size_t labelled = 0;
+  for (size_t f = 0; f < 3; ++f)
+    for (const auto& o : synth["frames"][f]["objects"]) {
+      ++labelled;
+      const auto& po = plan["sequences"][f]["objects"][o["plan_object"].get<size_t>()];
+      EXPECT_EQ(po["asset"], o["asset"]);
+      for (int c = 0; c < 3; ++c)  // KITTI: world = ego frame
+        EXPECT_NEAR(o["center_world_m"][c].get<double>(), o["center_ego_m"][c].get<double>(), 1e-9);
+    }
+  EXPECT_EQ(labelled, s.objects);
+
+  // coco_2d.json: the real KITTI 2D boxes plus one synthetic box per inserted object the camera sees.
+  const Coco2D coco = ReadCoco2D(dir / "local" / "coco_2d.json");
+  EXPECT_EQ(coco.images.size(), 3u);
+  size_t synthetic = 0;
+  for (const CocoAnnotation& a : coco.annotations) {
+    if (!a.synthetic) continue;
+    ++synthetic;
+    EXPECT_TRUE(a.asset_id == "cone" || a.asset_id == "barrier" || a.asset_id == "car") << a.asset_id;
+    EXPECT_GT(a.area, 0);
+    EXPECT_GE(a.box.x1, 0);
+    EXPECT_LE(a.box.x2, 1242);
+  }
+  EXPECT_GT(synthetic, 0u);
+  EXPECT_LE(synthetic, s.objects);
+
+  // Parts made for another selection were made under another plan: the merge refuses them, naming the plan.
+  SynthRequest two = KittiRequest(dir.path(), dir / "other");
+  two.options.frames = {"0", "1"};
+  RunSynthShard(two, ShardSpec{0, 1});
+  SynthRequest one = KittiRequest(dir.path(), dir / "other");
+  one.options.frames = {"0"};
+  const std::string err = InputErrorOf([&] { MergeSynthParts(one); });
+  EXPECT_NE(err.find("part of a different synth request (plan_fnv1a64 is"), std::string::npos) << err;
+  EXPECT_FALSE(fs::exists(dir / "other"));
+}
 }  // namespace
 }  // namespace sd

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <map>
 #include <memory>
+#include <random>
 
 #include "core/log.h"
 #include "datasets/categories.h"
@@ -80,9 +81,105 @@ std::vector<float> ReferenceIntensities(const PointCloud& sweep, const std::vect
   return out;
 }
 
+std::pair<Rigid3d, Rigid3d> ConstantVelocitySweepPoses(const Eigen::Vector3d& v_ego, double yaw_rate, double period,
+                                                       double reference_time) {
+  // Pose of the ego at time t relative to the ego at time 0 (constant body velocity and yaw rate).
+  auto at = [&](double t) {
+    const double yaw = yaw_rate * t;
+    Eigen::Vector3d p;
+    if (std::abs(yaw_rate) < 1e-9) {
+      p = v_ego * t;
+    } else {
+      // Integral of R(yaw_rate s) v ds over [0, t], rotation about z.
+      const double s = std::sin(yaw), c = std::cos(yaw);
+      p = Eigen::Vector3d((v_ego.x() * s - v_ego.y() * (1 - c)) / yaw_rate, (v_ego.x() * (1 - c) + v_ego.y() * s) / yaw_rate,
+                          v_ego.z() * t);
+    }
+    return Rigid3d::FromYaw(yaw, p);
+  };
+  const Rigid3d T_ref_0 = at(reference_time).Inverse();
+  return {T_ref_0 * at(0.0), T_ref_0 * at(period)};
+}
+
+std::pair<Rigid3d, Rigid3d> SweepPosesFromEgoPoses(const Rigid3d& T_world_ego_ref, const Rigid3d& T_world_ego_a, double t_a,
+                                                   const Rigid3d& T_world_ego_b, double t_b, double period,
+                                                   double reference_time) {
+  SD_CHECK(t_b != t_a, << "two ego poses at the same time");
+  const Rigid3d T_ref_a = T_world_ego_ref.Inverse() * T_world_ego_a;
+  const Rigid3d T_ref_b = T_world_ego_ref.Inverse() * T_world_ego_b;
+  const double dt = t_b - t_a;
+  const Eigen::Vector3d v_ego = (T_ref_b.translation - T_ref_a.translation) / dt;
+  const double yaw_rate = std::remainder(T_ref_b.Yaw() - T_ref_a.Yaw(), 2 * M_PI) / dt;
+  return ConstantVelocitySweepPoses(v_ego, yaw_rate, period, reference_time);
+}
+
+namespace {
+
+bool IsIdentity(const Rigid3d& T) {
+  return T.rotation.w() == 1.0 && T.rotation.x() == 0.0 && T.rotation.y() == 0.0 && T.rotation.z() == 0.0 &&
+         T.translation.isZero(0.0);
+}
+
+// One LiDAR ray: direction in the sensor frame at its firing time, and that sensor's pose in the reference
+// LiDAR frame.
+struct Ray {
+  Eigen::Vector3f dir_sensor;
+  Rigid3d T_ref_sensor;
+  bool static_pose = true;  // T_ref_sensor is exactly the identity
+  // Where set, the ray's direction in the reference frame (a real return of a de-skewed sweep: from the
+  // sensor's position at firing time through the recorded point); else T_ref_sensor.rotation * dir_sensor.
+  bool has_dir_ref = false;
+  Eigen::Vector3f dir_ref = Eigen::Vector3f::Zero();
+};
+
+struct RayReturn {
+  LidarReturn ret;
+  Eigen::Vector3f origin = Eigen::Vector3f::Zero(), dir = Eigen::Vector3f::Zero();  // reference LiDAR frame
+};
+
+// As CastLidarRays, with one origin per ray.
+std::vector<RayReturn> CastRays(const RayScene& scene, const std::vector<Ray>& rays, float max_range) {
+  std::vector<Eigen::Vector3f> origins(rays.size()), dirs(rays.size());
+  for (size_t i = 0; i < rays.size(); ++i) {
+    if (rays[i].static_pose) {
+      origins[i] = Eigen::Vector3f::Zero();
+      dirs[i] = rays[i].dir_sensor;
+    } else {
+      origins[i] = rays[i].T_ref_sensor.translation.cast<float>();
+      dirs[i] = rays[i].has_dir_ref ? rays[i].dir_ref
+                                    : Eigen::Vector3f((rays[i].T_ref_sensor.rotation.cast<float>() * rays[i].dir_sensor).normalized());
+    }
+  }
+  const std::vector<RayHit> hits = scene.IntersectMany(origins, dirs);
+  std::vector<RayReturn> out(rays.size());
+  for (size_t i = 0; i < rays.size(); ++i) {
+    out[i].origin = origins[i];
+    out[i].dir = dirs[i];
+    const RayHit& h = hits[i];
+    if (!h.Hit() || !(h.t <= max_range)) continue;
+    LidarReturn& r = out[i].ret;
+    r.hit = true;
+    r.range = h.t;
+    r.mesh = h.mesh;
+    r.face = h.face;
+    r.point = scene.HitPoint(h);
+    Eigen::Vector3f n = scene.GeometricNormal(h);
+    const float c = n.dot(dirs[i]);
+    if (c > 0) n = -n;
+    r.normal = n;
+    r.cos_incidence = std::min(1.0f, std::abs(c));
+  }
+  return out;
+}
+
+}  // namespace
+
 LidarSimResult SimulateLidar(const LidarSimInput& input) {
   SD_CHECK(input.sweep != nullptr);
   const PointCloud& sweep = *input.sweep;
+  const LidarRealism& re = input.realism;
+  SD_CHECK(re.model != nullptr || !(re.noise || re.dropout || re.intensity || re.ego_motion),
+           << "LidarRealism switches need a fitted LidarModel");
   LidarSimResult result;
   result.cloud = sweep;
   result.points_on_object.assign(input.objects.size(), 0);
@@ -92,23 +189,59 @@ LidarSimResult SimulateLidar(const LidarSimInput& input) {
   const Rigid3d T_lidar_ego = input.T_ego_lidar.Inverse();
   RayScene scene;
   std::vector<AngularBounds> bounds;
+  double nearest_vertex = 1e9;
   for (const PlacedObject* o : input.objects) {
     auto mesh = std::make_shared<TriangleMesh>(o->asset->mesh);
     mesh->Transform(T_lidar_ego * o->T_ego_asset);
     bounds.push_back(BoundsOf(*mesh));
+    for (const auto& p : mesh->positions) nearest_vertex = std::min(nearest_vertex, static_cast<double>(p.norm()));
     scene.AddMesh(mesh);
   }
   scene.Commit();
+
+  // Sensor pose at a beam's firing time, in the reference LiDAR frame.
+  const bool moving = re.ego_motion && !(IsIdentity(re.T_ref_ego_start) && IsIdentity(re.T_ref_ego_end));
+  auto make_ray = [&](const Eigen::Vector3f& dir_sensor) {
+    Ray ray;
+    ray.dir_sensor = dir_sensor;
+    if (!moving) return ray;
+    const double s = std::clamp(re.model->FiringTime(std::atan2(dir_sensor.y(), dir_sensor.x())) / re.model->SweepPeriod(), 0.0, 1.0);
+    const Rigid3d T_ref_ego(re.T_ref_ego_start.rotation.slerp(s, re.T_ref_ego_end.rotation),
+                            (1 - s) * re.T_ref_ego_start.translation + s * re.T_ref_ego_end.translation);
+    ray.T_ref_sensor = T_lidar_ego * T_ref_ego * input.T_ego_lidar;
+    ray.static_pose = false;
+    return ray;
+  };
 
   const int fi = sweep.num_features > 3 ? 3 : -1;
   float max_intensity = 0;
   if (fi >= 0)
     for (size_t i = 0; i < sweep.size(); ++i) max_intensity = std::max(max_intensity, sweep.feature(i, fi));
   auto intensity = [&](int object, float cos_incidence) {
+    if (re.intensity) return re.model->Intensity(input.objects[object]->asset->info.category, cos_incidence);
     const float v = input.reference_intensity.empty() ? 0.0f : input.reference_intensity[object] * cos_incidence / 0.7f;
     return std::clamp(v, 0.0f, max_intensity > 0 ? max_intensity : v);
   };
-  const double pad = 0.01;  // radians around each object's angular bounds
+  // Noise, dropout and the stored point of a return (see the header: raw sensor frame or reference frame).
+  std::mt19937_64 rng(re.seed);
+  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  std::normal_distribution<double> gauss(0.0, 1.0);
+  auto dropped = [&](const LidarReturn& h) { return re.dropout && uniform(rng) < re.model->DropoutProbability(h.range); };
+  auto stored_point = [&](const Ray& ray, const RayReturn& rr) -> Eigen::Vector3f {
+    if (!re.noise && ray.static_pose) return rr.ret.point;
+    float range = rr.ret.range;
+    if (re.noise) range = std::max(0.0f, range + static_cast<float>(re.model->RangeSigma(range) * gauss(rng)));
+    if (re.motion_compensated_output) return rr.origin + range * rr.dir;
+    return range * ray.dir_sensor;
+  };
+
+  double pad = 0.01;  // radians around each object's angular bounds
+  if (moving) {
+    const double shift = std::max(re.T_ref_ego_start.translation.norm(), re.T_ref_ego_end.translation.norm());
+    const double turn = std::max(re.T_ref_ego_start.rotation.angularDistance(Eigen::Quaterniond::Identity()),
+                                 re.T_ref_ego_end.rotation.angularDistance(Eigen::Quaterniond::Identity()));
+    pad += shift / std::max(0.5, nearest_vertex) + turn;
+  }
   auto near_any_object = [&](double az, double el) {
     for (const auto& b : bounds)
       if (b.Contains(az, el, pad)) return true;
@@ -117,21 +250,36 @@ LidarSimResult SimulateLidar(const LidarSimInput& input) {
 
   // 1. Real returns.
   std::vector<int> candidates;
-  std::vector<Eigen::Vector3f> dirs;
+  std::vector<Ray> rays;
   for (size_t i = 0; i < sweep.size(); ++i) {
     const Eigen::Vector3f p = sweep.xyz(i);
     const double r = p.norm();
     if (r < 0.5) continue;
     if (!near_any_object(std::atan2(p.y(), p.x()), std::atan2(p.z(), std::hypot(p.x(), p.y())))) continue;
     candidates.push_back(static_cast<int>(i));
-    dirs.push_back(p / static_cast<float>(r));
+    Ray ray = make_ray(p / static_cast<float>(r));
+    if (!ray.static_pose && re.motion_compensated_output) {
+      // The recorded point is in the reference frame; the beam came from the sensor at its firing time.
+      const Eigen::Vector3f o = ray.T_ref_sensor.translation.cast<float>();
+      ray.dir_ref = (p - o).normalized();
+      ray.has_dir_ref = true;
+      ray.dir_sensor = (ray.T_ref_sensor.rotation.inverse().cast<float>() * ray.dir_ref).normalized();
+    }
+    rays.push_back(ray);
   }
-  const auto hits = CastLidarRays(scene, Eigen::Vector3f::Zero(), dirs, input.max_range);
+  const auto hits = CastRays(scene, rays, input.max_range);
+  std::vector<char> remove(sweep.size(), 0);
   for (size_t k = 0; k < candidates.size(); ++k) {
     const int i = candidates[k];
-    const auto& h = hits[k];
-    if (!h.hit || h.range >= sweep.xyz(i).norm() - 0.02f) continue;
-    result.cloud.xyz(i) = h.point;
+    const auto& h = hits[k].ret;
+    const float recorded = rays[k].has_dir_ref ? (sweep.xyz(i) - hits[k].origin).norm() : sweep.xyz(i).norm();
+    if (!h.hit || h.range >= recorded - 0.02f) continue;
+    if (dropped(h)) {
+      remove[i] = 1;
+      ++result.dropped;
+      continue;
+    }
+    result.cloud.xyz(i) = stored_point(rays[k], hits[k]);
     if (fi >= 0) result.cloud.feature(i, fi) = intensity(h.mesh, h.cos_incidence);
     ++result.moved;
     ++result.points_on_object[h.mesh];
@@ -147,7 +295,7 @@ LidarSimResult SimulateLidar(const LidarSimInput& input) {
       rings[static_cast<int>(sweep.feature(i, ring_f))].push_back(
           {std::atan2(p.y(), p.x()), std::atan2(p.z(), std::hypot(p.x(), p.y()))});
     }
-    std::vector<Eigen::Vector3f> new_dirs;
+    std::vector<Ray> new_rays;
     std::vector<int> new_ring;
     for (auto& [ring, pts] : rings) {
       if (pts.size() < 100) continue;
@@ -171,20 +319,25 @@ LidarSimResult SimulateLidar(const LidarSimInput& input) {
           // Skip slots that hold a real return (cast above).
           auto it = std::lower_bound(pts.begin(), pts.end(), std::make_pair(a - 0.5 * step, -1e9));
           if (it != pts.end() && it->first <= a + 0.5 * step) continue;
-          new_dirs.emplace_back(static_cast<float>(std::cos(el) * std::cos(a)), static_cast<float>(std::cos(el) * std::sin(a)),
-                                static_cast<float>(std::sin(el)));
+          new_rays.push_back(make_ray(Eigen::Vector3f(static_cast<float>(std::cos(el) * std::cos(a)),
+                                                      static_cast<float>(std::cos(el) * std::sin(a)), static_cast<float>(std::sin(el)))));
           new_ring.push_back(ring);
         }
       }
     }
-    const auto new_hits = CastLidarRays(scene, Eigen::Vector3f::Zero(), new_dirs, input.max_range);
+    const auto new_hits = CastRays(scene, new_rays, input.max_range);
     std::vector<float> record(sweep.num_features, 0.0f);
-    for (size_t k = 0; k < new_dirs.size(); ++k) {
-      const auto& h = new_hits[k];
+    for (size_t k = 0; k < new_rays.size(); ++k) {
+      const auto& h = new_hits[k].ret;
       if (!h.hit) continue;
-      record[0] = h.point.x();
-      record[1] = h.point.y();
-      record[2] = h.point.z();
+      if (dropped(h)) {
+        ++result.dropped;
+        continue;
+      }
+      const Eigen::Vector3f q = stored_point(new_rays[k], new_hits[k]);
+      record[0] = q.x();
+      record[1] = q.y();
+      record[2] = q.z();
       if (fi >= 0) record[fi] = intensity(h.mesh, h.cos_incidence);
       record[ring_f] = static_cast<float>(new_ring[k]);
       result.object_points.push_back({static_cast<int>(result.cloud.size()), h.mesh});
@@ -193,7 +346,25 @@ LidarSimResult SimulateLidar(const LidarSimInput& input) {
       ++result.points_on_object[h.mesh];
     }
   }
-  SD_LOG(Debug, "lidar: moved " << result.moved << " returns onto objects, added " << result.added << " from empty beams");
+
+  // Real returns whose simulated return dropped out leave the cloud; indices shift.
+  if (std::find(remove.begin(), remove.end(), 1) != remove.end()) {
+    const int nf = sweep.num_features;
+    std::vector<int> new_index(result.cloud.size(), -1);
+    std::vector<float> data;
+    data.reserve(result.cloud.data.size());
+    int next = 0;
+    for (size_t i = 0; i < result.cloud.size(); ++i) {
+      if (i < remove.size() && remove[i]) continue;
+      new_index[i] = next++;
+      data.insert(data.end(), result.cloud.data.begin() + static_cast<long>(i * nf),
+                  result.cloud.data.begin() + static_cast<long>((i + 1) * nf));
+    }
+    result.cloud.data = std::move(data);
+    for (auto& [i, k] : result.object_points) i = new_index[i];
+  }
+  SD_LOG(Debug, "lidar: moved " << result.moved << " returns onto objects, added " << result.added
+                                << " from empty beams, dropped " << result.dropped);
   return result;
 }
 

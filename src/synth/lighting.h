@@ -9,6 +9,9 @@
 // grey Lambertian surface of albedo `road_albedo`, so its linear pixel colour L gives the horizontal
 // irradiance E = pi * L / albedo — colour included, which matches white balance and exposure to the
 // camera. E is split into sun and sky by `direct_fraction`.
+//
+// synth/environment.h goes further: an HDR environment map stitched from all cameras (exposure/white-balance
+// gains per camera, fitted sky, sun from the images or this ephemeris, sun intensity from real shadows).
 #include <optional>
 #include <vector>
 

@@ -12,6 +12,7 @@
 #include "core/log.h"
 #include "core/parallel.h"
 #include "datasets/categories.h"
+#include "datasets/coco.h"
 #include "io/files.h"
 #include "io/image_io.h"
 #include "io/json.h"
@@ -22,6 +23,7 @@
 #include "synth/lighting.h"
 #include "synth/occlusion.h"
 #include "synth/report.h"
+#include "synth/road_surface.h"
 
 namespace sd {
 namespace fs = std::filesystem;
@@ -80,6 +82,52 @@ GroundModel EstimateFrameGround(const Frame& frame, const std::vector<Eigen::Vec
   return GroundModel::Estimate(points_ego, real_boxes, gopt);
 }
 
+// The plan's world-fixed objects a frame renders: those within the plan's range gate, at their ego-frame pose.
+std::vector<PlacedObject> PlacedFromPlan(const SequencePlan& plan, size_t frame_index, const std::vector<Asset>& assets,
+                                         std::vector<int>* plan_index) {
+  const PlannedFrame* pf = nullptr;
+  for (const PlannedFrame& f : plan.frames)
+    if (f.frame_index == frame_index) pf = &f;
+  SD_CHECK(pf != nullptr, << "frame " << frame_index << " is not in the plan [" << plan.frame_begin << ", " << plan.frame_end << ")");
+  std::vector<PlacedObject> placed;
+  for (size_t i = 0; i < plan.objects.size(); ++i) {
+    const PlannedView& v = pf->objects[i];
+    if (!v.in_range) continue;
+    const Asset* asset = nullptr;
+    for (const Asset& a : assets)
+      if (a.info.id == plan.objects[i].asset_id) asset = &a;
+    SD_CHECK(asset != nullptr, << "planned object " << i << " has no asset '" << plan.objects[i].asset_id << "'");
+    placed.push_back(PlacedObject{asset, plan.objects[i].request, v.T_ego_object, v.box_ego, v.T_ego_object.translation.z()});
+    plan_index->push_back(static_cast<int>(i));
+  }
+  return placed;
+}
+
+// Drops the objects a frame does not observe (no LiDAR point, no labelable camera box): a world-fixed object
+// far behind or hidden has no label in that frame. Indices in cameras and LiDAR bookkeeping follow.
+void DropUnobserved(FrameOutcome* out) {
+  std::vector<int> new_index(out->objects.size(), -1);
+  std::vector<ObjectOutcome> kept;
+  for (size_t k = 0; k < out->objects.size(); ++k) {
+    if (out->objects[k].label.camera_boxes.empty() && out->objects[k].lidar_points == 0) continue;
+    new_index[k] = static_cast<int>(kept.size());
+    kept.push_back(std::move(out->objects[k]));
+  }
+  out->objects = std::move(kept);
+  out->edit.added.clear();
+  for (const auto& o : out->objects) out->edit.added.push_back(o.label);
+  for (auto& co : out->cameras) {
+    std::vector<int> objects;
+    for (int k : co.objects)
+      if (new_index[static_cast<size_t>(k)] >= 0) objects.push_back(new_index[static_cast<size_t>(k)]);
+    co.objects = std::move(objects);
+  }
+  std::vector<std::pair<int, int>> points;
+  for (const auto& [i, k] : out->lidar_object_points)
+    if (new_index[static_cast<size_t>(k)] >= 0) points.push_back({i, new_index[static_cast<size_t>(k)]});
+  out->lidar_object_points = std::move(points);
+}
+
 int NuScenesVisibility(double fraction) {
   if (fraction < 0.4) return 1;
   if (fraction < 0.6) return 2;
@@ -90,7 +138,7 @@ int NuScenesVisibility(double fraction) {
 }  // namespace
 
 FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vector<Asset>& assets,
-                             const Scenario& scenario, const SynthOptions& options) {
+                             const Scenario& scenario, const SynthOptions& options, const SequencePlan* plan) {
   const Frame& frame = log.frames.at(frame_index);
   if (!frame.lidar) throw InputError(log.source, "frame " + frame.token + " has no LiDAR sweep; synth needs one");
   FrameOutcome out;
@@ -115,9 +163,15 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
   pin.points_ego = points_ego;
   pin.real_boxes = real_boxes;
   for (const auto& c : frame.cameras) pin.cameras.push_back(&c);
-  Scenario frame_scenario = scenario;
-  frame_scenario.seed = scenario.seed + static_cast<uint32_t>(frame_index) * 7919u;  // distinct, reproducible per frame
-  std::vector<PlacedObject> placed = PlaceObjects(frame_scenario, assets, pin);
+  std::vector<PlacedObject> placed;
+  std::vector<int> plan_index;
+  if (plan) {
+    placed = PlacedFromPlan(*plan, frame_index, assets, &plan_index);
+  } else {
+    Scenario frame_scenario = scenario;
+    frame_scenario.seed = scenario.seed + static_cast<uint32_t>(frame_index) * 7919u;  // distinct, reproducible per frame
+    placed = PlaceObjects(frame_scenario, assets, pin);
+  }
 
   // Scene in the ego frame: objects, then one receiver mesh for shadows.
   std::string sun_source;
@@ -139,6 +193,7 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
   for (size_t k = 0; k < placed.size(); ++k) {
     auto& oc = out.objects[k];
     oc.placement = placed[k];
+    if (plan) oc.plan_object = plan_index[k];
     const auto cat = FindCategory(placed[k].asset->info.category);
     if (!cat) throw InputError(placed[k].asset->dir, "unknown category '" + placed[k].asset->info.category + "'");
     oc.label.category = cat->name;
@@ -277,6 +332,7 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
     out.edit.added.push_back(oc.label);
   }
   out.edit.points = std::move(lidar.cloud);
+  if (plan) DropUnobserved(&out);
   return out;
 }
 
@@ -294,6 +350,14 @@ struct SynthInputs {
   Scenario scenario;
   std::vector<size_t> selected;  // frame indices, in the order the user named them
   json fingerprint;              // what a part's content depends on (see RequestFingerprint)
+  bool world_fixed = false;      // the scenario is planned once per sequence (PlanSynthesis)
+  SynthPlan plan;                // when world_fixed (or a dry run)
+  const SequencePlan* PlanFor(size_t frame_index) const {
+    if (!world_fixed) return nullptr;
+    const SequencePlan* p = plan.ForFrame(frame_index);
+    SD_CHECK(p != nullptr, << "frame " << frame_index << " is in no plan");
+    return p;
+  }
 };
 
 std::string Fnv1a64Hex(std::string_view bytes) {
@@ -346,15 +410,21 @@ std::vector<fs::path> BankAssets(const Scenario& scenario, const fs::path& scena
   return dirs;
 }
 
-SynthInputs LoadInputs(const SynthRequest& request) {
+// True when the scenario is planned once per sequence: it has arrangements, or says "world_fixed": true.
+bool WorldFixedScenario(const Scenario& scenario) { return !scenario.arrangements.empty() || scenario.world_fixed; }
+
+SynthInputs LoadInputs(const SynthRequest& request, bool dry_run = false) {
   SynthInputs in;
   in.log = OpenLog(request.log, request.log_options);
   const Log& log = in.log;
   SD_LOG(Info, "log: " << request.log.string() << " (" << ToString(log.format) << ", " << log.frames.size() << " frames)");
+  if (log.format == LogFormat::kArgoverse2 && !dry_run)  // refused now rather than after synthesising every frame
+    throw InputError(request.log, "writing Argoverse 2 logs is not supported (their tables are Apache Arrow files); "
+                                  "--dry-run plans on them");
   in.scenario = ReadScenario(request.scenario);
   std::vector<fs::path> asset_dirs = request.assets;
   for (const fs::path& dir : BankAssets(in.scenario, request.scenario)) asset_dirs.push_back(dir);
-  if (asset_dirs.empty()) throw InputError("", "no --asset given, and the scenario names no assets_from_bank");
+  if (asset_dirs.empty() && !dry_run) throw InputError("", "no --asset given, and the scenario names no assets_from_bank");
   std::set<std::string> ids;
   for (const auto& path : asset_dirs) {
     in.assets.push_back(LoadAsset(path));
@@ -379,6 +449,13 @@ SynthInputs LoadInputs(const SynthRequest& request) {
   }
   if (in.selected.empty()) throw InputError(request.log, "log has no frames");
   in.fingerprint = RequestFingerprint(request, in.assets);
+  in.world_fixed = WorldFixedScenario(in.scenario);
+  if (in.world_fixed || dry_run) {
+    in.plan = PlanSynthesis(in.log, in.selected, in.scenario, in.assets, request.scenario, !dry_run);
+    // Every shard plans from the whole selection; a part made under another plan (other frames selected, other
+    // sweeps) is of another request.
+    if (in.world_fixed) in.fingerprint["plan_fnv1a64"] = Fnv1a64Hex(SynthPlanToJson(in.plan).dump());
+  }
   return in;
 }
 
@@ -511,6 +588,7 @@ void WritePart(const fs::path& dir, const FrameOutcome& o, const SynthInputs& in
                        {"lidar_points", ob.lidar_points},
                        {"rendered_pixels", ob.rendered_pixels},
                        {"visible_pixels", ob.visible_pixels}});
+    if (ob.plan_object >= 0) objects.back()["plan_object"] = ob.plan_object;
   }
   json lidar_object_points = json::array();
   for (const auto& [i, k] : o.lidar_object_points) lidar_object_points.push_back({i, k});
@@ -574,6 +652,7 @@ FrameOutcome ReadPart(const fs::path& dir, size_t frame_index, const SynthInputs
     ob.lidar_points = static_cast<int>(ro["lidar_points"].Integer());
     ob.rendered_pixels = ro["rendered_pixels"].Number();
     ob.visible_pixels = ro["visible_pixels"].Number();
+    if (ro.Has("plan_object")) ob.plan_object = static_cast<int>(ro["plan_object"].Integer());
     o.edit.added.push_back(ob.label);
     o.objects.push_back(std::move(ob));
   }
@@ -665,7 +744,7 @@ ShardRun SynthesizeParts(const SynthInputs& in, const SynthRequest& request, con
       line["error"] = "";
     } else {
       try {
-        const FrameOutcome outcome = SynthesizeFrame(in.log, fi, in.assets, in.scenario, request.options);
+        const FrameOutcome outcome = SynthesizeFrame(in.log, fi, in.assets, in.scenario, request.options, in.PlanFor(fi));
         StagingDirectory staging(part, false);
         WritePart(staging.path(), outcome, in, request.options);
         staging.Commit();
@@ -688,6 +767,12 @@ ShardRun SynthesizeParts(const SynthInputs& in, const SynthRequest& request, con
   return run;
 }
 
+json PlanFileJson(const SynthInputs& in, const SynthRequest& request) {
+  json j = {{"tool", "synthdrive synth"}, {"log", fs::absolute(request.log).string()}, {"scenario", ReadJsonFile(request.scenario)}};
+  j.update(SynthPlanToJson(in.plan));
+  return j;
+}
+
 // The derivative dataset, synth.json and report.html from the frames' outcomes, published by one rename.
 SynthSummary WriteSynthOutput(const SynthInputs& in, const SynthRequest& request, const std::vector<FrameOutcome>& outcomes) {
   const Log& log = in.log;
@@ -695,6 +780,7 @@ SynthSummary WriteSynthOutput(const SynthInputs& in, const SynthRequest& request
   std::vector<FrameEdit> edits;
   for (const auto& o : outcomes) edits.push_back(o.edit);
   WriteDerivative(log, edits, staging.path(), request.options.write);
+  if (request.options.coco) WriteCoco2D(log, edits, staging.path() / "coco_2d.json");
 
   // Provenance and placements, machine-readable. No wall-clock fields: a merge writes the same bytes as a
   // local run.
@@ -720,9 +806,21 @@ SynthSummary WriteSynthOutput(const SynthInputs& in, const SynthRequest& request
                                {"ground_height_m", ob.placement.ground_height},
                                {"lidar_points", ob.lidar_points},
                                {"visible_fraction", ob.rendered_pixels > 0 ? ob.visible_pixels / ob.rendered_pixels : 0.0}});
+      if (ob.plan_object >= 0) {
+        // World-fixed: the same plan object (plan.json "objects") in every frame that observes it.
+        const SequencePlan* plan = in.PlanFor(o.frame_index);
+        const Eigen::Vector3d c = plan->objects.at(static_cast<size_t>(ob.plan_object)).box.center();
+        jf["objects"].back()["plan_object"] = ob.plan_object;
+        jf["objects"].back()["center_world_m"] = {c.x(), c.y(), c.z()};
+      }
       ++summary.objects;
     }
     j["frames"].push_back(jf);
+  }
+  if (in.world_fixed) {
+    j["plan"] = "plan.json";
+    WriteJsonFile(staging.path() / "plan.json", PlanFileJson(in, request));
+    if (request.options.report) WritePlanReport(log, in.plan, staging.path() / "plan.html");
   }
   WriteJsonFile(staging.path() / "synth.json", j);
   if (request.options.report) WriteSynthReport(log, outcomes, staging.path() / "report.html");
@@ -796,6 +894,219 @@ SynthSummary RunSynth(const SynthRequest& request) {
   }
   SynthSummary summary = Merge(in, request);
   fs::remove_all(run.summary.parts, ec);
+  return summary;
+}
+
+
+// ---------------------------------------------------------------------------------------------------------
+// Sequence planning for synth.
+
+const SequencePlan* SynthPlan::ForFrame(size_t frame_index) const {
+  for (const auto& s : sequences)
+    for (const PlannedFrame& f : s.plan.frames)
+      if (f.frame_index == frame_index) return &s.plan;
+  return nullptr;
+}
+
+namespace {
+
+// Frames a < b of one sequence: every step between them within the planner's time gap.
+bool OneSequence(const Log& log, size_t a, size_t b, double max_gap_s) {
+  if (log.format == LogFormat::kKitti) return false;  // object frames: no world pose, no time order
+  for (size_t k = a; k < b; ++k) {
+    const double gap = log.frames[k + 1].timestamp - log.frames[k].timestamp;
+    if (!(gap >= 0 && gap <= max_gap_s)) return false;
+  }
+  return true;
+}
+
+double Median(std::vector<double> v) {
+  SD_CHECK(!v.empty(), << "median of nothing");
+  std::nth_element(v.begin(), v.begin() + static_cast<long>(v.size() / 2), v.end());
+  return v[v.size() / 2];
+}
+
+// Where no sweep measured the road: horizontal at the height of the nearest ego origin plus `ground_offset`
+// (the road's height in the ego frame: 0 in nuScenes and Argoverse 2, whose ego origin is on the ground; about
+// -1.73 m for KITTI's Velodyne frame), drivable everywhere (nothing is known there; the plan's lane geometry
+// and the annotated boxes still apply).
+class EgoPoseSurface final : public SurfaceModel {
+ public:
+  EgoPoseSurface(std::vector<Rigid3d> poses, double ground_offset) : poses_(std::move(poses)), offset_(ground_offset) {
+    SD_CHECK(!poses_.empty(), << "no poses");
+  }
+  std::optional<SurfacePoint> At(const Eigen::Vector2d& xy) const override {
+    double best = std::numeric_limits<double>::infinity(), z = 0;
+    for (const Rigid3d& T : poses_) {
+      const double d = (T.translation.head<2>() - xy).squaredNorm();
+      if (d < best) {
+        best = d;
+        z = T.translation.z();
+      }
+    }
+    return SurfacePoint{z + offset_, Eigen::Vector3d::UnitZ(), false};
+  }
+  bool IsDrivable(const Eigen::Vector2d&) const override { return true; }
+
+ private:
+  std::vector<Rigid3d> poses_;
+  double offset_;
+};
+
+// How far from a sweep's sensor its road surface decides. RoadSurface keeps points to 50 m, but beyond about
+// 30 m the ground rings are too sparse for an unmeasured cell to mean "no road" (one Argoverse 2 log with 2 of
+// its 156 sweeps refused every lane closure ahead at 50 m, "off the surface"; at 30 m it plans).
+constexpr double kSweepCoverage = 30.0;
+
+// The LiDAR road surface within `coverage` of some sweep's sensor (there it alone decides: a hole is a
+// building or an occlusion shadow, not missing data), the ego poses' height beyond it.
+class CoveredRoadSurface final : public SurfaceModel {
+ public:
+  CoveredRoadSurface(RoadSurface road, const std::vector<SweepInWorld>& sweeps, std::vector<Rigid3d> poses, double coverage)
+      : road_(std::move(road)), poses_(poses, GroundUnderEgo(road_, poses)), coverage2_(coverage * coverage) {
+    for (const auto& s : sweeps) sensors_.push_back(s.sensor_origin.head<2>());
+  }
+  // The measured road's height under the ego origins, relative to them (median).
+  static double GroundUnderEgo(const RoadSurface& road, const std::vector<Rigid3d>& poses) {
+    std::vector<double> dz;
+    for (const Rigid3d& T : poses)
+      if (const auto p = road.At(T.translation.head<2>())) dz.push_back(p->height - T.translation.z());
+    return dz.empty() ? 0.0 : Median(dz);
+  }
+  const RoadSurface& road() const { return road_; }
+  std::optional<SurfacePoint> At(const Eigen::Vector2d& xy) const override { return Covered(xy) ? road_.At(xy) : poses_.At(xy); }
+  bool IsDrivable(const Eigen::Vector2d& xy) const override { return Covered(xy) ? road_.IsDrivable(xy) : true; }
+
+ private:
+  bool Covered(const Eigen::Vector2d& xy) const {
+    for (const auto& s : sensors_)
+      if ((s - xy).squaredNorm() <= coverage2_) return true;
+    return false;
+  }
+  RoadSurface road_;
+  EgoPoseSurface poses_;
+  double coverage2_;
+  std::vector<Eigen::Vector2d> sensors_;
+};
+
+}  // namespace
+
+SynthPlan PlanSynthesis(const Log& log, const std::vector<size_t>& selected, const Scenario& scenario,
+                        const std::vector<Asset>& assets, const fs::path& scenario_file, bool need_assets) {
+  SequencePlanOptions options;
+  for (const Asset& a : assets) {
+    const auto cat = FindCategory(a.info.category);
+    options.assets.push_back(PlanAsset{a.info.id, cat ? cat->name : a.info.category, a.info.extent});
+  }
+  std::vector<size_t> sorted = selected;
+  std::sort(sorted.begin(), sorted.end());
+  std::vector<std::pair<size_t, size_t>> ranges;  // [first, last] selected frames of each sequence
+  for (size_t fi : sorted) {
+    if (!ranges.empty() && OneSequence(log, ranges.back().second, fi, options.max_frame_gap_s)) ranges.back().second = fi;
+    else ranges.push_back({fi, fi});
+  }
+  SynthPlan out;
+  for (const auto& [first, last] : ranges) {
+    SynthPlanSequence seq;
+    std::vector<Rigid3d> poses;
+    for (size_t k = first; k <= last; ++k) poses.push_back(log.frames[k].T_world_ego);
+    // The sweeps on disk, read by runs of consecutive frames that have one (info files may list sweeps that
+    // were never downloaded; Argoverse 2 test logs hold a few of their sweeps).
+    std::vector<SweepInWorld> sweeps;
+    for (size_t k = first; k <= last;) {
+      auto on_disk = [&](size_t i) {
+        std::error_code ec;
+        return log.frames[i].lidar && fs::is_regular_file(log.frames[i].lidar->path, ec);
+      };
+      if (!on_disk(k)) { ++k; continue; }
+      size_t e = k;
+      while (e <= last && on_disk(e)) ++e;
+      for (SweepInWorld& sw : SweepsFromLog(log, k, e)) sweeps.push_back(std::move(sw));
+      k = e;
+    }
+    std::unique_ptr<SurfaceModel> surface;
+    if (!sweeps.empty()) {
+      auto road = std::make_unique<CoveredRoadSurface>(RoadSurface::Build(sweeps), sweeps, poses, kSweepCoverage);
+      const RoadSurface::Stats& st = road->road().stats();
+      seq.surface = "road_surface";
+      seq.surface_detail = Msg() << sweeps.size() << " of " << last - first + 1 << " frames' LiDAR sweeps, " << st.observed_cells
+                                 << " observed + " << st.filled_cells << " filled cells, " << st.drivable_cells
+                                 << " drivable; beyond " << kSweepCoverage << " m of every sweep: the ego poses' height";
+      surface = std::move(road);
+    } else {
+      seq.surface = "ego_poses";
+      seq.surface_detail = "no LiDAR files on disk: the height of the nearest ego origin (on the ground in nuScenes and "
+                           "Argoverse 2), drivable everywhere";
+      // The road under the ego origin: on it by convention, except KITTI's Velodyne frame: there the boxes say.
+      std::vector<double> bottoms;
+      if (log.format == LogFormat::kKitti)
+        for (size_t k = first; k <= last; ++k)
+          for (const auto& a : log.frames[k].annotations) bottoms.push_back(a.box.center().z() - 0.5 * a.box.size.z());
+      surface = std::make_unique<EgoPoseSurface>(poses, bottoms.empty() ? 0.0 : Median(bottoms));
+    }
+    try {
+      seq.plan = PlanSequence(log, scenario, *surface, FrameRange{first, last + 1}, options);
+    } catch (const InputError& e) {
+      if (!e.where().empty()) throw;
+      throw InputError(scenario_file, e.what());
+    }
+    if (need_assets)
+      for (const PlannedObject& o : seq.plan.objects)
+        if (o.asset_id.empty())
+          throw InputError(scenario_file, Msg() << o.source << " places a " << o.category << " (" << o.role
+                                                << "), and no asset of that category was given: rendering needs one "
+                                                   "(--asset or assets_from_bank; --dry-run plans without)");
+    SD_LOG(Info, "plan of frames " << first << ".." << last << ": " << seq.plan.objects.size() << " world-fixed object(s), surface: "
+                                   << seq.surface << " (" << seq.surface_detail << ")");
+    out.sequences.push_back(std::move(seq));
+  }
+  return out;
+}
+
+json SynthPlanToJson(const SynthPlan& plan) {
+  json seqs = json::array();
+  for (const auto& s : plan.sequences) {
+    json j = PlanToJson(s.plan);
+    j["surface"] = s.surface;
+    j["surface_detail"] = s.surface_detail;
+    seqs.push_back(std::move(j));
+  }
+  return {{"sequences", std::move(seqs)}};
+}
+
+DryRunSummary RunSynthDryRun(const SynthRequest& request) {
+  const SynthInputs in = LoadInputs(request, true);
+  CheckOutputFree(request);
+  DryRunSummary summary;
+  StagingDirectory staging(request.out, request.options.overwrite);
+  WriteJsonFile(staging.path() / "plan.json", PlanFileJson(in, request));
+  WritePlanReport(in.log, in.plan, staging.path() / "plan.html");
+  staging.Commit();
+  summary.out = staging.final_path();
+  for (const auto& s : in.plan.sequences) {
+    const SequencePlan& p = s.plan;
+    summary.objects += p.objects.size();
+    summary.lines.push_back(Msg() << "frames " << p.frame_begin << ".." << p.frame_end - 1 << " (ego path " << p.ego_path_length_m
+                                  << " m; " << p.annotated_boxes << " annotated boxes, " << p.tracks << " tracks, " << p.swept_boxes
+                                  << " swept boxes; surface: " << s.surface << ", " << s.surface_detail << "): "
+                                  << p.objects.size() << " object(s) placed");
+    for (const PlanStats& st : p.stats) {
+      std::string what;
+      const size_t idx = static_cast<size_t>(std::stoul(st.source.substr(st.source.find('[') + 1)));
+      if (st.source.rfind("arrangements", 0) == 0) what = ToString(in.scenario.arrangements.at(idx).kind);
+      else what = ObjectSpec{in.scenario.objects.at(idx).asset_id, in.scenario.objects.at(idx).category}.Describe();
+      int objects = 0, visible_frames = 0;  // frames that see at least one object of this source
+      for (const PlannedObject& o : p.objects) objects += o.source == st.source ? 1 : 0;
+      for (const PlannedFrame& f : p.frames) {
+        bool seen = false;
+        for (size_t i = 0; i < p.objects.size(); ++i) seen = seen || (p.objects[i].source == st.source && f.objects[i].visible);
+        visible_frames += seen ? 1 : 0;
+      }
+      summary.lines.push_back(Msg() << "  " << st.source << " " << what << ": " << st.placed << " placed (" << objects << " object(s)), seen in " << visible_frames
+                                    << " of " << p.frames.size() << " frames; " << st.Summary());
+    }
+  }
+  summary.plan = in.plan;
   return summary;
 }
 

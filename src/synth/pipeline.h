@@ -19,6 +19,7 @@
 #include "synth/ground.h"
 #include "synth/placement.h"
 #include "synth/scenario.h"
+#include "synth/sequence_plan.h"
 
 namespace sd {
 
@@ -29,6 +30,7 @@ struct SynthOptions {
   WriteOptions write;
   bool overwrite = false;
   bool report = true;
+  bool coco = false;  // also write coco_2d.json (datasets/coco.h WriteCoco2D) into the output
   // Tests only: called while a part is half written (its images and sweep are in the staging folder, its
   // part.json is not), so a test can kill the process mid-part.
   std::function<void(size_t frame_index, const std::filesystem::path& staging)> part_written_hook;
@@ -46,6 +48,7 @@ struct SynthRequest {
 // What happened to one inserted object in one frame, for labels, reports and verification.
 struct ObjectOutcome {
   PlacedObject placement;
+  int plan_object = -1;  // index into the SequencePlan's objects (world-fixed); -1: placed for this frame alone
   AddedObject label;
   int lidar_points = 0;
   double rendered_pixels = 0, visible_pixels = 0;
@@ -68,9 +71,45 @@ struct FrameOutcome {
   std::vector<std::pair<int, int>> lidar_object_points;  // (point index in edit.points, object index)
 };
 
-// Synthesises one frame in memory (no files written).
+// Synthesises one frame in memory (no files written). Without a plan, objects are placed for this frame alone
+// (synth/placement.h, ego frame, the frame's GroundModel). With a plan (which must cover the frame), the
+// plan's world-fixed objects within its range gate (PlannedView::in_range) are rendered at their ego-frame
+// pose PlannedView::T_ego_object, so every frame shows the same objects where the world has them; an object
+// that ends up with neither a LiDAR point nor a labelable camera box (>= 4 visible pixels) gets no label.
 FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vector<Asset>& assets,
-                             const Scenario& scenario, const SynthOptions& options);
+                             const Scenario& scenario, const SynthOptions& options, const SequencePlan* plan = nullptr);
+
+// Sequence planning for synth (docs/sequence_placement.md). Used when the scenario has "arrangements" or
+// says "world_fixed": true (then its plain "objects" are planned once too, distance_m / lateral_m read along
+// the ego path), and always by --dry-run.
+//  - Sequences: the selected frames, sorted, are cut where consecutive log frames are more than
+//    SequencePlanOptions::max_frame_gap_s apart (nuScenes info files hold several scenes); each sequence is
+//    planned over the log frames [first selected, last selected] of it (unselected frames in between count as
+//    obstacles and path). KITTI object frames have no world pose: each is its own sequence.
+//  - Surface: RoadSurface::Build over the sequence's sweeps that are on disk; it alone decides within
+//    RoadSurfaceOptions::max_range (50 m) of some sweep's sensor. Beyond that, and everywhere when no sweep
+//    is on disk (info files without the sensor data), the height of the nearest planned ego origin (on the
+//    ground in nuScenes and Argoverse 2), horizontal, drivable everywhere ("ego_poses").
+// Deterministic: the plan depends only on the log, the selection, the scenario and the assets, so every shard
+// computes the same plan (its hash is part of the parts' request fingerprint).
+struct SynthPlanSequence {
+  std::string surface;         // "road_surface" (LiDAR, ego poses beyond its reach) | "ego_poses" (no sweep on disk)
+  std::string surface_detail;  // for people: sweeps and cells used
+  SequencePlan plan;
+};
+struct SynthPlan {
+  std::vector<SynthPlanSequence> sequences;
+  // The plan covering `frame_index`, or nullptr.
+  const SequencePlan* ForFrame(size_t frame_index) const;
+};
+// `need_assets`: every planned object must resolve to one of `assets` (InputError otherwise: rendering needs a
+// mesh); false for dry runs, where a category without an asset stands at its default size. InputError naming
+// `scenario_file` when the plan is impossible.
+SynthPlan PlanSynthesis(const Log& log, const std::vector<size_t>& selected, const Scenario& scenario,
+                        const std::vector<Asset>& assets, const std::filesystem::path& scenario_file, bool need_assets);
+// {"sequences": [PlanToJson(plan) + {"surface", "surface_detail"}]}; plan.json is this plus "tool", "log" and
+// "scenario" (the scenario file's JSON).
+nlohmann::json SynthPlanToJson(const SynthPlan& plan);
 
 struct SynthSummary {
   std::filesystem::path out, report;
@@ -78,7 +117,8 @@ struct SynthSummary {
 };
 
 // The whole command: loads everything, synthesises the selected frames, writes the derivative dataset,
-// synth.json (placements and provenance) and report.html into `out` atomically. It is RunSynthShard(0/1)
+// synth.json (placements and provenance) and report.html into `out` atomically (world-fixed scenarios: also
+// plan.json and plan.html, as --dry-run writes them; --coco: coco_2d.json). It is RunSynthShard(0/1)
 // followed by MergeSynthParts; the parts folder is removed once the output is committed (and kept when a
 // frame failed and others have parts, so a rerun resumes). A frame's failure does not stop the others; the
 // first failure is rethrown at the end.
@@ -105,5 +145,17 @@ SynthShardSummary RunSynthShard(const SynthRequest& request, const ShardSpec& sh
 // before anything is created, listing the frames that have no part, or naming a part of a different request.
 // The parts folder is left in place.
 SynthSummary MergeSynthParts(const SynthRequest& request);
+
+// `synth --dry-run`: plans the selected frames (PlanSynthesis; --asset / bank assets optional: without them a
+// category stands at its default size), renders nothing, and writes `out` (StagingDirectory) with plan.json
+// (SynthPlanToJson) and plan.html (synth/report.h WritePlanReport). Works on logs whose sensor files are
+// absent (only the poses and boxes are read).
+struct DryRunSummary {
+  std::filesystem::path out;
+  SynthPlan plan;
+  size_t objects = 0;
+  std::vector<std::string> lines;  // human summary: per sequence and per arrangement / object request
+};
+DryRunSummary RunSynthDryRun(const SynthRequest& request);
 
 }  // namespace sd

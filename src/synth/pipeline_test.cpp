@@ -2,18 +2,25 @@
 // against the data (boxes, ground, projections, point-to-mesh distances), not against golden files.
 #include "synth/pipeline.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <fstream>
+#include <map>
 
 #include <gtest/gtest.h>
 
 #include "assetgen/canonical.h"
+#include "io/files.h"
+#include "io/json.h"
 #include "io/mesh_io.h"
 #include "synth/test_assets.h"
 #include "testing/testing.h"
 
 namespace sd {
 namespace {
+
+namespace fs = std::filesystem;
 
 const char* kInfo = "driving/nuscenes-scene0061-kf0/mmdet3d_info/n015-2018-07-24-11-22-45+0800.json";
 
@@ -217,5 +224,203 @@ TEST_F(PipelineTest, ImpossibleScenarioIsAnErrorNamingTheObject) {
   }
 }
 
+
+// ---------------------------------------------------------------------------------------------------------
+// World-fixed synthesis over several frames (one SequencePlan) and the dry run.
+
+// A lane closure of demo cones and a barrier among the roadside clutter, placed once for the sequence.
+const char* kWorldFixedScenario = R"({"seed": 5, "margin_m": 0.5, "arrangements": [
+  {"type": "lane_closure", "category": "traffic_cone", "count": 3, "spacing_m": 3, "distance_m": [8, 30], "side": "right"},
+  {"type": "roadside_clutter", "categories": ["barrier"], "count": 1, "distance_m": [5, 25], "lateral_m": [3, 7]}]})";
+
+// The repo keyframe followed by a copy of it 0.5 s later with the ego 1.5 m further along and turned 2 degrees:
+// the same sensor data, so any difference between the frames' labels comes from the ego pose alone.
+Log TwoFrameLog() {
+  Log log = OpenLog(testing::RepoData(kInfo));
+  Frame second = log.frames[0];
+  second.token = "moved-copy";
+  second.timestamp += 0.5;
+  second.T_world_ego = log.frames[0].T_world_ego * Rigid3d::FromYaw(2 * M_PI / 180, Eigen::Vector3d(1.5, 0, 0));
+  log.frames.push_back(second);
+  return log;
+}
+
+TEST(WorldFixedSynthesis, AnArrangedObjectHasOneWorldPoseInEveryFramesLabels) {
+  testing::TempDir dir;
+  const std::vector<Asset> assets = DemoAssets(dir);
+  WriteFileAtomic(dir / "scenario.json", kWorldFixedScenario);
+  const Scenario scenario = ReadScenario(dir / "scenario.json");
+  const Log log = TwoFrameLog();
+  const SynthPlan plan = PlanSynthesis(log, {0, 1}, scenario, assets, dir / "scenario.json", true);
+  ASSERT_EQ(plan.sequences.size(), 1u);  // 0.5 s apart: one sequence
+  EXPECT_EQ(plan.sequences[0].surface, "road_surface");
+  const SequencePlan& p = plan.sequences[0].plan;
+  ASSERT_EQ(p.objects.size(), 4u);
+  ASSERT_EQ(plan.ForFrame(1), &p);
+  SynthOptions opt;
+  opt.samples_per_pixel = 1;
+  opt.ao_samples = 2;
+  std::map<int, int> frames_labelled;  // plan object -> frames whose labels hold it
+  for (size_t fi : {0u, 1u}) {
+    const FrameOutcome o = SynthesizeFrame(log, fi, assets, scenario, opt, plan.ForFrame(fi));
+    const Rigid3d& T_world_ego = log.frames[fi].T_world_ego;
+    ASSERT_EQ(o.edit.added.size(), o.objects.size());
+    for (size_t k = 0; k < o.objects.size(); ++k) {
+      const ObjectOutcome& ob = o.objects[k];
+      ASSERT_GE(ob.plan_object, 0);
+      const PlannedObject& po = p.objects[static_cast<size_t>(ob.plan_object)];
+      ++frames_labelled[ob.plan_object];
+      // The label (ego frame) mapped back to the world is the plan's one world box, in every frame.
+      const Box3 world = o.edit.added[k].annotation.box.Transformed(T_world_ego);
+      EXPECT_LT((world.center() - po.box.center()).norm(), 1e-9) << "frame " << fi << " object " << ob.plan_object;
+      EXPECT_LT(world.T_frame_box.rotation.angularDistance(po.box.T_frame_box.rotation), 1e-9);
+      EXPECT_EQ(world.size, po.box.size);
+      EXPECT_EQ(o.edit.added[k].asset_id, po.asset_id);
+      EXPECT_TRUE(ob.lidar_points > 0 || !ob.label.camera_boxes.empty());  // unobserved objects get no label
+      for (const auto& a : log.frames[fi].annotations) EXPECT_FALSE(BoxesOverlap(ob.placement.box, a.box, 0.49));
+    }
+  }
+  // The ego moved, so the same world pose is a different ego-frame pose; every cone of the closure, 8..36 m
+  // ahead, is observed in both frames.
+  for (int i = 0; i < 3; ++i) EXPECT_EQ(frames_labelled[i], 2) << "cone " << i;
+  const Rigid3d T0 = p.frames[0].objects[0].T_ego_object, T1 = p.frames[1].objects[0].T_ego_object;
+  EXPECT_GT((T0.translation - T1.translation).norm(), 1.4);
+}
+
+TEST(WorldFixedSynthesis, AnArrangementWithoutAnAssetOfItsCategoryIsRefusedBeforeRendering) {
+  testing::TempDir dir;
+  const std::vector<Asset> assets = DemoAssets(dir);
+  WriteFileAtomic(dir / "debris.json", R"({"arrangements": [{"type": "ego_lane_object", "category": "debris", "distance_m": [10, 30]}]})");
+  const Log log = OpenLog(testing::RepoData(kInfo));
+  try {
+    PlanSynthesis(log, {0}, ReadScenario(dir / "debris.json"), assets, dir / "debris.json", true);
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("debris.json: arrangements[0] places a debris"), std::string::npos) << m;
+    EXPECT_EQ(m.find('\n'), std::string::npos);
+  }
+  // Unsatisfiable: a closure longer than the whole visible world.
+  WriteFileAtomic(dir / "long.json", R"({"arrangements": [{"type": "lane_closure", "count": 80, "spacing_m": 3, "distance_m": [8, 9]}]})");
+  try {
+    PlanSynthesis(log, {0}, ReadScenario(dir / "long.json"), assets, dir / "long.json", true);
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    const std::string m = e.what();
+    EXPECT_EQ(m.rfind((dir / "long.json").string() + ": impossible scenario: arrangements[0]", 0), 0u) << m;
+  }
+}
+
+// Every planned object's box, in every planned frame's ego frame, against that frame's annotated boxes.
+size_t CountOverlaps(const Log& log, const SynthPlan& plan, double margin, size_t* pairs) {
+  size_t overlaps = 0;
+  for (const auto& s : plan.sequences)
+    for (const PlannedFrame& f : s.plan.frames)
+      for (const auto& a : log.frames[f.frame_index].annotations)
+        for (const PlannedView& v : f.objects) {
+          ++*pairs;
+          overlaps += BoxesOverlap(v.box_ego, a.box, margin) || FootprintsOverlap(v.box_ego, a.box, margin) ? 1 : 0;
+        }
+  return overlaps;
+}
+
+TEST(SynthDryRun, PlansTheRepoKeyframeOnItsLidarRoadSurface) {
+  testing::TempDir dir;
+  WriteFileAtomic(dir / "scenario.json", kWorldFixedScenario);
+  SynthRequest r;
+  r.log = testing::RepoData(kInfo);
+  r.scenario = dir / "scenario.json";
+  r.out = dir / "plan";
+  const DryRunSummary s = RunSynthDryRun(r);  // no assets: categories at their default sizes
+  ASSERT_EQ(s.plan.sequences.size(), 1u);
+  EXPECT_EQ(s.plan.sequences[0].surface, "road_surface");
+  EXPECT_EQ(s.objects, 4u);
+  const nlohmann::json j = ReadJsonFile(dir / "plan" / "plan.json");
+  ASSERT_EQ(j["sequences"].size(), 1u);
+  EXPECT_EQ(j["sequences"][0]["objects"].size(), 4u);
+  EXPECT_EQ(j["sequences"][0]["per_frame"].size(), 1u);
+  EXPECT_EQ(j["scenario"]["seed"], 5);
+  EXPECT_EQ(j["sequences"][0]["rejections"][0]["placed"], 1);
+  const std::string html = ReadFileToString(dir / "plan" / "plan.html");
+  EXPECT_NE(html.find("<svg"), std::string::npos);
+  size_t titles = 0;  // one titled footprint per placed object
+  for (size_t at = html.find("</title></polygon>"); at != std::string::npos; at = html.find("</title></polygon>", at + 1)) ++titles;
+  EXPECT_EQ(titles, 4u);
+  const Log log = OpenLog(testing::RepoData(kInfo));
+  size_t pairs = 0;
+  EXPECT_EQ(CountOverlaps(log, s.plan, 0.49, &pairs), 0u);
+  EXPECT_EQ(pairs, 69u * 4u);
+  // Every object stands on the LiDAR road: its ground contact within 5 cm of its box bottom, and the road near
+  // the ego origin's height (nuScenes: the rear axle projected on the ground; the LiDAR is 1.84 m above it).
+  for (const PlannedView& v : s.plan.sequences[0].plan.frames[0].objects) {
+    const double bottom = v.box_ego.center().z() - 0.5 * v.box_ego.size.z();
+    EXPECT_NEAR(bottom, v.T_ego_object.translation.z(), 0.05);
+    EXPECT_LT(std::abs(bottom), 0.5);
+  }
+  // A second dry run into the same folder is refused, the first left as it was.
+  EXPECT_THROW(RunSynthDryRun(r), InputError);
+}
+
+TEST(SynthDryRun, NuScenesMiniValInfosWithoutSensorFilesPlanBothScenesWithoutOverlaps) {
+  SD_REQUIRE_SHARED(info, "driving/nuscenes-mini-val-infos/nuscenes_infos_val.json");
+  testing::TempDir dir;
+  WriteFileAtomic(dir / "scenario.json", R"({"seed": 11, "margin_m": 0.5, "arrangements": [
+    {"type": "lane_closure", "count": 6, "spacing_m": 3, "distance_m": [125, 145], "side": "right"},
+    {"type": "ego_lane_object", "category": "debris", "distance_m": [125, 160]},
+    {"type": "roadside_clutter", "categories": ["traffic_cone", "a_frame_sign", "debris"], "count": 6, "distance_m": [0, 120],
+     "lateral_m": [2.5, 6]},
+    {"type": "breakdown", "vehicle": "car", "warning": "warning_tripod", "position": "shoulder", "side": "right",
+     "distance_m": [20, 120], "setting": "city"}]})");
+  SynthRequest r;
+  r.log = info;
+  r.scenario = dir / "scenario.json";
+  r.out = dir / "plan";
+  const DryRunSummary s = RunSynthDryRun(r);
+  ASSERT_EQ(s.plan.sequences.size(), 2u);  // two scenes, cut at the time gap
+  EXPECT_EQ(s.plan.sequences[0].plan.frame_begin, 0u);
+  EXPECT_EQ(s.plan.sequences[0].plan.frame_end, 40u);
+  EXPECT_EQ(s.plan.sequences[1].plan.frame_begin, 40u);
+  EXPECT_EQ(s.plan.sequences[1].plan.frame_end, 81u);
+  for (const auto& seq : s.plan.sequences) EXPECT_EQ(seq.surface, "ego_poses");  // no sweeps on disk
+  EXPECT_EQ(s.objects, 30u);
+  const Log log = OpenLog(info);
+  size_t pairs = 0;
+  EXPECT_EQ(CountOverlaps(log, s.plan, 0.49, &pairs), 0u);
+  EXPECT_EQ(pairs, 4514u * 15u);
+  const nlohmann::json j = ReadJsonFile(dir / "plan" / "plan.json");
+  EXPECT_EQ(j["sequences"][1]["per_frame"].size(), 41u);
+  EXPECT_TRUE(fs::exists(dir / "plan" / "plan.html"));
+}
+
+TEST(SynthDryRun, Argoverse2LogWithTwoOfItsSweepsPlansOnTheirRoadSurface) {
+  SD_REQUIRE_SHARED(av2, "driving/argoverse2-av2-api/val/7fab2350-7eaf-3b7e-a39d-6937a4c1bede");
+  testing::TempDir dir;
+  WriteFileAtomic(dir / "scenario.json", R"({"seed": 3, "arrangements": [
+    {"type": "roadside_clutter", "categories": ["traffic_cone", "debris"], "count": 4, "distance_m": [5, 60], "lateral_m": [2.5, 6]},
+    {"type": "lane_closure", "count": 6, "distance_m": [80, 100]}]})");
+  SynthRequest r;
+  r.log = av2;
+  r.scenario = dir / "scenario.json";
+  r.out = dir / "plan";
+  const DryRunSummary s = RunSynthDryRun(r);
+  ASSERT_EQ(s.plan.sequences.size(), 1u);
+  EXPECT_EQ(s.plan.sequences[0].surface, "road_surface");
+  EXPECT_EQ(s.plan.sequences[0].plan.frames.size(), 156u);
+  EXPECT_EQ(s.objects, 10u);
+  const Log log = OpenLog(av2);
+  size_t pairs = 0;
+  EXPECT_EQ(CountOverlaps(log, s.plan, 0.49, &pairs), 0u);
+  EXPECT_EQ(pairs, 11364u * 10u);
+  // Rendering into an Argoverse 2 log is refused up front, in one line naming the log.
+  r.out = dir / "synth";
+  r.assets = {};
+  try {
+    RunSynth(r);
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("writing Argoverse 2 logs is not supported"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(fs::exists(dir / "synth"));
+}
 }  // namespace
 }  // namespace sd

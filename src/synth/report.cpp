@@ -1,9 +1,12 @@
 #include "synth/report.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <fstream>
 #include <sstream>
+
+#include <Eigen/Geometry>
 
 #include "io/files.h"
 #include "io/image_io.h"
@@ -170,6 +173,96 @@ void WriteSynthReport(const Log& log, const std::vector<FrameOutcome>& frames, c
       html << "<h3>LiDAR, bird's-eye view (80 m x 80 m, ego at the centre facing up)</h3><img src='report/" << name
            << "' style='max-width:800px'>";
     }
+  }
+  html << "</body></html>\n";
+  WriteFileAtomic(html_path, html.str());
+}
+
+void WritePlanReport(const Log& log, const SynthPlan& plan, const fs::path& html_path) {
+  static const char* kColors[] = {"#ff8c00", "#e6194b", "#3cb44b", "#ffe119", "#f032e6", "#42d4f4", "#bfef45", "#fabed4"};
+  std::ostringstream html;
+  html << "<!doctype html><html><head><meta charset='utf-8'><title>SynthDrive synthesis plan</title><style>"
+          "body{font-family:sans-serif;background:#111;color:#ddd;margin:20px}h2{border-bottom:1px solid #444}"
+          "table{border-collapse:collapse}td,th{border:1px solid #444;padding:1px 4px;font-size:11px;text-align:center}"
+          "td.v{background:#264d26}td.r{background:#4d4426}svg{background:#1b1b1b;border:1px solid #333}</style></head><body>";
+  html << "<h1>SynthDrive synthesis plan (dry run)</h1><p>Log: " << Escape(log.source.string()) << " (" << ToString(log.format)
+       << "). Top-down, world frame: white = ego path (a dot per frame), blue = annotated boxes of every planned frame, "
+          "filled = placed objects (colour per arrangement / request).</p>";
+  char buf[256];
+  for (const auto& seq : plan.sequences) {
+    const SequencePlan& p = seq.plan;
+    html << "<h2>Frames " << p.frame_begin << ".." << p.frame_end - 1 << "</h2><p>Surface: " << Escape(seq.surface) << " ("
+         << Escape(seq.surface_detail) << "). Ego path " << p.ego_path_length_m << " m, " << p.objects.size()
+         << " objects, seed " << p.seed << ", margin " << p.margin_m << " m.</p>";
+    std::vector<std::array<Eigen::Vector2d, 4>> real;
+    std::vector<Eigen::Vector2d> path;
+    for (const PlannedFrame& f : p.frames) {
+      const Frame& frame = log.frames[f.frame_index];
+      path.push_back(frame.T_world_ego.translation.head<2>());
+      for (const auto& a : frame.annotations) {
+        const auto c = a.box.Transformed(frame.T_world_ego).Corners();
+        real.push_back({c[0].head<2>(), c[1].head<2>(), c[2].head<2>(), c[3].head<2>()});
+      }
+    }
+    Eigen::AlignedBox2d extent;
+    for (const auto& q : path) extent.extend(q);
+    for (const auto& o : p.objects)
+      for (const auto& c : o.box.Corners()) extent.extend(c.head<2>());
+    extent.min() -= Eigen::Vector2d(15, 15);
+    extent.max() += Eigen::Vector2d(15, 15);
+    const double width_px = 1000, scale = width_px / std::max(extent.sizes().x(), 1.0);
+    const double height_px = std::min(1400.0, extent.sizes().y() * scale);
+    auto X = [&](const Eigen::Vector2d& q) { return (q.x() - extent.min().x()) * scale; };
+    auto Y = [&](const Eigen::Vector2d& q) { return (extent.max().y() - q.y()) * scale; };
+    auto polygon = [&](const auto& pts) {
+      std::string s;
+      for (const auto& q : pts) {
+        std::snprintf(buf, sizeof buf, "%.1f,%.1f ", X(q), Y(q));
+        s += buf;
+      }
+      return s;
+    };
+    std::snprintf(buf, sizeof buf, "<svg width='%.0f' height='%.0f'>", width_px, height_px);
+    html << buf;
+    for (const auto& r : real)
+      html << "<polygon points='" << polygon(r) << "' fill='none' stroke='#4f7fd0' stroke-width='0.6' opacity='0.6'/>";
+    html << "<polyline points='" << polygon(path) << "' fill='none' stroke='#fff' stroke-width='1.5'/>";
+    for (const auto& q : path) {
+      std::snprintf(buf, sizeof buf, "<circle cx='%.1f' cy='%.1f' r='2' fill='#fff'/>", X(q), Y(q));
+      html << buf;
+    }
+    std::vector<std::string> sources;
+    for (size_t i = 0; i < p.objects.size(); ++i) {
+      const PlannedObject& o = p.objects[i];
+      size_t color = std::find(sources.begin(), sources.end(), o.source) - sources.begin();
+      if (color == sources.size()) sources.push_back(o.source);
+      const auto c = o.box.Corners();
+      const std::array<Eigen::Vector2d, 4> fp{c[0].head<2>(), c[1].head<2>(), c[2].head<2>(), c[3].head<2>()};
+      html << "<polygon points='" << polygon(fp) << "' fill='" << kColors[color % 8] << "' stroke='#000' stroke-width='0.5'><title>"
+           << i << ": " << Escape(o.source) << " " << Escape(o.role) << " " << Escape(o.category) << " "
+           << Escape(o.asset_id) << "</title></polygon>";
+      std::snprintf(buf, sizeof buf, "<text x='%.1f' y='%.1f' fill='#ddd' font-size='10'>%zu</text>", X(o.box.center().head<2>()) + 4,
+                    Y(o.box.center().head<2>()) - 4, i);
+      html << buf;
+    }
+    html << "</svg><p>";
+    for (size_t s = 0; s < sources.size(); ++s)
+      html << "<span style='color:" << kColors[s % 8] << "'>&#9632;</span> " << Escape(sources[s]) << " &nbsp; ";
+    html << "</p><table><tr><th>frame</th><th>token</th>";
+    for (size_t i = 0; i < p.objects.size(); ++i) html << "<th title='" << Escape(p.objects[i].category) << "'>" << i << "</th>";
+    html << "</tr><tr><td></td><td>category</td>";
+    for (const auto& o : p.objects) html << "<td>" << Escape(o.category) << "</td>";
+    html << "</tr>";
+    for (const PlannedFrame& f : p.frames) {
+      html << "<tr><td>" << f.frame_index << "</td><td>" << Escape(f.token.substr(0, 10)) << "</td>";
+      for (const PlannedView& v : f.objects) {
+        std::snprintf(buf, sizeof buf, "%.1f m", v.distance_m);
+        html << "<td class='" << (v.visible ? "v" : v.in_range ? "r" : "") << "' title='" << buf << "'>"
+             << (v.visible ? "V" : v.in_range ? "r" : "") << "</td>";
+      }
+      html << "</tr>";
+    }
+    html << "</table>";
   }
   html << "</body></html>\n";
   WriteFileAtomic(html_path, html.str());

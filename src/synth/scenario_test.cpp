@@ -35,6 +35,8 @@ TEST(Scenario, FixedYawAndSun) {
   EXPECT_EQ(s.objects[0].yaw_mode, ObjectRequest::Yaw::kFixed);
   ASSERT_TRUE(s.sun.has_value());
   EXPECT_DOUBLE_EQ(s.sun->elevation_deg, 40.0);
+  EXPECT_FALSE(s.world_fixed);
+  EXPECT_TRUE(ReadScenario(Write(dir, R"({"objects":[{"asset":"a"}],"world_fixed":true})")).world_fixed);
 }
 
 void ExpectError(const std::string& text, const std::string& fragment) {
@@ -64,6 +66,74 @@ TEST(Scenario, BankQueriesAreKeptForThePipeline) {
   for (const char* bad : {R"({"assets_from_bank": "b.sqlite", "objects": []})",
                           R"({"assets_from_bank": [], "objects": []})", R"({"assets_from_bank": [3], "objects": []})"})
     EXPECT_THROW(ReadScenario(Write(dir, bad)), InputError) << bad;
+}
+
+TEST(Scenario, ArrangementsWithDefaultsAndNormalisedCategories) {
+  testing::TempDir dir;
+  const Scenario s = ReadScenario(Write(dir, R"({"seed": 4, "arrangements": [
+      {"type": "lane_closure", "count": 8, "spacing_m": 2.5, "side": "left", "lane_offset_m": 3.5},
+      {"type": "ego_lane_object", "category": "movable_object.debris", "distance_m": [40, 80]},
+      {"type": "roadside_clutter", "categories": ["traffic_cone", "TrafficCone", {"asset": "crate_7"}], "count": 3},
+      {"type": "breakdown", "vehicle": {"asset": "torcs_p406"}, "position": "lane", "setting": "highway"},
+      {"type": "breakdown", "warning_distance_m": [15, 20], "yaw": 5}]})"));
+  EXPECT_TRUE(s.objects.empty());
+  ASSERT_EQ(s.arrangements.size(), 5u);
+  const Arrangement& closure = s.arrangements[0];
+  EXPECT_EQ(closure.kind, Arrangement::Kind::kLaneClosure);
+  EXPECT_STREQ(ToString(closure.kind), "lane_closure");
+  EXPECT_EQ(closure.objects[0].category, "traffic_cone");
+  EXPECT_EQ(closure.count, 8);
+  EXPECT_DOUBLE_EQ(closure.spacing_m, 2.5);
+  EXPECT_DOUBLE_EQ(closure.lane_width_m, 3.5);
+  EXPECT_DOUBLE_EQ(closure.lane_offset_m, 3.5);
+  EXPECT_EQ(closure.side, Arrangement::Side::kLeft);
+  EXPECT_DOUBLE_EQ(closure.distance_min, 20);
+  EXPECT_FALSE(closure.allow_shoulder);
+  const Arrangement& obj = s.arrangements[1];
+  EXPECT_EQ(obj.objects[0].category, "debris");
+  EXPECT_DOUBLE_EQ(obj.distance_max, 80);
+  EXPECT_DOUBLE_EQ(obj.lateral_min, -0.5);
+  EXPECT_EQ(obj.yaw_mode, ObjectRequest::Yaw::kAligned);
+  const Arrangement& clutter = s.arrangements[2];
+  ASSERT_EQ(clutter.objects.size(), 3u);
+  EXPECT_EQ(clutter.objects[1].category, "traffic_cone");
+  EXPECT_EQ(clutter.objects[2].asset_id, "crate_7");
+  EXPECT_EQ(clutter.side, Arrangement::Side::kBoth);
+  EXPECT_DOUBLE_EQ(clutter.lateral_min, 2.5);
+  EXPECT_TRUE(clutter.allow_shoulder);
+  EXPECT_EQ(clutter.yaw_mode, ObjectRequest::Yaw::kRandom);
+  const Arrangement& highway = s.arrangements[3];
+  EXPECT_EQ(highway.objects[0].asset_id, "torcs_p406");
+  EXPECT_EQ(highway.objects[1].category, "warning_tripod");
+  EXPECT_TRUE(highway.in_lane);
+  EXPECT_FALSE(highway.allow_shoulder);
+  EXPECT_DOUBLE_EQ(highway.warning_distance_min, 30);
+  EXPECT_DOUBLE_EQ(highway.warning_distance_max, 100);
+  const Arrangement& city = s.arrangements[4];
+  EXPECT_EQ(city.objects[0].category, "car");
+  EXPECT_FALSE(city.in_lane);
+  EXPECT_EQ(city.side, Arrangement::Side::kRight);
+  EXPECT_DOUBLE_EQ(city.warning_distance_min, 15);
+  EXPECT_DOUBLE_EQ(city.warning_distance_max, 20);
+  EXPECT_EQ(city.yaw_mode, ObjectRequest::Yaw::kFixed);
+  EXPECT_DOUBLE_EQ(city.yaw_deg, 5);
+}
+
+TEST(Scenario, BadArrangementsNameTheProblem) {
+  ExpectError(R"({"arrangements":[{"type":"parade"}]})", "unknown arrangement type");
+  ExpectError(R"({"objects":[{"asset":"a"}],"world_fixed":"yes"})", "world_fixed");
+  ExpectError(R"({"arrangements":[{"type":"lane_closure","count":1}]})", "count must be between 2");
+  ExpectError(R"({"arrangements":[{"type":"lane_closure","side":"both"}]})", "\"left\" or \"right\"");
+  ExpectError(R"({"arrangements":[{"type":"lane_closure","spacing_m":0}]})", "must be positive");
+  ExpectError(R"({"arrangements":[{"type":"ego_lane_object","category":"unicorn"}]})", "unknown category 'unicorn'");
+  ExpectError(R"({"arrangements":[{"type":"roadside_clutter"}]})", "exactly one of \"categories\"");
+  ExpectError(R"({"arrangements":[{"type":"roadside_clutter","categories":[]}]})", "empty list");
+  ExpectError(R"({"arrangements":[{"type":"roadside_clutter","categories":["debris"],"lateral_m":[-3,3]}]})", ">= 0");
+  ExpectError(R"({"arrangements":[{"type":"breakdown","position":"roof"}]})", "position");
+  ExpectError(R"({"arrangements":[{"type":"breakdown","setting":"moon"}]})", "setting");
+  ExpectError(R"({"arrangements":[{"type":"breakdown","warning_distance_m":[50,10]}]})", "min must not exceed max");
+  ExpectError(R"({"arrangements":[]})", "no objects");
+  ExpectError(R"({"seed": 1})", "no objects");
 }
 
 TEST(Scenario, BadInputNamesTheFileAndTheProblem) {

@@ -1,0 +1,901 @@
+#include "synth/environment.h"
+
+#include <algorithm>
+#include <cmath>
+#include <exception>
+#include <limits>
+
+#include <Eigen/Dense>
+
+#include "core/error.h"
+#include "core/log.h"
+#include "core/parallel.h"
+
+namespace sd {
+namespace {
+
+constexpr double kDeg = M_PI / 180.0;
+
+float Luma(const float* rgb) { return 0.2126f * rgb[0] + 0.7152f * rgb[1] + 0.0722f * rgb[2]; }
+float Luma(const Eigen::Vector3f& rgb) { return 0.2126f * rgb[0] + 0.7152f * rgb[1] + 0.0722f * rgb[2]; }
+
+double Median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  const size_t m = v.size() / 2;
+  std::nth_element(v.begin(), v.begin() + m, v.end());
+  return v[m];
+}
+
+// Integer hash -> [0, 1): deterministic per (seed, index) sampling, independent of threads.
+double Hash01(uint32_t a, uint32_t b) {
+  uint32_t h = a * 0x9E3779B1u ^ (b + 0x7F4A7C15u + (a << 6) + (a >> 2));
+  h ^= h >> 16;
+  h *= 0x85EBCA6Bu;
+  h ^= h >> 13;
+  h *= 0xC2B2AE35u;
+  h ^= h >> 16;
+  return (h >> 8) * (1.0 / 16777216.0);
+}
+
+void Basis(const Eigen::Vector3d& n, Eigen::Vector3d* t, Eigen::Vector3d* b) {
+  const Eigen::Vector3d a = std::abs(n.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+  *t = n.cross(a).normalized();
+  *b = n.cross(*t);
+}
+
+// Stratified sample k of n on the unit square.
+Eigen::Vector2d Stratified(int k, int n, uint32_t seed, uint32_t salt) {
+  const int g = std::max(1, static_cast<int>(std::ceil(std::sqrt(static_cast<double>(n)))));
+  const int i = k % g, j = k / g;
+  return {(i + Hash01(seed, salt * 2654435761u + 2 * k)) / g, (j + Hash01(seed, salt * 2654435761u + 2 * k + 1)) / g};
+}
+
+// Camera image area-averaged to about the map's angular resolution, with the share of clipped pixels.
+struct Downsampled {
+  int factor = 1;
+  ImageF linear;     // 3 channels
+  ImageF saturated;  // 1 channel, share of source pixels with any channel >= saturated_level
+};
+
+Downsampled Downsample(const ImageU8& img, int factor, int saturated_level) {
+  Downsampled d;
+  d.factor = factor;
+  const int w = img.width() / factor, h = img.height() / factor;
+  d.linear = ImageF(w, h, 3, 0.0f);
+  d.saturated = ImageF(w, h, 1, 0.0f);
+  const float inv = 1.0f / (factor * factor);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      float acc[3] = {0, 0, 0};
+      float sat = 0;
+      for (int j = 0; j < factor; ++j)
+        for (int i = 0; i < factor; ++i) {
+          const uint8_t* p = img.pixel(x * factor + i, y * factor + j);
+          bool s = false;
+          for (int c = 0; c < 3; ++c) {
+            acc[c] += SrgbToLinear(p[c] / 255.0f);
+            s = s || p[c] >= saturated_level;
+          }
+          sat += s ? 1.0f : 0.0f;
+        }
+      for (int c = 0; c < 3; ++c) d.linear.at(x, y, c) = acc[c] * inv;
+      d.saturated.at(x, y) = sat * inv;
+    }
+  return d;
+}
+
+// One camera projected on the map: linear colour, blend weight (0 = not seen), clipped share.
+struct Layer {
+  ImageF color, weight, saturated;
+};
+
+Layer ProjectCamera(const CameraSensor& cam, const Downsampled& d, int W, int H) {
+  Layer l{ImageF(W, H, 3, 0.0f), ImageF(W, H, 1, 0.0f), ImageF(W, H, 1, 0.0f)};
+  const Eigen::Matrix3d R_cam_ego = cam.T_ego_cam.rotation.conjugate().toRotationMatrix();
+  const PinholeCamera& K = cam.intrinsics;
+  const bool distorted = !K.distortion.IsZero();
+  for (int v = 0; v < H; ++v)
+    for (int u = 0; u < W; ++u) {
+      const Eigen::Vector3d dc = R_cam_ego * LatLongDirection(u + 0.5, v + 0.5, W, H);
+      if (dc.z() < 0.05) continue;
+      const auto uv = K.Project(dc, 1e-6);
+      if (!uv || !K.InImage(*uv)) continue;
+      // Strong distortion folds far off-axis rays back into the image: keep only rays that round-trip.
+      if (distorted && K.RayDirection(*uv).dot(dc.normalized()) < 0.9995) continue;
+      const double xn = 2.0 * uv->x() / K.width - 1.0, yn = 2.0 * uv->y() / K.height - 1.0;
+      const double w = (1 - xn * xn) * (1 - yn * yn);
+      if (w <= 0) continue;
+      float rgb[3], s;
+      SampleBilinear(d.linear, uv->x() / d.factor, uv->y() / d.factor, rgb);
+      SampleBilinear(d.saturated, uv->x() / d.factor, uv->y() / d.factor, &s);
+      for (int c = 0; c < 3; ++c) l.color.at(u, v, c) = rgb[c];
+      l.weight.at(u, v) = static_cast<float>(w);
+      l.saturated.at(u, v) = s;
+    }
+  return l;
+}
+
+struct PairStats {
+  int i, j;
+  std::vector<std::array<double, 3>> log_ratio;  // log I_j - log I_i per channel
+  std::vector<std::array<float, 6>> values;      // rgb_i, rgb_j for the seam error
+};
+
+// Seam error: median relative luminance difference over all overlap pixels.
+double SeamError(const std::vector<PairStats>& pairs, const std::vector<Eigen::Vector3f>& gains) {
+  std::vector<double> e;
+  for (const auto& p : pairs)
+    for (const auto& v : p.values) {
+      const Eigen::Vector3f a = Eigen::Vector3f(v[0], v[1], v[2]).cwiseProduct(gains[p.i]);
+      const Eigen::Vector3f b = Eigen::Vector3f(v[3], v[4], v[5]).cwiseProduct(gains[p.j]);
+      const double ya = Luma(a), yb = Luma(b);
+      e.push_back(std::abs(ya - yb) / (0.5 * (ya + yb)));
+    }
+  return Median(e);
+}
+
+// CIE general sky (ISO 15469) gradation and indicatrix functions.
+double CieGradation(double cos_z, double a, double b) { return cos_z <= 1e-6 ? 1.0 : 1.0 + a * std::exp(b / cos_z); }
+double CieIndicatrix(double chi, double c, double d, double e) {
+  const double cc = std::cos(chi);
+  return 1.0 + c * (std::exp(d * chi) - std::exp(d * M_PI / 2)) + e * cc * cc;
+}
+
+// Visible, unoccluded ground around one annotated box: luminance per cell (NaN = not usable).
+struct GroundPatch {
+  size_t annotation = 0;
+  std::string channel;
+  Box3 box;
+  double z = 0;               // ground height (box bottom)
+  Eigen::Vector2d origin;     // cell (0,0) corner
+  int n = 0;                  // n x n cells
+  double cell = 0.1;
+  std::vector<float> lum;
+};
+
+// Ray-box test: does the segment from `o` to `p` pass through the box (grown by margin)?
+bool SegmentHitsBox(const Eigen::Vector3d& o, const Eigen::Vector3d& p, const Box3& box, double margin) {
+  const Rigid3d inv = box.T_frame_box.Inverse();
+  const Eigen::Vector3d a = inv * o, b = inv * p, d = b - a;
+  const Eigen::Vector3d h = 0.5 * box.size.array() + margin;
+  double t0 = 0, t1 = 1;
+  for (int k = 0; k < 3; ++k) {
+    if (std::abs(d[k]) < 1e-12) {
+      if (std::abs(a[k]) > h[k]) return false;
+      continue;
+    }
+    double ta = (-h[k] - a[k]) / d[k], tb = (h[k] - a[k]) / d[k];
+    if (ta > tb) std::swap(ta, tb);
+    t0 = std::max(t0, ta);
+    t1 = std::min(t1, tb);
+    if (t0 > t1) return false;
+  }
+  return true;
+}
+
+std::vector<GroundPatch> SampleGroundPatches(const Frame& frame, const std::vector<ImageF>& linear, const ShadowCheckOptions& opt) {
+  std::vector<GroundPatch> patches;
+  for (size_t ai = 0; ai < frame.annotations.size(); ++ai) {
+    const Box3& box = frame.annotations[ai].box;
+    if (box.size.z() < opt.min_height_m || box.center().head<2>().norm() > opt.max_distance_m) continue;
+    // The camera that sees the box centre nearest its image centre.
+    int best = -1;
+    double best_r = 1e9;
+    for (size_t k = 0; k < frame.cameras.size() && k < linear.size(); ++k) {
+      const auto& cam = frame.cameras[k];
+      const auto uv = cam.intrinsics.Project(cam.T_ego_cam.Inverse() * box.center(), 0.5);
+      if (!uv || !cam.intrinsics.InImage(*uv)) continue;
+      const double r = std::hypot(uv->x() / cam.intrinsics.width - 0.5, uv->y() / cam.intrinsics.height - 0.5);
+      if (r < best_r) best_r = r, best = static_cast<int>(k);
+    }
+    if (best < 0) continue;
+    const auto& cam = frame.cameras[best];
+    const Rigid3d T_cam_ego = cam.T_ego_cam.Inverse();
+    GroundPatch g;
+    g.annotation = ai;
+    g.channel = cam.channel;
+    g.box = box;
+    g.z = box.center().z() - 0.5 * box.size.z();
+    g.cell = opt.cell_m;
+    // Shadows of sun elevations >= 20 deg reach at most h / tan(20 deg) from the footprint.
+    const double reach = 0.5 * box.size.head<2>().norm() + std::min(6.0, box.size.z() / std::tan(20 * kDeg)) + 0.2;
+    g.n = static_cast<int>(std::ceil(2 * reach / g.cell));
+    g.origin = box.center().head<2>() - Eigen::Vector2d::Constant(reach);
+    g.lum.assign(static_cast<size_t>(g.n) * g.n, std::numeric_limits<float>::quiet_NaN());
+    const Eigen::Vector3d cam_o = cam.T_ego_cam.translation;
+    for (int j = 0; j < g.n; ++j)
+      for (int i = 0; i < g.n; ++i) {
+        const Eigen::Vector3d p(g.origin.x() + (i + 0.5) * g.cell, g.origin.y() + (j + 0.5) * g.cell, g.z);
+        bool blocked = false;
+        for (const auto& a : frame.annotations)
+          if (a.box.Contains(p + Eigen::Vector3d(0, 0, 0.05), &a == &frame.annotations[ai] ? opt.footprint_margin_m : 0.05)) {
+            blocked = true;
+            break;
+          }
+        if (blocked) continue;
+        const auto uv = cam.intrinsics.Project(T_cam_ego * p, 0.5);
+        if (!uv || !cam.intrinsics.InImage(*uv)) continue;
+        for (const auto& a : frame.annotations)
+          if (SegmentHitsBox(cam_o, p + Eigen::Vector3d(0, 0, 0.02), a.box, 0.05)) {
+            blocked = true;
+            break;
+          }
+        if (blocked) continue;
+        float rgb[3];
+        SampleBilinear(linear[best], uv->x(), uv->y(), rgb);
+        g.lum[static_cast<size_t>(j) * g.n + i] = Luma(rgb);
+      }
+    patches.push_back(std::move(g));
+  }
+  return patches;
+}
+
+bool InConvex(const std::vector<Eigen::Vector2d>& poly, const Eigen::Vector2d& p) {
+  const size_t n = poly.size();
+  if (n < 3) return false;
+  for (size_t i = 0; i < n; ++i) {
+    const Eigen::Vector2d e = poly[(i + 1) % n] - poly[i], q = p - poly[i];
+    if (e.x() * q.y() - e.y() * q.x() < 0) return false;
+  }
+  return true;
+}
+
+ShadowCheck Judge(const std::vector<GroundPatch>& patches, const Eigen::Vector3d& sun, const ShadowCheckOptions& opt) {
+  ShadowCheck out;
+  double sum_log = 0;
+  int agree = 0;
+  for (const auto& g : patches) {
+    const auto hull = ShadowHull(g.box, sun, false), mirror = ShadowHull(g.box, sun, true);
+    double s_sum = 0, m_sum = 0;
+    int s_n = 0, m_n = 0;
+    for (int j = 0; j < g.n; ++j)
+      for (int i = 0; i < g.n; ++i) {
+        const float y = g.lum[static_cast<size_t>(j) * g.n + i];
+        if (std::isnan(y)) continue;
+        const Eigen::Vector2d p(g.origin.x() + (i + 0.5) * g.cell, g.origin.y() + (j + 0.5) * g.cell);
+        const bool in_s = InConvex(hull, p), in_m = InConvex(mirror, p);
+        if (in_s == in_m) continue;  // the footprint (in both) or neither
+        if (in_s) s_sum += y, ++s_n;
+        else m_sum += y, ++m_n;
+      }
+    if (s_n < opt.min_cells || m_n < opt.min_cells) continue;
+    ShadowCheckBox b;
+    b.annotation = g.annotation;
+    b.channel = g.channel;
+    b.shadow_luminance = s_sum / s_n;
+    b.mirrored_luminance = m_sum / m_n;
+    if (b.shadow_luminance <= 0 || b.mirrored_luminance <= 0) continue;
+    sum_log += std::clamp(std::log(b.Ratio()), -1.0, 1.0);  // one odd object (a dark kerb, a black car) must not decide alone
+    agree += b.Ratio() > 1.0 ? 1 : 0;
+    out.boxes.push_back(b);
+  }
+  if (!out.boxes.empty()) {
+    out.agreement = static_cast<double>(agree) / out.boxes.size();
+    out.mean_log_ratio = sum_log / out.boxes.size();
+  }
+  return out;
+}
+
+// Connected components of fully saturated pixels above the horizon; a sun candidate is small and round.
+struct Blob {
+  double area_sr = 0;
+  Eigen::Vector3d dir = Eigen::Vector3d::Zero();
+  double fill = 0;
+  double halo = 0;  // mean 8-bit luma in the ring 1.5-3 equivalent radii around the blob
+};
+
+std::vector<Blob> SaturatedBlobs(const CameraSensor& cam, const ImageU8& img, int level) {
+  const int W = img.width(), H = img.height();
+  std::vector<int> label(static_cast<size_t>(W) * H, -1);
+  auto sat = [&](int x, int y) {
+    const uint8_t* p = img.pixel(x, y);
+    return p[0] >= level && p[1] >= level && p[2] >= level;
+  };
+  const double px_sr = 1.0 / (cam.intrinsics.fx * cam.intrinsics.fy);
+  std::vector<Blob> blobs;
+  std::vector<int> stack;
+  for (int y0 = 0; y0 < H; ++y0)
+    for (int x0 = 0; x0 < W; ++x0) {
+      if (label[static_cast<size_t>(y0) * W + x0] >= 0 || !sat(x0, y0)) continue;
+      const int id = static_cast<int>(blobs.size());
+      Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+      Eigen::Vector2d pix_sum = Eigen::Vector2d::Zero();
+      double area = 0, pix_count = 0;
+      bool touches_border = false;
+      std::vector<Eigen::Vector3d> dirs;
+      stack.assign(1, y0 * W + x0);
+      label[static_cast<size_t>(y0) * W + x0] = id;
+      while (!stack.empty()) {
+        const int q = stack.back();
+        stack.pop_back();
+        const int x = q % W, y = q / W;
+        const Eigen::Vector3d d = cam.T_ego_cam.rotation * cam.intrinsics.RayDirection({x + 0.5, y + 0.5});
+        sum += d;
+        pix_sum += Eigen::Vector2d(x + 0.5, y + 0.5);
+        pix_count += 1;
+        area += px_sr * std::pow(d.dot(cam.T_ego_cam.rotation * Eigen::Vector3d::UnitZ()), 3);
+        if (dirs.size() < 200000) dirs.push_back(d);
+        if (x == 0 || y == 0 || x == W - 1 || y == H - 1) touches_border = true;
+        const int nb[4][2] = {{1, 0}, {-1, 0}, {0, 1}, {0, -1}};
+        for (const auto& o : nb) {
+          const int nx = x + o[0], ny = y + o[1];
+          if (nx < 0 || ny < 0 || nx >= W || ny >= H) continue;
+          int& l = label[static_cast<size_t>(ny) * W + nx];
+          if (l < 0 && sat(nx, ny)) {
+            l = id;
+            stack.push_back(ny * W + nx);
+          }
+        }
+      }
+      Blob b;
+      b.area_sr = area;
+      b.dir = sum.normalized();
+      double r_max = 0;
+      for (const auto& d : dirs) r_max = std::max(r_max, std::acos(std::clamp(d.dot(b.dir), -1.0, 1.0)));
+      b.fill = r_max > 0 ? area / (M_PI * r_max * r_max) : 1.0;
+      if (touches_border) b.fill = 0;  // cut by the frame: shape unknown, and a clipped sky reaches the border
+      // A clipped sun sits in its own glare on a bright sky; a white sign or a lamp sits on anything.
+      const Eigen::Vector2d c = pix_sum / pix_count;
+      const double r_px = std::sqrt(pix_count / M_PI);
+      double ring = 0, ring_n = 0;
+      const int R = static_cast<int>(std::ceil(3 * r_px)) + 1;
+      for (int y = std::max(0, static_cast<int>(c.y()) - R); y < std::min(H, static_cast<int>(c.y()) + R); ++y)
+        for (int x = std::max(0, static_cast<int>(c.x()) - R); x < std::min(W, static_cast<int>(c.x()) + R); ++x) {
+          const double r = std::hypot(x + 0.5 - c.x(), y + 0.5 - c.y());
+          if (r < 1.5 * r_px || r > 3 * r_px) continue;
+          const uint8_t* p = img.pixel(x, y);
+          ring += 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
+          ring_n += 1;
+        }
+      b.halo = ring_n > 0 ? ring / ring_n : 0;
+      blobs.push_back(b);
+    }
+  return blobs;
+}
+
+}  // namespace
+
+Eigen::Vector3d LatLongDirection(double u, double v, int width, int height) {
+  const double phi = M_PI - 2 * M_PI * u / width, el = M_PI / 2 - M_PI * v / height;
+  return {std::cos(el) * std::cos(phi), std::cos(el) * std::sin(phi), std::sin(el)};
+}
+
+Eigen::Vector2d LatLongPixel(const Eigen::Vector3d& d, int width, int height) {
+  const Eigen::Vector3d n = d.normalized();
+  const double phi = std::atan2(n.y(), n.x()), el = std::asin(std::clamp(n.z(), -1.0, 1.0));
+  double u = (M_PI - phi) / (2 * M_PI) * width;
+  if (u >= width) u -= width;
+  return {u, (M_PI / 2 - el) / M_PI * height};
+}
+
+double CieClearSky(const Eigen::Vector3d& dir, const Eigen::Vector3d& sun) {
+  // Type 12, "CIE standard clear sky, low luminance turbidity": a=-1, b=-0.32, c=10, d=-3, e=0.45.
+  const double cz = std::max(0.0, dir.z()), cs = std::clamp(sun.z(), 0.0, 1.0);
+  const double chi = std::acos(std::clamp(dir.dot(sun), -1.0, 1.0));
+  const double zs = std::acos(cs);
+  return CieIndicatrix(chi, 10, -3, 0.45) * CieGradation(cz, -1, -0.32) /
+         (CieIndicatrix(zs, 10, -3, 0.45) * CieGradation(1.0, -1, -0.32));
+}
+
+double CieOvercastSky(const Eigen::Vector3d& dir) {
+  // Type 1, "CIE standard overcast sky": a=4, b=-0.7, indicatrix 1.
+  return CieGradation(std::max(0.0, dir.z()), 4, -0.7) / CieGradation(1.0, 4, -0.7);
+}
+
+Eigen::Vector3f SkyModel::Radiance(const Eigen::Vector3d& dir) const {
+  if (dir.z() <= 0) return Eigen::Vector3f::Zero();
+  return clear * static_cast<float>(CieClearSky(dir, sun_direction)) + overcast * static_cast<float>(CieOvercastSky(dir));
+}
+
+Eigen::Vector3f EnvironmentMap::Lookup(const Eigen::Vector3d& dir) const {
+  const Eigen::Vector2d uv = LatLongPixel(dir, width(), height());
+  float rgb[3];
+  SampleBilinear(radiance, uv.x(), uv.y(), rgb);
+  return {rgb[0], rgb[1], rgb[2]};
+}
+
+Eigen::Vector3f EnvironmentMap::SkyIrradianceUp() const {
+  Eigen::Vector3d e = Eigen::Vector3d::Zero();
+  const int W = width(), H = height();
+  for (int v = 0; v < H / 2; ++v) {
+    const Eigen::Vector3d d = LatLongDirection(0.5, v + 0.5, W, H);
+    const double dw = (2 * M_PI / W) * (M_PI / H) * std::sqrt(std::max(0.0, 1 - d.z() * d.z()));
+    for (int u = 0; u < W; ++u)
+      for (int c = 0; c < 3; ++c) e[c] += radiance.at(u, v, c) * d.z() * dw;
+  }
+  return e.cast<float>();
+}
+
+std::optional<Eigen::Vector3d> DetectSunInImages(const Frame& frame, const std::vector<ImageU8>& images, int level,
+                                                 std::string* channel) {
+  std::optional<Eigen::Vector3d> best;
+  double best_area = 0;
+  for (size_t k = 0; k < frame.cameras.size() && k < images.size(); ++k) {
+    for (const Blob& b : SaturatedBlobs(frame.cameras[k], images[k], level)) {
+      // The sun disk is 0.5 deg; with glare a clipped sun covers ~0.5-6 deg across.
+      const double r_eq = std::sqrt(b.area_sr / M_PI) / kDeg;
+      if (b.dir.z() < std::sin(3 * kDeg) || r_eq < 0.15 || r_eq > 4.0 || b.fill < 0.7 || b.halo < 190) continue;
+      if (b.area_sr > best_area) {
+        best_area = b.area_sr;
+        best = b.dir;
+        if (channel) *channel = frame.cameras[k].channel;
+      }
+    }
+  }
+  return best;
+}
+
+EnvironmentMap BuildEnvironmentMap(const Frame& frame, const std::vector<ImageU8>& images, const EnvironmentOptions& options) {
+  SD_CHECK(images.size() == frame.cameras.size(), << images.size() << " images for " << frame.cameras.size() << " cameras");
+  SD_CHECK(options.width >= 16 && options.width % 2 == 0, << options.width);
+  const int W = options.width, H = W / 2;
+  const size_t nc = frame.cameras.size();
+  for (size_t k = 0; k < nc; ++k)
+    if (images[k].width() != frame.cameras[k].intrinsics.width || images[k].height() != frame.cameras[k].intrinsics.height ||
+        images[k].channels() < 3)
+      throw InputError(frame.cameras[k].image_path, Msg() << "image is " << images[k].width() << "x" << images[k].height() << "x"
+                                                          << images[k].channels() << " but the calibration says "
+                                                          << frame.cameras[k].intrinsics.width << "x"
+                                                          << frame.cameras[k].intrinsics.height << " RGB");
+
+  // Per-camera layers on the map.
+  std::vector<Layer> layers(nc);
+  std::vector<std::exception_ptr> errors(nc);
+  ParallelFor(0, nc, [&](size_t k) {
+    try {
+      const auto& cam = frame.cameras[k];
+      const int factor = std::max(1, static_cast<int>(std::lround(cam.intrinsics.fx * 2 * M_PI / W)));
+      layers[k] = ProjectCamera(cam, Downsample(images[k], factor, options.saturated_level), W, H);
+    } catch (...) {
+      errors[k] = std::current_exception();
+    }
+  });
+  for (auto& e : errors)
+    if (e) std::rethrow_exception(e);
+
+  // Overlaps -> relative gains.
+  std::vector<PairStats> pairs;
+  const float dark = 2e-3f;
+  for (size_t i = 0; i < nc; ++i)
+    for (size_t j = i + 1; j < nc; ++j) {
+      PairStats p{static_cast<int>(i), static_cast<int>(j), {}, {}};
+      for (int v = 0; v < H; ++v) {
+        const double el = M_PI / 2 - M_PI * (v + 0.5) / H;
+        if (el < options.min_overlap_elevation_deg * kDeg) break;
+        for (int u = 0; u < W; ++u) {
+          if (layers[i].weight.at(u, v) <= 0 || layers[j].weight.at(u, v) <= 0) continue;
+          if (layers[i].saturated.at(u, v) > 0 || layers[j].saturated.at(u, v) > 0) continue;
+          const float* a = layers[i].color.pixel(u, v);
+          const float* b = layers[j].color.pixel(u, v);
+          if (std::min({a[0], a[1], a[2], b[0], b[1], b[2]}) < dark) continue;
+          p.log_ratio.push_back({std::log(b[0] / a[0]), std::log(b[1] / a[1]), std::log(b[2] / a[2])});
+          p.values.push_back({a[0], a[1], a[2], b[0], b[1], b[2]});
+        }
+      }
+      if (p.values.size() >= 20) pairs.push_back(std::move(p));
+    }
+  size_t ref = 0;
+  for (size_t k = 0; k < nc; ++k)
+    if (frame.cameras[k].channel == options.reference_channel) ref = k;
+  std::vector<Eigen::Vector3f> gains(nc, Eigen::Vector3f::Ones());
+  if (options.estimate_gains && !pairs.empty()) {
+    for (int c = 0; c < 3; ++c) {
+      Eigen::MatrixXd A = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(nc), static_cast<Eigen::Index>(nc));
+      Eigen::VectorXd rhs = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(nc));
+      for (const auto& p : pairs) {
+        std::vector<double> r;
+        for (const auto& l : p.log_ratio) r.push_back(l[c]);
+        const double m = Median(r);
+        const double w = std::sqrt(static_cast<double>(p.log_ratio.size()));  // more overlap, more trust (sub-linear)
+        // x_i - x_j = m
+        A(p.i, p.i) += w, A(p.j, p.j) += w, A(p.i, p.j) -= w, A(p.j, p.i) -= w;
+        rhs(p.i) += w * m, rhs(p.j) -= w * m;
+      }
+      const double anchor = 1e6;
+      A(static_cast<Eigen::Index>(ref), static_cast<Eigen::Index>(ref)) += anchor;
+      // Cameras without any overlap keep gain 1 (a weak prior towards 0).
+      for (size_t k = 0; k < nc; ++k) A(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(k)) += 1e-3;
+      const Eigen::VectorXd x = A.ldlt().solve(rhs);
+      for (size_t k = 0; k < nc; ++k) gains[k][c] = static_cast<float>(std::exp(x(static_cast<Eigen::Index>(k))));
+    }
+  }
+
+  EnvironmentMap map;
+  map.seam_error_before = SeamError(pairs, std::vector<Eigen::Vector3f>(nc, Eigen::Vector3f::Ones()));
+  map.seam_error_after = SeamError(pairs, gains);
+  for (const auto& p : pairs) map.overlap_pixels += static_cast<int>(p.values.size());
+  for (size_t k = 0; k < nc; ++k) {
+    CameraGain g;
+    g.channel = frame.cameras[k].channel;
+    g.exposure = Luma(gains[k]);
+    g.white_balance = gains[k] / g.exposure;
+    map.gains.push_back(g);
+  }
+
+  // Blend.
+  map.radiance = ImageF(W, H, 3, 0.0f);
+  map.coverage = ImageF(W, H, 1, 0.0f);
+  for (int v = 0; v < H; ++v)
+    for (int u = 0; u < W; ++u) {
+      double acc[3] = {0, 0, 0}, wsum = 0;
+      for (size_t k = 0; k < nc; ++k) {
+        const float w = layers[k].weight.at(u, v);
+        if (w <= 0) continue;
+        for (int c = 0; c < 3; ++c) acc[c] += w * layers[k].color.at(u, v, c) * gains[k][c];
+        wsum += w;
+      }
+      map.coverage.at(u, v) = static_cast<float>(wsum);
+      if (wsum > 0)
+        for (int c = 0; c < 3; ++c) map.radiance.at(u, v, c) = static_cast<float>(acc[c] / wsum);
+    }
+
+  // Sun direction.
+  std::string sun_channel;
+  std::optional<Eigen::Vector3d> sun_img;
+  if (options.detect_sun_in_images) sun_img = DetectSunInImages(frame, images, options.saturated_level, &sun_channel);
+  if (sun_img) {
+    map.sun_direction = *sun_img;
+    map.sun_source = "image (" + sun_channel + ")";
+  } else {
+    map.sun_direction = options.ephemeris_sun_ego ? options.ephemeris_sun_ego->normalized() : Eigen::Vector3d::UnitZ();
+    map.sun_source = options.ephemeris_sun_ego ? "ephemeris" : "default (overhead)";
+  }
+  map.sun_angular_radius_rad = options.sun_angular_radius_deg * kDeg;
+
+  // Sky model fitted to the seen sky: bright, not greenish/brownish pixels above 3 deg.
+  std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3f>> sky_px;
+  {
+    std::vector<double> lum;
+    for (int v = 0; v < H / 2; ++v) {
+      const double el = M_PI / 2 - M_PI * (v + 0.5) / H;
+      if (el < 3 * kDeg) continue;
+      for (int u = 0; u < W; ++u)
+        if (map.coverage.at(u, v) > 0.05f) lum.push_back(Luma(map.radiance.pixel(u, v)));
+    }
+    std::sort(lum.begin(), lum.end());
+    const double bright = lum.empty() ? 0 : lum[static_cast<size_t>(0.95 * (lum.size() - 1))];
+    for (int v = 0; v < H / 2; ++v) {
+      const double el = M_PI / 2 - M_PI * (v + 0.5) / H;
+      if (el < 3 * kDeg) continue;
+      for (int u = 0; u < W; ++u) {
+        if (map.coverage.at(u, v) <= 0.05f) continue;
+        const float* p = map.radiance.pixel(u, v);
+        if (Luma(p) < 0.5 * bright || p[2] < 0.85f * p[0]) continue;
+        sky_px.push_back({LatLongDirection(u + 0.5, v + 0.5, W, H), Eigen::Vector3f(p[0], p[1], p[2])});
+      }
+    }
+  }
+  map.sky.sun_direction = map.sun_direction;
+  if (sky_px.size() >= 20) {
+    // Per channel: min |s f_clear + t f_overcast - L|^2 with s, t >= 0 (2 unknowns: try the free solution,
+    // then each one alone).
+    double aa = 0, ab = 0, bb = 0;
+    Eigen::Vector3d ay = Eigen::Vector3d::Zero(), by = Eigen::Vector3d::Zero();
+    for (const auto& [d, L] : sky_px) {
+      const double fa = CieClearSky(d, map.sun_direction), fb = CieOvercastSky(d);
+      aa += fa * fa, ab += fa * fb, bb += fb * fb;
+      ay += fa * L.cast<double>(), by += fb * L.cast<double>();
+    }
+    for (int c = 0; c < 3; ++c) {
+      const double det = aa * bb - ab * ab;
+      double s = det > 1e-12 ? (bb * ay[c] - ab * by[c]) / det : -1, t = det > 1e-12 ? (aa * by[c] - ab * ay[c]) / det : -1;
+      if (s < 0 || t < 0) {
+        const double s1 = std::max(0.0, ay[c] / aa), t1 = std::max(0.0, by[c] / bb);
+        // Residual comparison: |y|^2 - 2 s ay + s^2 aa (constant |y|^2 drops out).
+        if (-2 * s1 * ay[c] + s1 * s1 * aa <= -2 * t1 * by[c] + t1 * t1 * bb) s = s1, t = 0;
+        else s = 0, t = t1;
+      }
+      map.sky.clear[c] = static_cast<float>(s);
+      map.sky.overcast[c] = static_cast<float>(t);
+    }
+  } else {
+    SD_LOG(Debug, "environment: " << sky_px.size() << " sky pixels seen; sky model set from the brightest seen pixels");
+    map.sky.overcast = Eigen::Vector3f::Constant(0.5f);
+  }
+  // Ground fill: median of the seen road band (-25..-8 deg).
+  Eigen::Vector3f ground = Eigen::Vector3f::Constant(0.05f);
+  {
+    std::vector<double> ch[3];
+    for (int v = H / 2; v < H; ++v) {
+      const double el = M_PI / 2 - M_PI * (v + 0.5) / H;
+      if (el > -8 * kDeg || el < -25 * kDeg) continue;
+      for (int u = 0; u < W; ++u)
+        if (map.coverage.at(u, v) > 0.05f)
+          for (int c = 0; c < 3; ++c) ch[c].push_back(map.radiance.at(u, v, c));
+    }
+    if (!ch[0].empty())
+      for (int c = 0; c < 3; ++c) ground[c] = static_cast<float>(Median(ch[c]));
+  }
+  // Feathered fill: where camera weights are small the model takes over smoothly.
+  const float model_weight = 0.05f;
+  for (int v = 0; v < H; ++v)
+    for (int u = 0; u < W; ++u) {
+      const Eigen::Vector3d d = LatLongDirection(u + 0.5, v + 0.5, W, H);
+      const Eigen::Vector3f fill = d.z() > 0 ? map.sky.Radiance(d) : ground;
+      const float w = map.coverage.at(u, v);
+      for (int c = 0; c < 3; ++c) map.radiance.at(u, v, c) = (map.radiance.at(u, v, c) * w + fill[c] * model_weight) / (w + model_weight);
+    }
+
+  // Sun intensity from the road contrast at real shadows of annotated objects.
+  const Eigen::Vector3f E_sky = map.SkyIrradianceUp();
+  const double sin_el = std::max(0.1, map.sun_direction.z());
+  double contrast = 0;
+  if (!frame.annotations.empty()) {
+    std::vector<ImageF> linear(nc);
+    for (size_t k = 0; k < nc; ++k) {
+      linear[k] = ToLinear(images[k]);
+      float* p = linear[k].data();
+      const size_t n = linear[k].size() / linear[k].channels();
+      for (size_t q = 0; q < n; ++q)
+        for (int c = 0; c < 3; ++c) p[q * linear[k].channels() + c] *= gains[k][c];
+    }
+    const ShadowCheck check = CheckSunAgainstShadows(frame, linear, map.sun_direction);
+    std::vector<double> ratios;
+    for (const auto& b : check.boxes)
+      if (b.Ratio() > 1.0) ratios.push_back(b.Ratio());
+    // The median over agreeing objects; the shadow polygon also holds lit ground where the box is a poor
+    // outline of the object, so this under-estimates the contrast.
+    if (ratios.size() >= 3) contrast = Median(ratios);
+  }
+  const double k = options.shadow_sky_visibility;
+  double direct_over_sky;  // E_sun sin(el) / E_sky
+  if (contrast > 1.0 / k) {
+    direct_over_sky = k * contrast - 1;
+    map.sun_road_contrast = contrast;
+  } else {
+    direct_over_sky = options.default_direct_fraction / (1 - options.default_direct_fraction);
+  }
+  // The sun's colour is not measurable from a clipped or unseen disk; take it white in map units (the
+  // gains already carry the cameras' white balance) at the sky's luminance scale.
+  map.sun_irradiance = Eigen::Vector3f::Constant(static_cast<float>(direct_over_sky * Luma(E_sky) / sin_el));
+  return map;
+}
+
+std::vector<Eigen::Vector2d> ShadowHull(const Box3& box, const Eigen::Vector3d& sun, bool mirrored) {
+  const auto corners = box.Corners();
+  const double z0 = box.center().z() - 0.5 * box.size.z();
+  const Eigen::Vector3d s = sun.normalized();
+  const double sz = std::max(s.z(), 0.05);
+  std::vector<Eigen::Vector2d> pts;
+  for (int i = 0; i < 8; ++i) {
+    const Eigen::Vector3d& c = corners[i];
+    Eigen::Vector2d off = -s.head<2>() * ((c.z() - z0) / sz);  // along the light, down to the ground plane
+    if (mirrored) off = -off;
+    pts.push_back(c.head<2>() + off);
+  }
+  // Convex hull (Andrew's monotone chain), counter-clockwise.
+  std::sort(pts.begin(), pts.end(), [](const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+    return a.x() < b.x() || (a.x() == b.x() && a.y() < b.y());
+  });
+  auto cross = [](const Eigen::Vector2d& o, const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+    return (a.x() - o.x()) * (b.y() - o.y()) - (a.y() - o.y()) * (b.x() - o.x());
+  };
+  std::vector<Eigen::Vector2d> hull(2 * pts.size());
+  size_t k = 0;
+  for (size_t i = 0; i < pts.size(); ++i) {
+    while (k >= 2 && cross(hull[k - 2], hull[k - 1], pts[i]) <= 0) --k;
+    hull[k++] = pts[i];
+  }
+  for (size_t i = pts.size() - 1, t = k + 1; i-- > 0;) {
+    while (k >= t && cross(hull[k - 2], hull[k - 1], pts[i]) <= 0) --k;
+    hull[k++] = pts[i];
+  }
+  hull.resize(k - 1);
+  return hull;
+}
+
+ShadowCheck CheckSunAgainstShadows(const Frame& frame, const std::vector<ImageF>& linear, const Eigen::Vector3d& sun,
+                                   const ShadowCheckOptions& options) {
+  return Judge(SampleGroundPatches(frame, linear, options), sun, options);
+}
+
+std::optional<Eigen::Vector3d> EstimateSunFromShadows(const Frame& frame, const std::vector<ImageF>& linear,
+                                                      const ShadowCheckOptions& options, ShadowCheck* best,
+                                                      std::optional<double> elevation_deg) {
+  const auto patches = SampleGroundPatches(frame, linear, options);
+  std::vector<double> elevations;
+  if (elevation_deg) elevations.push_back(*elevation_deg);
+  else
+    for (int el = 20; el <= 80; el += 10) elevations.push_back(el);
+  std::vector<Eigen::Vector3d> dirs;
+  for (double el : elevations)
+    for (int az = 0; az < 360; az += 5)
+      dirs.emplace_back(std::cos(el * kDeg) * std::cos(az * kDeg), std::cos(el * kDeg) * std::sin(az * kDeg), std::sin(el * kDeg));
+  std::vector<ShadowCheck> checks(dirs.size());
+  ParallelFor(0, dirs.size(), [&](size_t i) { checks[i] = Judge(patches, dirs[i], options); });
+  std::optional<Eigen::Vector3d> out;
+  double score = -std::numeric_limits<double>::infinity();
+  for (size_t i = 0; i < dirs.size(); ++i) {
+    // Every direction must be judged on the same objects to compare; a direction that loses objects (too
+    // little visible ground) competes with fewer votes, so weight by how many it judged.
+    if (checks[i].boxes.empty()) continue;
+    const double s = checks[i].mean_log_ratio * std::sqrt(static_cast<double>(checks[i].boxes.size()));
+    if (s > score) {
+      score = s;
+      out = dirs[i];
+      if (best) *best = checks[i];
+    }
+  }
+  return out;
+}
+
+// ---- Spherical harmonics ----
+
+namespace {
+std::array<double, 9> ShBasis(const Eigen::Vector3d& d) {
+  const double x = d.x(), y = d.y(), z = d.z();
+  return {0.282095, 0.488603 * y, 0.488603 * z, 0.488603 * x, 1.092548 * x * y, 1.092548 * y * z,
+          0.315392 * (3 * z * z - 1), 1.092548 * x * z, 0.546274 * (x * x - y * y)};
+}
+}  // namespace
+
+ShIrradiance ProjectToSh(const ImageF& img) {
+  SD_CHECK(img.channels() >= 3 && img.width() == 2 * img.height(), << img.width() << "x" << img.height());
+  const int W = img.width(), H = img.height();
+  std::array<Eigen::Vector3d, 9> acc;
+  for (auto& a : acc) a.setZero();
+  for (int v = 0; v < H; ++v) {
+    const double el = M_PI / 2 - M_PI * (v + 0.5) / H;
+    const double dw = (2 * M_PI / W) * (M_PI / H) * std::cos(el);
+    for (int u = 0; u < W; ++u) {
+      const auto Y = ShBasis(LatLongDirection(u + 0.5, v + 0.5, W, H));
+      const Eigen::Vector3d L(img.at(u, v, 0), img.at(u, v, 1), img.at(u, v, 2));
+      for (int i = 0; i < 9; ++i) acc[i] += L * (Y[i] * dw);
+    }
+  }
+  ShIrradiance sh;
+  for (int i = 0; i < 9; ++i) sh.L[i] = acc[i].cast<float>();
+  return sh;
+}
+
+Eigen::Vector3f ShIrradiance::Irradiance(const Eigen::Vector3d& n) const {
+  // Convolution with the clamped cosine: A0 = pi, A1 = 2 pi / 3, A2 = pi / 4.
+  static const double A[9] = {M_PI, 2 * M_PI / 3, 2 * M_PI / 3, 2 * M_PI / 3, M_PI / 4, M_PI / 4, M_PI / 4, M_PI / 4, M_PI / 4};
+  const auto Y = ShBasis(n.normalized());
+  Eigen::Vector3d e = Eigen::Vector3d::Zero();
+  for (int i = 0; i < 9; ++i) e += L[i].cast<double>() * (A[i] * Y[i]);
+  return e.cwiseMax(0.0).cast<float>();
+}
+
+EnvironmentLight MakeEnvironmentLight(const EnvironmentMap& map) {
+  EnvironmentLight l;
+  l.sh = ProjectToSh(map.radiance);
+  l.radiance = &map.radiance;
+  l.sun_direction = map.sun_direction;
+  l.sun_irradiance = map.sun_irradiance;
+  l.sun_angular_radius_rad = map.sun_angular_radius_rad;
+  return l;
+}
+
+// ---- Ray-traced light at a point ----
+
+namespace {
+Eigen::Vector3f Offset(const Eigen::Vector3d& p, const Eigen::Vector3d& n, float off) {
+  return (p + n.normalized() * off).cast<float>();
+}
+Eigen::Vector3d SunRay(const EnvironmentLight& light, int k, int n, uint32_t seed) {
+  const Eigen::Vector3d s = light.sun_direction.normalized();
+  Eigen::Vector3d t, b;
+  Basis(s, &t, &b);
+  const Eigen::Vector2d r = Stratified(k, n, seed, 17);
+  const double rad = std::tan(light.sun_angular_radius_rad) * std::sqrt(r.x()), phi = 2 * M_PI * r.y();  // uniform on the disk
+  return (s + rad * (std::cos(phi) * t + std::sin(phi) * b)).normalized();
+}
+Eigen::Vector3d CosineRay(const Eigen::Vector3d& n, int k, int count, uint32_t seed) {
+  Eigen::Vector3d t, b;
+  Basis(n.normalized(), &t, &b);
+  const Eigen::Vector2d r = Stratified(k, count, seed, 29);
+  const double rr = std::sqrt(r.x()), phi = 2 * M_PI * r.y();
+  return (rr * std::cos(phi) * t + rr * std::sin(phi) * b + std::sqrt(std::max(0.0, 1 - r.x())) * n.normalized()).normalized();
+}
+}  // namespace
+
+double SunVisibility(const RayScene& scene, const Eigen::Vector3d& p, const Eigen::Vector3d& normal, const EnvironmentLight& light,
+                     const EnvShadingOptions& o) {
+  const int n = std::max(1, o.sun_rays);
+  const Eigen::Vector3f origin = Offset(p, normal, o.ray_offset);
+  int visible = 0;
+  for (int k = 0; k < n; ++k) {
+    const Eigen::Vector3f d = SunRay(light, k, n, o.seed).cast<float>();
+    if (!scene.Occluded(origin, d, 0.0f, std::numeric_limits<float>::infinity(), o.skip_mesh)) ++visible;
+  }
+  return static_cast<double>(visible) / n;
+}
+
+double AmbientOcclusion(const RayScene& scene, const Eigen::Vector3d& p, const Eigen::Vector3d& normal, const EnvShadingOptions& o) {
+  const int n = std::max(1, o.sky_rays);
+  const Eigen::Vector3f origin = Offset(p, normal, o.ray_offset);
+  int open = 0;
+  for (int k = 0; k < n; ++k) {
+    const Eigen::Vector3d d = CosineRay(normal, k, n, o.seed);
+    if (d.z() <= 0) continue;
+    if (!scene.Occluded(origin, d.cast<float>(), 0.0f, std::numeric_limits<float>::infinity(), o.skip_mesh)) ++open;
+  }
+  return static_cast<double>(open) / n;
+}
+
+Eigen::Vector3f ObjectIrradiance(const RayScene& scene, const Eigen::Vector3d& p, const Eigen::Vector3d& normal,
+                                 const EnvironmentLight& light, const EnvShadingOptions& o) {
+  const double cos_sun = normal.normalized().dot(light.sun_direction.normalized());
+  Eigen::Vector3f e = light.sh.Irradiance(normal) * static_cast<float>(AmbientOcclusion(scene, p, normal, o));
+  if (cos_sun > 0) e += light.sun_irradiance * static_cast<float>(cos_sun * SunVisibility(scene, p, normal, light, o));
+  return e;
+}
+
+float ReceiverShadowRatio(const RayScene& scene, const Eigen::Vector3d& p, const Eigen::Vector3d& normal,
+                          const EnvironmentLight& light, const EnvShadingOptions& o) {
+  const Eigen::Vector3d n = normal.normalized();
+  const Eigen::Vector3f origin = Offset(p, n, o.ray_offset);
+  // Sky: cosine-weighted directions, each weighted by the map's luminance there (the same directions for
+  // numerator and denominator so that their noise cancels).
+  double sky_all = 0, sky_open = 0;
+  const int ns = std::max(1, o.sky_rays);
+  for (int k = 0; k < ns; ++k) {
+    const Eigen::Vector3d d = CosineRay(n, k, ns, o.seed);
+    if (d.z() <= 0) continue;
+    double L = 1.0;
+    if (light.radiance && !light.radiance->empty()) {
+      const Eigen::Vector2d uv = LatLongPixel(d, light.radiance->width(), light.radiance->height());
+      float rgb[3];
+      SampleBilinear(*light.radiance, uv.x(), uv.y(), rgb);
+      L = Luma(rgb);
+    }
+    sky_all += L;
+    if (!scene.Occluded(origin, d.cast<float>(), 0.0f, std::numeric_limits<float>::infinity(), o.skip_mesh)) sky_open += L;
+  }
+  // Monte Carlo estimate of the sky irradiance: pi * mean(L) over cosine-weighted directions; the SH value
+  // is the better-converged unoccluded total, scaled by the sampled open share.
+  const double E_sky = Luma(light.sh.Irradiance(n));
+  const double open_share = sky_all > 0 ? sky_open / sky_all : 1.0;
+  const double cos_sun = n.dot(light.sun_direction.normalized());
+  const double E_sun = cos_sun > 0 ? Luma(light.sun_irradiance) * cos_sun : 0.0;
+  const double without = E_sky + E_sun;
+  if (without <= 0) return 1.0f;
+  const double with = E_sky * open_share + (E_sun > 0 ? E_sun * SunVisibility(scene, p, n, light, o) : 0.0);
+  return static_cast<float>(std::clamp(with / without, 0.0, 1.0));
+}
+
+ImageF ReceiverShadowImage(const RayScene& scene, const PinholeCamera& camera, const Rigid3d& T_scene_cam, int receiver_mesh,
+                           const EnvironmentLight& light, const EnvShadingOptions& options, int x0, int y0, int x1, int y1) {
+  ImageF out(camera.width, camera.height, 1, 1.0f);
+  if (x1 <= x0 || y1 <= y0) x0 = 0, y0 = 0, x1 = camera.width, y1 = camera.height;
+  x0 = std::max(0, x0), y0 = std::max(0, y0), x1 = std::min(camera.width, x1), y1 = std::min(camera.height, y1);
+  if (x1 <= x0 || y1 <= y0) return out;
+  const Eigen::Vector3f origin = T_scene_cam.translation.cast<float>();
+  std::vector<std::exception_ptr> errors(static_cast<size_t>(y1 - y0));
+  ParallelFor(static_cast<size_t>(y0), static_cast<size_t>(y1), [&](size_t yy) {
+    const int y = static_cast<int>(yy);
+    try {
+      for (int x = x0; x < x1; ++x) {
+        const Eigen::Vector3d d = T_scene_cam.rotation * camera.RayDirection({x + 0.5, y + 0.5});
+        const RayHit hit = scene.Intersect(origin, d.cast<float>());
+        if (!hit.Hit() || hit.mesh != receiver_mesh) continue;
+        Eigen::Vector3d n = scene.GeometricNormal(hit).cast<double>();
+        if (n.squaredNorm() == 0) continue;
+        if (n.dot(d) > 0) n = -n;  // the side the camera sees
+        EnvShadingOptions o = options;
+        o.skip_mesh = receiver_mesh;
+        o.seed = options.seed * 0x9E3779B1u + static_cast<uint32_t>(y * camera.width + x);
+        out.at(x, y) = ReceiverShadowRatio(scene, scene.HitPoint(hit).cast<double>(), n, light, o);
+      }
+    } catch (...) {
+      errors[yy - static_cast<size_t>(y0)] = std::current_exception();
+    }
+  });
+  for (auto& e : errors)
+    if (e) std::rethrow_exception(e);
+  return out;
+}
+
+Lighting RendererLighting(const EnvironmentMap& map, size_t k) {
+  SD_CHECK(k < map.gains.size(), << k << " of " << map.gains.size());
+  const Eigen::Vector3f g = map.gains[k].Gain();
+  const ShIrradiance sh = ProjectToSh(map.radiance);
+  Lighting l;
+  l.sun_direction = map.sun_direction.cast<float>().normalized();
+  l.sun_irradiance = map.sun_irradiance.cwiseQuotient(g);
+  l.sky_radiance = (sh.Irradiance(Eigen::Vector3d::UnitZ()) / static_cast<float>(M_PI)).cwiseQuotient(g);
+  return l;
+}
+
+}  // namespace sd

@@ -3,11 +3,18 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/error.h"
+
 namespace sd {
 
 std::vector<LidarReturn> CastLidarRays(const RayScene& scene, const Eigen::Vector3f& origin,
                                        const std::vector<Eigen::Vector3f>& dirs, float max_range) {
-  const std::vector<Eigen::Vector3f> origins(dirs.size(), origin);
+  return CastLidarRays(scene, std::vector<Eigen::Vector3f>(dirs.size(), origin), dirs, max_range);
+}
+
+std::vector<LidarReturn> CastLidarRays(const RayScene& scene, const std::vector<Eigen::Vector3f>& origins,
+                                       const std::vector<Eigen::Vector3f>& dirs, float max_range) {
+  SD_CHECK(origins.size() == dirs.size(), << origins.size() << " origins for " << dirs.size() << " directions");
   const std::vector<RayHit> hits = scene.IntersectMany(origins, dirs);
   std::vector<LidarReturn> out(dirs.size());
   for (size_t i = 0; i < dirs.size(); ++i) {

@@ -24,5 +24,8 @@ struct LidarReturn {
 // Hits farther than `max_range` are misses. Parallel; deterministic.
 std::vector<LidarReturn> CastLidarRays(const RayScene& scene, const Eigen::Vector3f& origin,
                                        const std::vector<Eigen::Vector3f>& dirs, float max_range);
+// The same with one origin per ray (a spinning sensor on a moving vehicle fires each beam from another place).
+std::vector<LidarReturn> CastLidarRays(const RayScene& scene, const std::vector<Eigen::Vector3f>& origins,
+                                       const std::vector<Eigen::Vector3f>& dirs, float max_range);
 
 }  // namespace sd

@@ -137,7 +137,7 @@ struct RayReturn {
   Eigen::Vector3f origin = Eigen::Vector3f::Zero(), dir = Eigen::Vector3f::Zero();  // reference LiDAR frame
 };
 
-// As CastLidarRays, with one origin per ray.
+// The rays from their own origins (render/lidar_cast.h), each return kept with its origin and direction.
 std::vector<RayReturn> CastRays(const RayScene& scene, const std::vector<Ray>& rays, float max_range) {
   std::vector<Eigen::Vector3f> origins(rays.size()), dirs(rays.size());
   for (size_t i = 0; i < rays.size(); ++i) {
@@ -150,25 +150,9 @@ std::vector<RayReturn> CastRays(const RayScene& scene, const std::vector<Ray>& r
                                     : Eigen::Vector3f((rays[i].T_ref_sensor.rotation.cast<float>() * rays[i].dir_sensor).normalized());
     }
   }
-  const std::vector<RayHit> hits = scene.IntersectMany(origins, dirs);
+  std::vector<LidarReturn> returns = CastLidarRays(scene, origins, dirs, max_range);
   std::vector<RayReturn> out(rays.size());
-  for (size_t i = 0; i < rays.size(); ++i) {
-    out[i].origin = origins[i];
-    out[i].dir = dirs[i];
-    const RayHit& h = hits[i];
-    if (!h.Hit() || !(h.t <= max_range)) continue;
-    LidarReturn& r = out[i].ret;
-    r.hit = true;
-    r.range = h.t;
-    r.mesh = h.mesh;
-    r.face = h.face;
-    r.point = scene.HitPoint(h);
-    Eigen::Vector3f n = scene.GeometricNormal(h);
-    const float c = n.dot(dirs[i]);
-    if (c > 0) n = -n;
-    r.normal = n;
-    r.cos_incidence = std::min(1.0f, std::abs(c));
-  }
+  for (size_t i = 0; i < rays.size(); ++i) out[i] = {returns[i], origins[i], dirs[i]};
   return out;
 }
 

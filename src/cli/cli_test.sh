@@ -74,6 +74,14 @@ if synth --log "$INFO" --asset "$T/cone" --scenario "$T/one_cone.json" --out "$T
     --out "$T/again" && ok || bad "derivative dataset does not read back"
   n=$(grep -o '"num_lidar_pts"' "$T/again/mmdet3d_info/n015-2018-07-24-11-22-45+0800.json" | wc -l)
   [ "$n" -eq 71 ] && ok || bad "expected 69 + 1 + 1 boxes after two runs, found $n"
+  # LiDAR realism is the default: synth.json names the model fitted from the frame's sweep. --no-lidar-realism
+  # is the ideal sensor: "off", the same images, another sweep.
+  synth --log "$INFO" --asset "$T/cone" --scenario "$T/one_cone.json" --out "$T/ideal" --no-lidar-realism \
+    && grep -Eq '"lidar_model": ?"off"' "$T/ideal/synth.json" \
+    && grep -Eq '"lidar_model": ?"32 lasers \(ring feature\)' "$T/good/synth.json" \
+    && diff -r --exclude=LIDAR_TOP "$T/good/samples" "$T/ideal/samples" >/dev/null \
+    && ! diff -r "$T/good/samples/LIDAR_TOP" "$T/ideal/samples/LIDAR_TOP" >/dev/null \
+    && ok || bad "synth --no-lidar-realism"
 else
   bad "good run failed"
 fi
@@ -210,7 +218,7 @@ expect_error "synth: unsatisfiable arrangement" "long_closure.json: impossible s
 printf '{"arrangements": [{"type": "ego_lane_object", "category": "debris", "distance_m": [10, 30]}]}\n' > "$T/debris.json"
 expect_error "synth: arrangement without an asset of its category" "debris.json: arrangements.0. places a debris" "$T/wf2" -- synth --log "$INFO" --asset "$T/cone" --scenario "$T/debris.json" --out "$T/wf2"
 printf '{"world_fixed": "yes", "objects": [{"category": "traffic_cone"}]}\n' > "$T/wf_bad.json"
-expect_error "synth: world_fixed not a boolean" "wf_bad.json: .world_fixed: expected true or false" "$T/wf3" -- synth --log "$INFO" --asset "$T/cone" --scenario "$T/wf_bad.json" --out "$T/wf3"
+expect_error "synth: world_fixed not a boolean" "wf_bad.json: .world_fixed: expected true/false" "$T/wf3" -- synth --log "$INFO" --asset "$T/cone" --scenario "$T/wf_bad.json" --out "$T/wf3"
 
 # Bank: catalogue a folder of asset folders, reruns are no-ops, queries, verify finds changed files, one-line errors.
 BANK=$T/bank.sqlite

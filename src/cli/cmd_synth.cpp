@@ -18,6 +18,7 @@ Runner AddSynthCommand(CLI::App& app) {
   auto shard = std::make_shared<std::string>();
   auto merge = std::make_shared<bool>(false);
   auto dry_run = std::make_shared<bool>(false);
+  auto no_lidar_realism = std::make_shared<bool>(false);
   app.add_option("--log", req->log, "Driving log: a dataset root (nuScenes tables, KITTI) or an info file (mmdet3d .json)")
       ->required();
   app.add_option("--asset", req->assets,
@@ -44,8 +45,12 @@ Runner AddSynthCommand(CLI::App& app) {
                "Plan only: place the scenario's objects once for the selected frames (world-fixed, "
                "docs/sequence_placement.md), write <out>/plan.json and plan.html, render nothing; needs no sensor files");
   app.add_flag("--coco", req->options.coco, "Also write coco_2d.json (COCO 2D boxes of the edited frames) into <out>");
+  app.add_flag("--no-lidar-realism", *no_lidar_realism,
+               "Insert into the LiDAR sweep with the ideal sensor (no model fitted from the sweep: no range noise, "
+               "dropout, fitted intensity or rolling shutter; docs/lidar.md): the output synth wrote before realism");
   return [=]() {
     SynthRequest r = *req;
+    r.options.lidar_realism = !*no_lidar_realism;
     if (*format == "kitti") r.log_options.format = LogFormat::kKitti;
     else if (*format == "nuscenes") r.log_options.format = LogFormat::kNuScenesTables;
     else if (*format == "mmdet3d") r.log_options.format.reset();  // v1 vs v0 is probed from the file

@@ -201,6 +201,37 @@ TEST_F(SynthBatchTest, PartsOfAnotherScenarioAreRefused) {
   EXPECT_NE(err.find("samples_per_pixel is 1, this run's is 2"), std::string::npos) << err;
 }
 
+// Realism is the default: each frame's model, fitted from its own HDL-64E sweep (KITTI: record-order lasers,
+// clockwise forced), is named in synth.json; KITTI object frames have no neighbours, so no ego motion. Parts of
+// the ideal sensor (--no-lidar-realism) are of another request.
+TEST_F(SynthBatchTest, SynthJsonNamesEachFramesLidarModel) {
+  const nlohmann::json j = ReadJsonFile(Dir() / "local" / "synth.json");
+  ASSERT_EQ(j["frames"].size(), 3u);
+  for (const auto& f : j["frames"]) {
+    const std::string m = f["lidar_model"].get<std::string>();
+    EXPECT_EQ(m.find("64 lasers (inferred)"), 0u) << m;
+    EXPECT_NE(m.find(" Hz cw;"), std::string::npos) << m;
+    EXPECT_EQ(f["lidar_ego_motion"], false);
+  }
+  SynthRequest r = KittiRequest(Dir(), Dir() / "ideal");
+  fs::copy(SynthPartsDir(Dir() / "sharded"), SynthPartsDir(r.out), fs::copy_options::recursive);
+  r.options.lidar_realism = false;
+  const std::string err = InputErrorOf([&] { MergeSynthParts(r); });
+  EXPECT_NE(err.find("lidar_realism is true, this run's is false"), std::string::npos) << err;
+  fs::remove_all(SynthPartsDir(r.out));
+  // The ideal sensor's run: "off", the same labels' boxes and images, another sweep.
+  r.options.frames = {"000001"};
+  RunSynth(r);
+  const nlohmann::json ji = ReadJsonFile(r.out / "synth.json");
+  ASSERT_EQ(ji["frames"].size(), 1u);
+  EXPECT_EQ(ji["frames"][0]["lidar_model"], "off");
+  EXPECT_EQ(ji["frames"][0]["objects"].size(), j["frames"][1]["objects"].size());
+  for (size_t k = 0; k < ji["frames"][0]["objects"].size(); ++k)
+    EXPECT_EQ(ji["frames"][0]["objects"][k]["center_ego_m"], j["frames"][1]["objects"][k]["center_ego_m"]);
+  EXPECT_EQ(ReadFileToString(r.out / "image_2" / "000001.png"), ReadFileToString(Dir() / "local" / "image_2" / "000001.png"));
+  EXPECT_NE(ReadFileToString(r.out / "velodyne" / "000001.bin"), ReadFileToString(Dir() / "local" / "velodyne" / "000001.bin"));
+}
+
 // Shards + merge equal a local run by construction, because a local run goes through parts too; this checks
 // that the parts lose nothing: the dataset and report written straight from the in-memory outcomes (the way
 // RunSynth wrote them before parts existed) are the bytes RunSynth writes. On KITTI (labels with 2-6

@@ -6,7 +6,9 @@
 #include <fstream>
 #include <map>
 #include <memory>
+#include <optional>
 #include <set>
+#include <tuple>
 
 #include "bank/bank.h"
 #include "core/log.h"
@@ -126,6 +128,59 @@ void DropUnobserved(FrameOutcome* out) {
   for (const auto& [i, k] : out->lidar_object_points)
     if (new_index[static_cast<size_t>(k)] >= 0) points.push_back({i, new_index[static_cast<size_t>(k)]});
   out->lidar_object_points = std::move(points);
+}
+
+// The LiDAR model of a frame's own sweep (docs/lidar.md), or nullopt where none applies: Argoverse 2 (its
+// converted sweeps hold two lidars in the ego frame; synth cannot write AV2 anyway) or a sweep too small to
+// fit (the caller falls back to the ideal sensor, which is not worth failing the frame for).
+std::optional<LidarModel> FitFrameLidarModel(const Log& log, const Frame& frame, const PointCloud& sweep) {
+  if (log.format == LogFormat::kArgoverse2) return std::nullopt;
+  LidarFitOptions fit;
+  const Rigid3d T_lidar_ego = frame.lidar->T_ego_lidar.Inverse();
+  for (const auto& a : frame.annotations)
+    if (!a.category.empty()) fit.annotated.push_back({a.category, a.box.Transformed(T_lidar_ego)});
+  if (log.format == LogFormat::kKitti) {
+    // KITTI stores scan lines in azimuth order, not firing order: the sensor spins clockwise and the sweep
+    // starts behind it.
+    fit.spin_direction = -1;
+    fit.start_azimuth = M_PI;
+  }
+  try {
+    return FitLidarModel(sweep, fit);
+  } catch (const InputError& e) {
+    SD_LOG(Warn, "frame " << frame.token << ": no LiDAR model (" << e.what() << "); inserting with the ideal sensor");
+    return std::nullopt;
+  }
+}
+
+// The LiDAR noise/dropout seed of a frame: the scenario seed and the frame index alone, so every shard draws
+// the same numbers for a frame.
+uint64_t LidarSeed(uint32_t scenario_seed, size_t frame_index) {
+  uint64_t z = (static_cast<uint64_t>(scenario_seed) << 32) ^ (static_cast<uint64_t>(frame_index) + 0x9E3779B97F4A7C15ull);
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;  // splitmix64 finaliser: nearby seeds, unrelated streams
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  return z ^ (z >> 31);
+}
+
+// Ego poses at the sweep's start and end (reference = the frame's ego pose, `reference_time` s after the sweep
+// start) from the ego motion between the previous and next log frames of the same sequence (or the frame and
+// its one neighbour); nullopt without one (KITTI object frames have no world pose, nor a sequence).
+std::optional<std::pair<Rigid3d, Rigid3d>> NeighbourSweepPoses(const Log& log, size_t frame_index, double period,
+                                                               double reference_time) {
+  if (log.format == LogFormat::kKitti) return std::nullopt;
+  const double max_gap = SequencePlanOptions{}.max_frame_gap_s;
+  const Frame& f = log.frames[frame_index];
+  auto near = [&](size_t k) {
+    const double gap = std::abs(log.frames[k].timestamp - f.timestamp);
+    return gap > 0 && gap <= max_gap;
+  };
+  const Frame* a = &f;
+  const Frame* b = &f;
+  if (frame_index > 0 && near(frame_index - 1)) a = &log.frames[frame_index - 1];
+  if (frame_index + 1 < log.frames.size() && near(frame_index + 1)) b = &log.frames[frame_index + 1];
+  if (a == b || a->timestamp == b->timestamp) return std::nullopt;
+  return SweepPosesFromEgoPoses(f.T_world_ego, a->T_world_ego, a->timestamp, b->T_world_ego, b->timestamp, period,
+                                reference_time);
 }
 
 int NuScenesVisibility(double fraction) {
@@ -320,6 +375,21 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
   lin.T_ego_lidar = frame.lidar->T_ego_lidar;
   lin.objects = ptrs;
   lin.reference_intensity = ReferenceIntensities(sweep, points_ego, ground.ground_indices(), annotated, ptrs);
+  if (options.lidar_realism) out.lidar_model_fit = FitFrameLidarModel(log, frame, sweep);
+  if (out.lidar_model_fit) {
+    const LidarModel& model = *out.lidar_model_fit;
+    out.lidar_model = model.Summary();
+    LidarRealism& re = lin.realism;
+    re.model = &model;
+    re.noise = re.dropout = re.intensity = true;
+    re.seed = LidarSeed(scenario.seed, frame_index);
+    // nuScenes (tables and mmdet3d infos) de-skew their sweeps and stamp them at the end of the turn.
+    re.motion_compensated_output = log.format != LogFormat::kKitti;
+    if (const auto poses = NeighbourSweepPoses(log, frame_index, model.SweepPeriod(), model.SweepPeriod())) {
+      re.ego_motion = out.lidar_ego_motion = true;
+      std::tie(re.T_ref_ego_start, re.T_ref_ego_end) = *poses;
+    }
+  }
   LidarSimResult lidar = SimulateLidar(lin);
   out.lidar_object_points = lidar.object_points;
 
@@ -387,6 +457,7 @@ json RequestFingerprint(const SynthRequest& request, const std::vector<Asset>& a
   }
   j["samples_per_pixel"] = request.options.samples_per_pixel;
   j["ao_samples"] = request.options.ao_samples;
+  j["lidar_realism"] = request.options.lidar_realism;
   return j;
 }
 
@@ -599,6 +670,8 @@ void WritePart(const fs::path& dir, const FrameOutcome& o, const SynthInputs& in
             {"objects", objects},
             {"cameras", cameras},
             {"sweep", sweep},
+            {"lidar_model", o.lidar_model},
+            {"lidar_ego_motion", o.lidar_ego_motion},
             {"lidar_object_points", lidar_object_points}};
   WriteJsonFile(dir / "part.json", j, -1);
 }
@@ -678,6 +751,8 @@ FrameOutcome ReadPart(const fs::path& dir, size_t frame_index, const SynthInputs
       r["sweep"]["points"].Fail(Msg() << "sweep.bin holds " << cloud.size() << " points");
     o.edit.points = std::move(cloud);
   }
+  o.lidar_model = r["lidar_model"].String();
+  o.lidar_ego_motion = r["lidar_ego_motion"].Bool();
   for (size_t i = 0; i < r["lidar_object_points"].Size(); ++i) {
     const JsonReader p = r["lidar_object_points"][i];
     o.lidar_object_points.push_back({static_cast<int>(p[0].Integer()), static_cast<int>(p[1].Integer())});
@@ -795,6 +870,8 @@ SynthSummary WriteSynthOutput(const SynthInputs& in, const SynthRequest& request
     nlohmann::json jf;
     jf["token"] = log.frames[o.frame_index].token;
     jf["sun"] = o.sun_source;
+    jf["lidar_model"] = o.lidar_model;  // LidarModel::Summary() of the frame's sweep, or "off"
+    jf["lidar_ego_motion"] = o.lidar_ego_motion;
     jf["objects"] = nlohmann::json::array();
     for (const auto& ob : o.objects) {
       const Box3& b = ob.placement.box;

@@ -8,6 +8,7 @@
 // "shard 0/1, then merge" (RunSynth), so shards + merge write the same bytes as a local run by construction.
 #include <filesystem>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -17,6 +18,7 @@
 #include "datasets/readers.h"
 #include "datasets/writers.h"
 #include "synth/ground.h"
+#include "synth/lidar_model.h"
 #include "synth/placement.h"
 #include "synth/scenario.h"
 #include "synth/sequence_plan.h"
@@ -31,6 +33,10 @@ struct SynthOptions {
   bool overwrite = false;
   bool report = true;
   bool coco = false;  // also write coco_2d.json (datasets/coco.h WriteCoco2D) into the output
+  // LiDAR realism (docs/lidar.md): a sensor model is fitted from each frame's own sweep and inserted objects get
+  // its range noise, dropout, intensity and (where neighbouring frames give the ego's motion) rolling-shutter
+  // skew. false (`--no-lidar-realism`): the ideal sensor, byte for byte what synth wrote before realism existed.
+  bool lidar_realism = true;
   // Tests only: called while a part is half written (its images and sweep are in the staging folder, its
   // part.json is not), so a test can kill the process mid-part.
   std::function<void(size_t frame_index, const std::filesystem::path& staging)> part_written_hook;
@@ -69,6 +75,12 @@ struct FrameOutcome {
   std::string sun_source;
   PointCloud sweep_before;  // sensor frame
   std::vector<std::pair<int, int>> lidar_object_points;  // (point index in edit.points, object index)
+  // The LiDAR model the frame was simulated with: LidarModel::Summary(), or "off" (lidar_realism false, an
+  // Argoverse 2 log, or a sweep the model cannot be fitted from: then the ideal sensor, with a warning).
+  // Kept in parts and written per frame to synth.json.
+  std::string lidar_model = "off";
+  std::optional<LidarModel> lidar_model_fit;  // the fitted model itself; in memory only (not in parts)
+  bool lidar_ego_motion = false;              // rolling shutter from the neighbouring frames' ego poses
 };
 
 // Synthesises one frame in memory (no files written). Without a plan, objects are placed for this frame alone
@@ -76,6 +88,11 @@ struct FrameOutcome {
 // plan's world-fixed objects within its range gate (PlannedView::in_range) are rendered at their ego-frame
 // pose PlannedView::T_ego_object, so every frame shows the same objects where the world has them; an object
 // that ends up with neither a LiDAR point nor a labelable camera box (>= 4 visible pixels) gets no label.
+// LiDAR (options.lidar_realism): the model is fitted from the frame's sweep (KITTI: clockwise, sweep boundary
+// behind); the simulation's seed is derived from the scenario seed and the frame index only, so the result does
+// not depend on which shard synthesises the frame; ego motion from the previous and next log frames where they
+// are of the same sequence (nuScenes: the sweep's timestamp is the end of its turn; output de-skewed as
+// nuScenes' own sweeps are), none for KITTI object frames.
 FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vector<Asset>& assets,
                              const Scenario& scenario, const SynthOptions& options, const SequencePlan* plan = nullptr);
 

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <iostream>
 #include <map>
 
 #include <gtest/gtest.h>
@@ -14,6 +15,9 @@
 #include "io/files.h"
 #include "io/json.h"
 #include "io/mesh_io.h"
+#include "io/pointcloud_io.h"
+#include "render/ray_scene.h"
+#include "synth/lidar_sim.h"
 #include "synth/test_assets.h"
 #include "testing/testing.h"
 
@@ -54,9 +58,14 @@ class PipelineTest : public ::testing::Test {
     log_ = new Log(OpenLog(testing::RepoData(kInfo)));
     assets_ = new std::vector<Asset>(DemoAssets(*dir_));
     scenario_ = new Scenario(ReadScenario(testing::RepoData("scenarios/demo.json")));
+    // The default (LiDAR realism: a model fitted from the keyframe's own HDL-32E sweep) and the ideal sensor.
     outcome_ = new FrameOutcome(SynthesizeFrame(*log_, 0, *assets_, *scenario_, SynthOptions{}));
+    SynthOptions ideal;
+    ideal.lidar_realism = false;
+    ideal_ = new FrameOutcome(SynthesizeFrame(*log_, 0, *assets_, *scenario_, ideal));
   }
   static void TearDownTestSuite() {
+    delete ideal_;
     delete outcome_;
     delete scenario_;
     delete assets_;
@@ -68,12 +77,37 @@ class PipelineTest : public ::testing::Test {
   static std::vector<Asset>* assets_;
   static Scenario* scenario_;
   static FrameOutcome* outcome_;
+  static FrameOutcome* ideal_;
 };
 testing::TempDir* PipelineTest::dir_ = nullptr;
 Log* PipelineTest::log_ = nullptr;
 std::vector<Asset>* PipelineTest::assets_ = nullptr;
 Scenario* PipelineTest::scenario_ = nullptr;
 FrameOutcome* PipelineTest::outcome_ = nullptr;
+FrameOutcome* PipelineTest::ideal_ = nullptr;
+
+// Distance from a point (ego frame) to an outcome's object mesh k.
+double DistanceToObject(const FrameOutcome& o, int k, const Eigen::Vector3d& p) {
+  TriangleMesh m = o.objects[static_cast<size_t>(k)].placement.asset->mesh;
+  m.Transform(o.objects[static_cast<size_t>(k)].placement.T_ego_asset);
+  double best = 1e9;
+  for (const auto& t : m.faces)
+    best = std::min(best, PointTriangleDistance(p, m.positions[t[0]].cast<double>(), m.positions[t[1]].cast<double>(),
+                                                m.positions[t[2]].cast<double>()));
+  return best;
+}
+
+// The object meshes of an outcome in the LiDAR frame, for casting the sensor's beams at them.
+RayScene ObjectsInLidarFrame(const FrameOutcome& o, const Rigid3d& T_ego_lidar) {
+  RayScene scene;
+  for (const auto& ob : o.objects) {
+    auto m = std::make_shared<TriangleMesh>(ob.placement.asset->mesh);
+    m->Transform(T_ego_lidar.Inverse() * ob.placement.T_ego_asset);
+    scene.AddMesh(m);
+  }
+  scene.Commit();
+  return scene;
+}
 
 TEST_F(PipelineTest, PlacesEveryRequestedObjectWithoutTouchingRealOnes) {
   ASSERT_EQ(outcome_->objects.size(), 5u);
@@ -135,47 +169,150 @@ TEST_F(PipelineTest, RenderedMasksLieInsideTheProjected3DBoxes) {
 
 TEST_F(PipelineTest, EveryLidarPointOnAnObjectLiesOnItsSurface) {
   const Frame& f = log_->frames[0];
-  const PointCloud& cloud = *outcome_->edit.points;
-  ASSERT_FALSE(outcome_->lidar_object_points.empty());
-  // Meshes in the ego frame.
-  std::vector<TriangleMesh> meshes;
-  for (const auto& o : outcome_->objects) {
-    TriangleMesh m = o.placement.asset->mesh;
-    m.Transform(o.placement.T_ego_asset);
-    meshes.push_back(std::move(m));
-  }
+  // The ideal sensor: on the mesh, to float precision.
+  ASSERT_FALSE(ideal_->lidar_object_points.empty());
   double worst = 0;
-  for (const auto& [i, k] : outcome_->lidar_object_points) {
-    const Eigen::Vector3d p = f.lidar->T_ego_lidar * cloud.xyz(i).cast<double>();
-    double best = 1e9;
-    const TriangleMesh& m = meshes[k];
-    for (const auto& t : m.faces)
-      best = std::min(best, PointTriangleDistance(p, m.positions[t[0]].cast<double>(), m.positions[t[1]].cast<double>(),
-                                                  m.positions[t[2]].cast<double>()));
-    worst = std::max(worst, best);
-  }
+  for (const auto& [i, k] : ideal_->lidar_object_points)
+    worst = std::max(worst, DistanceToObject(*ideal_, k, f.lidar->T_ego_lidar * ideal_->edit.points->xyz(i).cast<double>()));
   EXPECT_LT(worst, 0.01) << "metres from the asset surface";
-  for (size_t k = 0; k < outcome_->objects.size(); ++k) EXPECT_EQ(outcome_->objects[k].label.annotation.num_lidar_pts, outcome_->objects[k].lidar_points);
+  // With realism: off the surface by at most the range error, 5 fitted sigmas at the point's range.
+  ASSERT_TRUE(outcome_->lidar_model_fit.has_value());
+  const LidarModel& model = *outcome_->lidar_model_fit;
+  ASSERT_FALSE(outcome_->lidar_object_points.empty());
+  for (const auto& [i, k] : outcome_->lidar_object_points) {
+    const Eigen::Vector3f p = outcome_->edit.points->xyz(i);
+    EXPECT_LT(DistanceToObject(*outcome_, k, f.lidar->T_ego_lidar * p.cast<double>()), 5 * model.RangeSigma(p.norm()) + 1e-3) << i;
+  }
+  for (const FrameOutcome* o : {outcome_, ideal_})
+    for (size_t k = 0; k < o->objects.size(); ++k) EXPECT_EQ(o->objects[k].label.annotation.num_lidar_pts, o->objects[k].lidar_points);
 }
 
 TEST_F(PipelineTest, UntouchedLidarPointsAreBitIdentical) {
-  const PointCloud& before = outcome_->sweep_before;
-  const PointCloud& after = *outcome_->edit.points;
+  const PointCloud& before = ideal_->sweep_before;
+  const PointCloud& after = *ideal_->edit.points;
   ASSERT_EQ(after.num_features, before.num_features);
   ASSERT_GE(after.size(), before.size());
   std::vector<uint8_t> touched(after.size(), 0);
-  for (const auto& [i, k] : outcome_->lidar_object_points) touched[i] = 1;
+  for (const auto& [i, k] : ideal_->lidar_object_points) touched[i] = 1;
   size_t moved = 0;
   for (size_t i = 0; i < before.size(); ++i) {
     if (touched[i]) { ++moved; continue; }
     for (int c = 0; c < before.num_features; ++c) ASSERT_EQ(std::memcmp(&before.data[i * before.num_features + c], &after.data[i * after.num_features + c], 4), 0) << i;
   }
   // Moved points only get nearer: the object blocks the beam before the original return.
-  for (const auto& [i, k] : outcome_->lidar_object_points)
+  for (const auto& [i, k] : ideal_->lidar_object_points)
     if (static_cast<size_t>(i) < before.size()) {
       EXPECT_LT(after.xyz(i).norm(), before.xyz(i).norm());
     }
   EXPECT_GT(moved, 0u);
+}
+
+// With realism a blocked return whose simulated return drops out leaves the cloud, so indices shift: the
+// untouched points of the output are, in order, bit-identical records of the input, and the input records
+// they skip are exactly the moved ones plus the dropped-out ones.
+TEST_F(PipelineTest, UntouchedLidarPointsAreBitIdenticalWithRealism) {
+  const PointCloud& before = outcome_->sweep_before;
+  const PointCloud& after = *outcome_->edit.points;
+  const int nf = before.num_features;
+  ASSERT_EQ(after.num_features, nf);
+  std::vector<uint8_t> touched(after.size(), 0);
+  for (const auto& [i, k] : outcome_->lidar_object_points) touched[i] = 1;
+  size_t j = 0, skipped = 0, untouched = 0;
+  for (size_t i = 0; i < after.size(); ++i) {
+    if (touched[i]) continue;
+    while (j < before.size() && std::memcmp(&before.data[j * nf], &after.data[i * nf], 4 * nf) != 0) ++j, ++skipped;
+    ASSERT_LT(j, before.size()) << "output point " << i << " is no input record (in order)";
+    ++j;
+    ++untouched;
+  }
+  skipped += before.size() - j;
+  size_t on_objects = 0;
+  for (const auto& o : outcome_->objects) on_objects += static_cast<size_t>(o.lidar_points);
+  EXPECT_EQ(on_objects, outcome_->lidar_object_points.size());
+  // Every input record is kept untouched, moved onto an object, or dropped: skipped ones are not kept.
+  EXPECT_EQ(untouched + skipped, before.size());
+  EXPECT_GT(skipped, 0u);
+  // Skipped = moved onto an object (at most every object point) + dropped out (a few % of those blocked).
+  EXPECT_LE(skipped, outcome_->lidar_object_points.size() + before.size() / 100);
+}
+
+// The fitted range noise shows up on the inserted objects: each object return lies on its beam (the ray from the
+// sensor through it) at the mesh's range plus an error whose spread is the model's sigma at that range.
+TEST_F(PipelineTest, ObjectReturnsScatterWithTheFittedRangeSigma) {
+  const Frame& f = log_->frames[0];
+  ASSERT_TRUE(outcome_->lidar_model_fit.has_value());
+  const LidarModel& model = *outcome_->lidar_model_fit;
+  EXPECT_EQ(outcome_->lidar_model, model.Summary());
+  EXPECT_EQ(model.beams.size(), 32u);
+  EXPECT_GT(model.RangeSigma(10), 0.005);
+  EXPECT_FALSE(outcome_->lidar_ego_motion);  // one keyframe: no neighbours, no ego motion
+  EXPECT_EQ(ideal_->lidar_model, "off");
+  EXPECT_FALSE(ideal_->lidar_model_fit.has_value());
+  auto normalised_errors = [&](const FrameOutcome& o, double* worst_abs) {
+    const RayScene scene = ObjectsInLidarFrame(o, f.lidar->T_ego_lidar);
+    std::vector<double> z;
+    *worst_abs = 0;
+    for (const auto& [i, k] : o.lidar_object_points) {
+      const Eigen::Vector3f p = o.edit.points->xyz(i);
+      const RayHit hit = scene.Intersect(Eigen::Vector3f::Zero(), p.normalized(), 0.3f);
+      if (!hit.Hit()) continue;  // noise pushed a grazing return off the silhouette
+      const double err = p.norm() - hit.t;
+      *worst_abs = std::max(*worst_abs, std::abs(err));
+      z.push_back(err / model.RangeSigma(hit.t));
+    }
+    return z;
+  };
+  double ideal_worst = 0, real_worst = 0;
+  const std::vector<double> zi = normalised_errors(*ideal_, &ideal_worst);
+  EXPECT_LT(ideal_worst, 1e-3) << "ideal sensor: returns exactly on the mesh";
+  std::vector<double> z = normalised_errors(*outcome_, &real_worst);
+  ASSERT_GE(z.size(), 150u);  // ~190 returns on the demo's five small objects
+  double mean = 0, var = 0;
+  for (double v : z) mean += v;
+  mean /= z.size();
+  for (double v : z) var += (v - mean) * (v - mean);
+  const double sd = std::sqrt(var / (z.size() - 1));
+  std::vector<double> a;
+  for (double v : z) a.push_back(std::abs(v - mean));
+  std::nth_element(a.begin(), a.begin() + a.size() / 2, a.end());
+  const double robust = 1.4826 * a[a.size() / 2];
+  std::cout << z.size() << " object returns: mean error " << mean << " sigma, sd " << sd << " sigma, robust sd " << robust
+            << " sigma (model sigma(10 m) = " << model.RangeSigma(10) * 100 << " cm); worst |error| " << real_worst * 100 << " cm\n";
+  // Bounds of 3-4 standard errors of each estimate for n normal samples (sd: 1/sqrt(2n); median absolute
+  // deviation: about 1.65/sqrt(2n)).
+  const double n = static_cast<double>(z.size());
+  EXPECT_LT(std::abs(mean), 4 / std::sqrt(n));
+  EXPECT_NEAR(sd, 1.0, 3 / std::sqrt(2 * n));
+  EXPECT_NEAR(robust, 1.0, 3 * 1.65 / std::sqrt(2 * n));
+}
+
+// lidar_realism = false is the pipeline as it was: SimulateLidar with no realism on the same placements and
+// reference intensities, bit for bit; realism changes the sweep only (same placements, same images).
+TEST_F(PipelineTest, NoLidarRealismIsTheIdealSensorExactly) {
+  const Frame& f = log_->frames[0];
+  const PointCloud& sweep = ideal_->sweep_before;
+  std::vector<Eigen::Vector3d> points_ego;
+  for (size_t i = 0; i < sweep.size(); ++i) points_ego.push_back(f.lidar->T_ego_lidar * sweep.xyz(i).cast<double>());
+  std::vector<std::pair<std::string, Box3>> annotated;
+  for (const auto& a : f.annotations) annotated.push_back({a.category, a.box});
+  std::vector<const PlacedObject*> ptrs;
+  for (const auto& o : ideal_->objects) ptrs.push_back(&o.placement);
+  LidarSimInput in;
+  in.sweep = &sweep;
+  in.T_ego_lidar = f.lidar->T_ego_lidar;
+  in.objects = ptrs;
+  in.reference_intensity = ReferenceIntensities(sweep, points_ego, ideal_->ground.ground_indices(), annotated, ptrs);
+  const LidarSimResult plain = SimulateLidar(in);
+  ASSERT_EQ(plain.cloud.data.size(), ideal_->edit.points->data.size());
+  EXPECT_EQ(std::memcmp(plain.cloud.data.data(), ideal_->edit.points->data.data(), 4 * plain.cloud.data.size()), 0);
+  EXPECT_EQ(plain.object_points, ideal_->lidar_object_points);
+
+  ASSERT_EQ(outcome_->objects.size(), ideal_->objects.size());
+  for (size_t k = 0; k < ideal_->objects.size(); ++k)
+    EXPECT_EQ(outcome_->objects[k].placement.T_ego_asset.translation, ideal_->objects[k].placement.T_ego_asset.translation);
+  ASSERT_EQ(outcome_->cameras.size(), ideal_->cameras.size());
+  for (size_t c = 0; c < ideal_->cameras.size(); ++c) EXPECT_EQ(outcome_->cameras[c].after.vector(), ideal_->cameras[c].after.vector());
+  EXPECT_NE(outcome_->edit.points->data, ideal_->edit.points->data);
 }
 
 TEST_F(PipelineTest, ImagesChangeOnlyNearTheObjects) {
@@ -206,7 +343,8 @@ TEST_F(PipelineTest, SameSeedSameResult) {
   ASSERT_EQ(again.objects.size(), outcome_->objects.size());
   for (size_t i = 0; i < again.objects.size(); ++i)
     EXPECT_TRUE(again.objects[i].placement.box.center().isApprox(outcome_->objects[i].placement.box.center(), 1e-12));
-  EXPECT_EQ(again.edit.points->data, outcome_->edit.points->data);
+  EXPECT_EQ(again.edit.points->data, outcome_->edit.points->data);  // realism's noise and dropout are seeded
+  EXPECT_EQ(again.lidar_model, outcome_->lidar_model);
 }
 
 TEST_F(PipelineTest, ImpossibleScenarioIsAnErrorNamingTheObject) {
@@ -224,6 +362,37 @@ TEST_F(PipelineTest, ImpossibleScenarioIsAnErrorNamingTheObject) {
   }
 }
 
+
+// A sweep the model cannot be fitted from (its ring feature relabelled into 500 "lasers" of under 100 returns; a
+// fit needs one with 100) is synthesised with the ideal sensor, "off", exactly as lidar_realism = false does,
+// instead of failing the frame.
+TEST(LidarRealismFallback, ASweepTooSparseToFitGetsTheIdealSensor) {
+  testing::TempDir dir;
+  const std::vector<Asset> assets = DemoAssets(dir);
+  Log log = OpenLog(testing::RepoData(kInfo));
+  PointCloud thin = ReadLidar(*log.frames[0].lidar);
+  const int ring = thin.FeatureIndex("ring");
+  ASSERT_GE(ring, 0);
+  ASSERT_LT(thin.size(), 500u * 100u);
+  for (size_t i = 0; i < thin.size(); ++i) thin.data[i * thin.num_features + ring] = static_cast<float>(i % 500);
+  log.frames[0].lidar->path = dir.path() / "thin.bin";
+  WritePointCloudBin(log.frames[0].lidar->path, thin);
+  WriteFileAtomic(dir.path() / "cone.json",
+                  R"({"seed": 3, "objects": [{"category": "traffic_cone", "count": 1, "distance_m": [6, 15], "lateral_m": [-3, 3]}]})");
+  const Scenario scenario = ReadScenario(dir.path() / "cone.json");
+  SynthOptions opt;
+  opt.samples_per_pixel = 1;
+  opt.ao_samples = 2;
+  const FrameOutcome o = SynthesizeFrame(log, 0, assets, scenario, opt);
+  EXPECT_EQ(o.lidar_model, "off");
+  EXPECT_FALSE(o.lidar_model_fit.has_value());
+  opt.lidar_realism = false;
+  const FrameOutcome ideal = SynthesizeFrame(log, 0, assets, scenario, opt);
+  ASSERT_EQ(o.objects.size(), 1u);
+  EXPECT_GT(o.objects[0].lidar_points, 0);
+  EXPECT_EQ(o.edit.points->data, ideal.edit.points->data);
+  EXPECT_EQ(o.lidar_object_points, ideal.lidar_object_points);
+}
 
 // ---------------------------------------------------------------------------------------------------------
 // World-fixed synthesis over several frames (one SequencePlan) and the dry run.
@@ -264,6 +433,8 @@ TEST(WorldFixedSynthesis, AnArrangedObjectHasOneWorldPoseInEveryFramesLabels) {
   for (size_t fi : {0u, 1u}) {
     const FrameOutcome o = SynthesizeFrame(log, fi, assets, scenario, opt, plan.ForFrame(fi));
     const Rigid3d& T_world_ego = log.frames[fi].T_world_ego;
+    EXPECT_TRUE(o.lidar_ego_motion) << "frame " << fi << ": its neighbour 0.5 s away gives the ego's motion";
+    EXPECT_NE(o.lidar_model, "off");
     ASSERT_EQ(o.edit.added.size(), o.objects.size());
     for (size_t k = 0; k < o.objects.size(); ++k) {
       const ObjectOutcome& ob = o.objects[k];

@@ -43,39 +43,19 @@
 #include "render/lidar_cast.h"
 #include "render/ray_scene.h"
 
+#include "bench_demo.h"
+
 namespace {
 namespace fs = std::filesystem;
 
-std::optional<fs::path> FindRepoRoot() {
-  std::vector<fs::path> candidates;
-  if (const char* env = std::getenv("SYNTHDRIVE_SOURCE_DIR"); env && *env) candidates.emplace_back(env);
-  std::error_code ec;
-  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-  if (!ec) candidates.push_back(exe.parent_path() / ".." / "..");
-  for (const auto& c : candidates)
-    if (fs::is_directory(c / "data" / "driving") && fs::is_directory(c / "data" / "assets"))
-      return fs::canonical(c);
-  return std::nullopt;
-}
+using sd::bench::FindRepoRoot;
 
 // The demo's meshes canonicalised in memory, as the demo imports them (src/cli/cmd_demo.cpp): y-up, the cone
 // scaled to 0.7 m, the barrier and the car in metres. Canonical frame: x front, y left, z up.
 std::map<std::string, sd::TriangleMesh> LoadDemoMeshes(const fs::path& data) {
-  struct Source { const char* mesh; const char* category; const char* front; double scale, height; };
-  const Source sources[] = {
-      {"assets/metadrive_traffic_cone/scene.gltf", "traffic_cone", "+x", 0, 0.70},
-      {"assets/metadrive_road_barrier/scene.gltf", "barrier", "+z", 1.0, 0},
-      {"assets/torcs_p406/obj/torcs_p406.obj", "car", "+x", 1.0, 0},
-  };
   std::map<std::string, sd::TriangleMesh> out;
-  for (const auto& s : sources) {
-    sd::CanonicalizeOptions o;
-    o.up = "+y";
-    o.front = s.front;
-    o.scale = s.scale;
-    if (s.height > 0) o.target_height = s.height;
-    out[s.category] = sd::Canonicalize(sd::LoadMesh(data / s.mesh), o).mesh;
-  }
+  for (const sd::bench::DemoMesh& m : sd::bench::DemoMeshes())
+    out[m.category] = sd::Canonicalize(sd::LoadMesh(data / m.mesh), m.Options()).mesh;
   return out;
 }
 

@@ -34,22 +34,14 @@
 #include "synth/placement.h"
 #include "synth/scenario.h"
 
+#include "bench_demo.h"
+
 namespace {
 namespace fs = std::filesystem;
 
 fs::path g_root;  // repo root, set in main
 
-std::optional<fs::path> FindRepoRoot() {
-  std::vector<fs::path> candidates;
-  if (const char* env = std::getenv("SYNTHDRIVE_SOURCE_DIR"); env && *env) candidates.emplace_back(env);
-  std::error_code ec;
-  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-  if (!ec) candidates.push_back(exe.parent_path() / ".." / "..");
-  for (const auto& c : candidates)
-    if (fs::is_directory(c / "data" / "driving") && fs::is_directory(c / "data" / "assets"))
-      return fs::canonical(c);
-  return std::nullopt;
-}
+using sd::bench::FindRepoRoot;
 
 // A temp directory removed at exit.
 struct TempDir {
@@ -67,16 +59,10 @@ struct TempDir {
 
 // The few lines of cli::ImportAsset the demo needs: load, canonicalise, save the asset folder, load it back.
 sd::Asset ImportAsset(const fs::path& mesh_path, const fs::path& out, const std::string& id,
-                      const std::string& category, const std::string& up, const std::string& front, double scale,
-                      double height) {
+                      const std::string& category, const sd::CanonicalizeOptions& opt) {
   const auto cat = sd::FindCategory(category);
   if (!cat) throw std::runtime_error("unknown category " + category);
   const sd::TriangleMesh mesh = sd::LoadMesh(mesh_path);
-  sd::CanonicalizeOptions opt;
-  opt.up = up;
-  opt.front = front;
-  opt.scale = scale;
-  if (height > 0) opt.target_height = height;
   sd::CanonicalizeResult c = sd::Canonicalize(mesh, opt);
   sd::Asset a;
   a.mesh = std::move(c.mesh);
@@ -108,15 +94,8 @@ const Inputs& GetInputs() {
   static const std::unique_ptr<Inputs> inputs = [] {
     auto in = std::make_unique<Inputs>();
     const fs::path data = g_root / "data";
-    struct Source { const char* mesh; const char* id; const char* category; const char* up; const char* front; double scale, height; };
-    const Source sources[] = {
-        {"assets/metadrive_traffic_cone/scene.gltf", "metadrive_traffic_cone", "traffic_cone", "+y", "+x", 0, 0.70},
-        {"assets/metadrive_road_barrier/scene.gltf", "metadrive_road_barrier", "barrier", "+y", "+z", 1.0, 0},
-        {"assets/torcs_p406/obj/torcs_p406.obj", "torcs_p406", "car", "+y", "+x", 1.0, 0},
-    };
-    for (const auto& s : sources)
-      in->assets.push_back(ImportAsset(data / s.mesh, in->tmp.path / "assets" / s.id, s.id, s.category, s.up,
-                                       s.front, s.scale, s.height));
+    for (const sd::bench::DemoMesh& m : sd::bench::DemoMeshes())
+      in->assets.push_back(ImportAsset(data / m.mesh, in->tmp.path / "assets" / m.id, m.id, m.category, m.Options()));
     in->log = sd::OpenLog(data / "driving/nuscenes-scene0061-kf0/mmdet3d_info/n015-2018-07-24-11-22-45+0800.json");
     in->scenario = sd::ReadScenario(data / "scenarios/demo.json");
     if (in->log.frames.empty()) throw std::runtime_error("the nuScenes log has no frames");
@@ -125,21 +104,27 @@ const Inputs& GetInputs() {
   return *inputs;
 }
 
-// The full frame: ground, placement, 6 cameras, LiDAR. Arg: camera samples per pixel (ao_samples 16).
-void BM_SynthesizeKeyframe(benchmark::State& state) {
-  const Inputs& in = GetInputs();
-  sd::SynthOptions options;
-  options.samples_per_pixel = static_cast<int>(state.range(0));
-  options.ao_samples = 16;
+// The timed loop of the whole-frame benchmarks, with what the frame placed and touched as counters.
+void TimeSynthesis(benchmark::State& state, const Inputs& in, const sd::Scenario& scenario,
+                   const sd::SynthOptions& options) {
   size_t objects = 0, cameras = 0;
   for (auto _ : state) {
-    sd::FrameOutcome out = sd::SynthesizeFrame(in.log, 0, in.assets, in.scenario, options);
+    sd::FrameOutcome out = sd::SynthesizeFrame(in.log, 0, in.assets, scenario, options);
     objects = out.objects.size();
     cameras = out.cameras.size();
     benchmark::DoNotOptimize(out.edit.points.has_value());
   }
   state.counters["objects"] = static_cast<double>(objects);
   state.counters["cameras_touched"] = static_cast<double>(cameras);
+}
+
+// The full frame: ground, placement, 6 cameras, LiDAR. Arg: camera samples per pixel (ao_samples 16).
+void BM_SynthesizeKeyframe(benchmark::State& state) {
+  const Inputs& in = GetInputs();
+  sd::SynthOptions options;
+  options.samples_per_pixel = static_cast<int>(state.range(0));
+  options.ao_samples = 16;
+  TimeSynthesis(state, in, in.scenario, options);
 }
 BENCHMARK(BM_SynthesizeKeyframe)
     ->ArgName("spp")
@@ -227,15 +212,7 @@ void BM_SynthesizeKeyframeObjects(benchmark::State& state) {
   sd::SynthOptions options;
   options.samples_per_pixel = 4;
   options.ao_samples = 16;
-  size_t objects = 0, cameras = 0;
-  for (auto _ : state) {
-    sd::FrameOutcome out = sd::SynthesizeFrame(in.log, 0, in.assets, scenario, options);
-    objects = out.objects.size();
-    cameras = out.cameras.size();
-    benchmark::DoNotOptimize(out.edit.points.has_value());
-  }
-  state.counters["objects"] = static_cast<double>(objects);
-  state.counters["cameras_touched"] = static_cast<double>(cameras);
+  TimeSynthesis(state, in, scenario, options);
 }
 BENCHMARK(BM_SynthesizeKeyframeObjects)
     ->ArgName("objects")

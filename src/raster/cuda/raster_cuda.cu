@@ -158,6 +158,39 @@ DeviceRaster Resident(const RasterView& rast) {
   return {ws.r_bary.Upload(rast.bary, 2 * np), ws.r_depth.Upload(rast.depth, np), ws.r_triangle.Upload(rast.triangle, np)};
 }
 
+// Rasterizes clip-space vertices already on the device into the workspace's raster buffers: the set-up, the
+// prefix sum of the bounding boxes (whose total, read back, sizes the cover grid: the one host sync), the
+// depth test by atomicMin, and the winners' barycentrics.
+DeviceRaster RasterizeOnDevice(const float* d_clip, const int32_t* d_tris, size_t num_tris, int width, int height) {
+  Workspace& ws = workspace;
+  const size_t np = static_cast<size_t>(width) * height;
+  unsigned long long* key = ws.key.Get(np);
+  SD_CUDA(cudaMemsetAsync(key, 0xff, np * sizeof(unsigned long long), cudaStreamPerThread));
+  shared::TriangleSetup* setup = ws.setup.Get(std::max<size_t>(num_tris, 1));
+  if (num_tris > 0) {
+    unsigned long long* area = ws.area.Get(2 * num_tris);  // [0, n): areas, [n, 2n): inclusive prefix sums
+    SetUpKernel<<<Blocks(num_tris), kThreads>>>(d_clip, d_tris, num_tris, width, height, setup, area);
+    SD_CUDA(cudaGetLastError());
+    size_t temp_bytes = 0;
+    SD_CUDA(cub::DeviceScan::InclusiveSum(nullptr, temp_bytes, area, area + num_tris, static_cast<int64_t>(num_tris)));
+    SD_CUDA(cub::DeviceScan::InclusiveSum(ws.scan_temp.Get(temp_bytes), temp_bytes, area, area + num_tris,
+                                          static_cast<int64_t>(num_tris), cudaStreamPerThread));
+    unsigned long long total = 0;
+    Download(&total, area + 2 * num_tris - 1, 1);
+    if (total > 0) {
+      const unsigned blocks = static_cast<unsigned>(std::min<unsigned long long>((total + kThreads - 1) / kThreads, 1u << 20));
+      CoverKernel<<<blocks, kThreads>>>(setup, area + num_tris, num_tris, total, width, height, key);
+      SD_CUDA(cudaGetLastError());
+    }
+  }
+  float* bary = ws.r_bary.Get(2 * np);
+  float* depth = ws.r_depth.Get(np);
+  int32_t* triangle = ws.r_triangle.Get(np);
+  ResolveKernel<<<Blocks(np), kThreads>>>(setup, key, width, height, bary, depth, triangle);
+  SD_CUDA(cudaGetLastError());
+  return {bary, depth, triangle};
+}
+
 // ---- rasterize backward / interpolate -----------------------------------------------------------------------
 
 __global__ void RasterizeBackwardKernel(const float* clip, const int32_t* tris, int width, int height,
@@ -308,39 +341,13 @@ const char* DeviceDescription() {
 
 void Rasterize(const float* clip, size_t num_vertices, const int32_t* tris, size_t num_tris, RasterOut out) {
   Workspace& ws = workspace;
-  const int width = out.width, height = out.height;
-  const size_t np = static_cast<size_t>(width) * height;
+  const size_t np = static_cast<size_t>(out.width) * out.height;
   if (np == 0) return;
-  const float* d_clip = ws.clip.Upload(clip, 4 * num_vertices);
-  const int32_t* d_tris = ws.tris.Upload(tris, 3 * num_tris);
-  unsigned long long* key = ws.key.Get(np);
-  SD_CUDA(cudaMemset(key, 0xff, np * sizeof(unsigned long long)));
-  if (num_tris > 0) {
-    shared::TriangleSetup* setup = ws.setup.Get(num_tris);
-    unsigned long long* area = ws.area.Get(2 * num_tris);  // [0, n): areas, [n, 2n): inclusive prefix sums
-    SetUpKernel<<<Blocks(num_tris), kThreads>>>(d_clip, d_tris, num_tris, width, height, setup, area);
-    SD_CUDA(cudaGetLastError());
-    size_t temp_bytes = 0;
-    SD_CUDA(cub::DeviceScan::InclusiveSum(nullptr, temp_bytes, area, area + num_tris, static_cast<int64_t>(num_tris)));
-    SD_CUDA(cub::DeviceScan::InclusiveSum(ws.scan_temp.Get(temp_bytes), temp_bytes, area, area + num_tris,
-                                          static_cast<int64_t>(num_tris)));
-    unsigned long long total = 0;
-    Download(&total, area + 2 * num_tris - 1, 1);
-    if (total > 0) {
-      const unsigned blocks = static_cast<unsigned>(std::min<unsigned long long>((total + kThreads - 1) / kThreads, 1u << 20));
-      CoverKernel<<<blocks, kThreads>>>(setup, area + num_tris, num_tris, total, width, height, key);
-      SD_CUDA(cudaGetLastError());
-    }
-  }
-  float* bary = ws.r_bary.Get(2 * np);
-  float* depth = ws.r_depth.Get(np);
-  int32_t* triangle = ws.r_triangle.Get(np);
-  ResolveKernel<<<Blocks(np), kThreads>>>(ws.setup.Get(std::max<size_t>(num_tris, 1)), key, width, height, bary, depth,
-                                          triangle);
-  SD_CUDA(cudaGetLastError());
-  Download(out.bary, bary, 2 * np);
-  Download(out.depth, depth, np);
-  Download(out.triangle, triangle, np);
+  const DeviceRaster r = RasterizeOnDevice(ws.clip.Upload(clip, 4 * num_vertices), ws.tris.Upload(tris, 3 * num_tris),
+                                           num_tris, out.width, out.height);
+  Download(out.bary, r.bary, 2 * np);
+  Download(out.depth, r.depth, np);
+  Download(out.triangle, r.triangle, np);
 }
 
 void RasterizeBackward(const float* clip, size_t num_vertices, const int32_t* tris, size_t num_tris,
@@ -610,30 +617,9 @@ void EvaluateLoss(LossTargets& targets, const float* positions, const float* nor
     const int width = view.host.width, height = view.host.height;
     const size_t np = static_cast<size_t>(width) * height;
     ToClipKernel<<<Blocks(nv), kThreads>>>(d_positions, nv, view.M, d_clip);
-    // Rasterize (as cuda::Rasterize, without the transfers).
-    unsigned long long* key = ws.key.Get(np);
-    SD_CUDA(cudaMemsetAsync(key, 0xff, np * sizeof(unsigned long long), cudaStreamPerThread));
-    shared::TriangleSetup* setup = ws.setup.Get(std::max<size_t>(nt, 1));
-    if (nt > 0) {
-      unsigned long long* area = ws.area.Get(2 * nt);
-      SetUpKernel<<<Blocks(nt), kThreads>>>(d_clip, d_tris, nt, width, height, setup, area);
-      size_t temp_bytes = 0;
-      SD_CUDA(cub::DeviceScan::InclusiveSum(nullptr, temp_bytes, area, area + nt, static_cast<int64_t>(nt)));
-      SD_CUDA(cub::DeviceScan::InclusiveSum(ws.scan_temp.Get(temp_bytes), temp_bytes, area, area + nt,
-                                            static_cast<int64_t>(nt), cudaStreamPerThread));
-      // The total decides the grid: the one host sync of a view.
-      unsigned long long total = 0;
-      Download(&total, area + 2 * nt - 1, 1);
-      if (total > 0) {
-        const unsigned blocks = static_cast<unsigned>(std::min<unsigned long long>((total + kThreads - 1) / kThreads, 1u << 20));
-        CoverKernel<<<blocks, kThreads>>>(setup, area + nt, nt, total, width, height, key);
-      }
-    }
-    float* bary = ws.r_bary.Get(2 * np);
-    float* depth = ws.r_depth.Get(np);
-    int32_t* triangle = ws.r_triangle.Get(np);
-    ResolveKernel<<<Blocks(np), kThreads>>>(setup, key, width, height, bary, depth, triangle);
-    const DeviceRaster rast{bary, depth, triangle};
+    const DeviceRaster rast = RasterizeOnDevice(d_clip, d_tris, nt, width, height);
+    const int32_t* triangle = rast.triangle;
+    const float* depth = rast.depth;
 
     double* d_grad_clip = grad_clip.Get(4 * nv);
     SD_CUDA(cudaMemsetAsync(d_grad_clip, 0, 4 * nv * sizeof(double), cudaStreamPerThread));

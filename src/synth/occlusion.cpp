@@ -218,7 +218,7 @@ DepthMap DenseDepth(const std::vector<ProjectedPoint>& points, const ImageU8& im
   for (size_t i = 0; i < cands.size(); ++i)
     grid[Idx(static_cast<int>(cands[i].u) / kCell, static_cast<int>(cands[i].v) / kCell, gw)].push_back(static_cast<int>(i));
 
-  DepthMap out{ImageF(W, H, 1, kInf), ImageF(W, H, 1, 0.0f)};
+  DepthMap out{ImageF(W, H, 1, kInf), ImageF(W, H, 1, 0.0f), ImageU8(W, H, 1, 0)};
   const float R = static_cast<float>(options.max_fill_px), R2 = R * R;
   const double inv_sc = 1.0 / (2 * options.sigma_color * options.sigma_color);
   ParallelFor(0, static_cast<size_t>(H), [&](size_t yi) {
@@ -231,6 +231,7 @@ DepthMap DenseDepth(const std::vector<ProjectedPoint>& points, const ImageU8& im
       const int cx0 = std::max(0, static_cast<int>((pu - R) / kCell)), cx1 = std::min(gw - 1, static_cast<int>((pu + R) / kCell));
       votes.clear();
       float best_r2 = kInf, nn_depth = kInf;
+      bool nn_ground = false;
       const float* rgb = options.edge_aware ? colour.pixel(x, y) : nullptr;
       for (int cy = cy0; cy <= cy1; ++cy)
         for (int cx = cx0; cx <= cx1; ++cx)
@@ -238,7 +239,7 @@ DepthMap DenseDepth(const std::vector<ProjectedPoint>& points, const ImageU8& im
             const Candidate& c = cands[static_cast<size_t>(i)];
             const float du = c.u - pu, dv = c.v - pv, r2 = du * du + dv * dv;
             if (r2 > R2) continue;
-            if (r2 < best_r2) best_r2 = r2, nn_depth = c.depth;
+            if (r2 < best_r2) best_r2 = r2, nn_depth = c.depth, nn_ground = c.ground;
             if (!rgb) continue;
             double cd2 = 0;
             for (int ch = 0; ch < 3; ++ch) cd2 += double(rgb[ch] - c.rgb[ch]) * (rgb[ch] - c.rgb[ch]);
@@ -248,6 +249,7 @@ DepthMap DenseDepth(const std::vector<ProjectedPoint>& points, const ImageU8& im
       out.confidence.at(x, y) = 1.0f - 0.6f * std::sqrt(best_r2) / R;
       if (!rgb || best_r2 <= options.nearest_within_px * options.nearest_within_px) {
         out.depth.at(x, y) = nn_depth;
+        out.ground.at(x, y) = nn_ground;
         continue;
       }
       // The spatial scale follows the local point spacing: colour arbitrates between surfaces whose points are
@@ -267,21 +269,24 @@ DepthMap DenseDepth(const std::vector<ProjectedPoint>& points, const ImageU8& im
       const auto mid = std::partition(votes.begin(), votes.end(), [](const Vote& v) { return !v.ground; });
       std::sort(votes.begin(), mid, [](const Vote& a, const Vote& b) { return a.depth < b.depth; });
       double best_score = 0, best_inv = 0;
+      bool best_ground = false;
       double w = 0, k = 0, ki = 0;
-      const auto consider = [&] {
-        if (w > best_score && k > 0) best_score = w, best_inv = ki / k;
+      const auto consider = [&](bool ground) {
+        if (w > best_score && k > 0) best_score = w, best_inv = ki / k, best_ground = ground;
         w = k = ki = 0;
       };
       for (auto it = votes.begin(); it != mid; ++it) {
-        if (it != votes.begin() && it->depth > (it - 1)->depth * (1 + options.cluster_rel)) consider();
+        if (it != votes.begin() && it->depth > (it - 1)->depth * (1 + options.cluster_rel)) consider(false);
         w = std::max(w, it->weight);
         k += it->near, ki += it->near / it->depth;
       }
-      consider();
+      consider(false);
       for (auto it = mid; it != votes.end(); ++it) w = std::max(w, it->weight), k += it->near, ki += it->near / it->depth;
-      consider();
-      if (best_score > 1e-30) depth = static_cast<float>(1.0 / best_inv);
+      consider(true);
+      bool ground = nn_ground;
+      if (best_score > 1e-30) depth = static_cast<float>(1.0 / best_inv), ground = best_ground;
       out.depth.at(x, y) = depth;
+      out.ground.at(x, y) = ground;
     }
   });
 
@@ -308,6 +313,7 @@ DepthMap DenseDepth(const std::vector<ProjectedPoint>& points, const ImageU8& im
       if (std::isfinite(d)) {
         out.depth.at(x, y) = d;
         out.confidence.at(x, y) = static_cast<float>(options.surface_confidence);
+        out.ground.at(x, y) = 1;
       }
     }
   });
@@ -327,6 +333,7 @@ ImageF DenseVisibility(const DepthMap& scene, const ImageU8& image, const ImageF
   if (x1 < 0) return vis;
   const auto hidden = [&](int x, int y, float d) {
     const double tol = std::max(options.tol_abs, options.tol_rel * d);
+    if (!options.ground_occludes && !scene.ground.empty() && scene.ground.at(x, y)) return false;
     return scene.confidence.at(x, y) >= options.min_confidence && scene.depth.at(x, y) < d - tol;
   };
   for (int y = y0; y <= y1; ++y)

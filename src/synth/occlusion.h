@@ -91,6 +91,7 @@ struct DepthPriors {
 struct DepthMap {
   ImageF depth;       // metres along the camera z axis; +inf where nothing is known (sky, beyond every prior)
   ImageF confidence;  // 0..1: LiDAR 1 at a kept point, falling with the distance to the points that voted; priors fixed
+  ImageU8 ground;     // 1 where the depth is the road's (the LiDAR ground surface or the surface prior); may be empty
 };
 
 // Drops points the camera cannot see (the visibility filter above). Keeps the input order.
@@ -108,6 +109,10 @@ struct VisibleMaskOptions {
   double min_confidence = 0.3;           // scene depth less trusted than this never hides anything
   int guide_radius = 2;       // window (pixels) the occluder and background colours are taken from; 0: hard edges
   double min_contrast = 24;   // 0..255 RGB distance below which the two colours are too alike to matte
+  // The road hides nothing by default (as in ComputeVisibility): objects stand on it, and at a grazing view a
+  // few centimetres of road height error move its depth by decimetres (5 cm at 15 m from a camera 1.5 m up:
+  // 0.5 m), enough to cut the feet off every object. Only DepthMap::ground pixels are exempt.
+  bool ground_occludes = false;
 };
 
 // Visibility (0..1) of each pixel of an inserted object: `object_depth` (metres along z, +inf off the object),

@@ -100,15 +100,35 @@ TEST(DenseDepth, BoxAndRoadPriorsFillWhereTheLidarIsSilent) {
   // Box face at x = 10 m; the camera's principal ray passes 0.75 m above the box's centre height: inside.
   EXPECT_NEAR(d.depth.at(100, 60), 10.0f, 1e-3f);
   EXPECT_NEAR(d.confidence.at(100, 60), 0.5f, 1e-6f);
+  EXPECT_EQ(d.ground.at(100, 60), 0) << "a box is not road";
   // Road: depth = f h / (v - cy) along the ray through pixel centre (v = y + 0.5).
   for (int y : {75, 90, 119}) {
     const double v = y + 0.5;
     EXPECT_NEAR(d.depth.at(20, y), 100 * 1.5 / (v - 60), 1e-3) << y;
     EXPECT_NEAR(d.confidence.at(20, y), 0.35f, 1e-6f);
+    EXPECT_EQ(d.ground.at(20, y), 1) << y;
   }
   // Sky: nothing.
   EXPECT_EQ(d.depth.at(20, 10), kInf);
   EXPECT_EQ(d.confidence.at(20, 10), 0.0f);
+}
+
+TEST(DenseDepth, MarksWhereTheDepthIsTheRoads) {
+  // Ground points in the lower half, an obstacle's points in the upper half: the map says which is which, from
+  // the nearest point and from the winning cluster alike; the road prior counts as road, a box as not.
+  EdgeScene s = MakeEdgeScene();
+  for (auto& p : s.points) p.ground = p.v > 40;
+  const PinholeCamera cam = SmallCamera(120, 80);
+  for (const bool edge_aware : {true, false}) {
+    DenseDepthOptions o;
+    o.edge_aware = edge_aware;
+    const DepthMap d = DenseDepth(s.points, s.image, cam, Rigid3d(), {}, o);
+    ASSERT_EQ(d.ground.width(), 120);
+    EXPECT_EQ(d.ground.at(10, 5), 0) << edge_aware;
+    EXPECT_EQ(d.ground.at(10, 75), 1) << edge_aware;
+    EXPECT_EQ(d.ground.at(100, 68), 1) << edge_aware;  // between rings: interpolated inside the ground cluster
+    EXPECT_EQ(d.ground.at(100, 20), 0) << edge_aware;
+  }
 }
 
 TEST(VisibleMask, OccluderEdgeAcrossAPixelGivesFractionalVisibility) {
@@ -118,7 +138,7 @@ TEST(VisibleMask, OccluderEdgeAcrossAPixelGivesFractionalVisibility) {
   for (int y = 0; y < 80; ++y)
     for (int x = 0; x < 120; ++x)
       for (int c = 0; c < 3; ++c) image.at(x, y, c) = x < 60 ? 40 : (x == 60 ? 120 : 200);
-  DepthMap scene{ImageF(120, 80, 1, 30.0f), ImageF(120, 80, 1, 1.0f)};
+  DepthMap scene{ImageF(120, 80, 1, 30.0f), ImageF(120, 80, 1, 1.0f), ImageU8()};
   for (int y = 0; y < 80; ++y)
     for (int x = 0; x < 61; ++x) scene.depth.at(x, y) = 5.0f;  // the densified map says column 60 is occluder
   ImageF object_depth(120, 80, 1, kInf), coverage(120, 80, 1, 0.0f);
@@ -137,9 +157,28 @@ TEST(VisibleMask, OccluderEdgeAcrossAPixelGivesFractionalVisibility) {
   }
   EXPECT_EQ(mask.at(10, 10), 0.0f);  // off the object
   // Far real geometry never hides the object.
-  DepthMap far{ImageF(120, 80, 1, 30.0f), ImageF(120, 80, 1, 1.0f)};
+  DepthMap far{ImageF(120, 80, 1, 30.0f), ImageF(120, 80, 1, 1.0f), ImageU8()};
   const ImageF all = VisibleMask(far, image, object_depth, coverage);
   EXPECT_EQ(all.vector(), coverage.vector());
+}
+
+TEST(VisibleMask, TheRoadHidesNothingUnlessAsked) {
+  // A road whose depth map is 0.5 m short of an object standing on it 15 m away (5 cm of height error at a
+  // grazing view): the object keeps its feet. Non-road geometry at the same depth hides it.
+  DepthMap scene{ImageF(120, 80, 1, 14.5f), ImageF(120, 80, 1, 1.0f), ImageU8(120, 80, 1, 0)};
+  for (int y = 40; y < 80; ++y)
+    for (int x = 0; x < 120; ++x) scene.ground.at(x, y) = 1;
+  ImageF object_depth(120, 80, 1, kInf);
+  for (int y = 20; y < 60; ++y)
+    for (int x = 30; x < 90; ++x) object_depth.at(x, y) = 15.0f;
+  VisibleMaskOptions o;
+  o.tol_abs = 0.3;
+  o.tol_rel = 0.01;
+  const ImageF vis = DenseVisibility(scene, ImageU8(), object_depth, o);
+  EXPECT_EQ(vis.at(50, 30), 0.0f) << "a real obstacle 0.5 m in front hides";
+  EXPECT_EQ(vis.at(50, 50), 1.0f) << "the road does not";
+  o.ground_occludes = true;
+  EXPECT_EQ(DenseVisibility(scene, ImageU8(), object_depth, o).at(50, 50), 0.0f);
 }
 
 // ---- Measurements on real frames ------------------------------------------------------------------------------

@@ -131,6 +131,7 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
         const float cos_sun = std::max(0.0f, f.n_shade.dot(sun_dir));
 
         if (hit.mesh == receiver) {
+          if (!options.receiver_shadow) continue;
           // Light the real road got (no objects) vs what it gets now; visibility ignores the road itself.
           const bool sun_visible = cos_sun > 0 && !scene.Occluded(f.p_offset, sun_dir, 0.0f, inf, receiver);
           int sky_with = 0, sky_without = 0;

@@ -35,6 +35,7 @@ struct CameraRenderOptions {
   int samples_per_pixel = 4;   // stratified sub-pixel samples (anti-aliased edges); perfect square preferred
   int ao_samples = 16;         // hemisphere rays for sky visibility per shaded sample
   int receiver_mesh = -1;      // mesh id of the road receiver (shadows only, never drawn); -1 = none
+  bool receiver_shadow = true; // false: the receiver only blocks rays (shadow stays 1): for callers that shade it themselves
   // Pixel rectangle to render [x0, x1) x [y0, y1); outside it the result is "no object, no shadow".
   // Default (all zero) = the whole image.
   int x0 = 0, y0 = 0, x1 = 0, y1 = 0;

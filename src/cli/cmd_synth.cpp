@@ -19,6 +19,8 @@ Runner AddSynthCommand(CLI::App& app) {
   auto merge = std::make_shared<bool>(false);
   auto dry_run = std::make_shared<bool>(false);
   auto no_lidar_realism = std::make_shared<bool>(false);
+  auto light = std::make_shared<std::string>("environment");
+  auto occlusion = std::make_shared<std::string>("dense");
   app.add_option("--log", req->log, "Driving log: a dataset root (nuScenes tables, KITTI) or an info file (mmdet3d .json)")
       ->required();
   app.add_option("--asset", req->assets,
@@ -48,9 +50,22 @@ Runner AddSynthCommand(CLI::App& app) {
   app.add_flag("--no-lidar-realism", *no_lidar_realism,
                "Insert into the LiDAR sweep with the ideal sensor (no model fitted from the sweep: no range noise, "
                "dropout, fitted intensity or rolling shutter; docs/lidar.md): the output synth wrote before realism");
+  app.add_option("--light", *light,
+                 "Light on the objects: environment (HDR map stitched from the frame's cameras, soft shadows; "
+                 "docs/lighting.md) or road (one sun and sky per camera from the road; faster)")
+      ->check(CLI::IsMember({"environment", "road"}));
+  app.add_option("--occlusion", *occlusion,
+                 "Hiding objects behind real geometry: dense (edge-aware depth from the sweep, matted edges; "
+                 "docs/occlusion.md) or sparse (per LiDAR ring)")
+      ->check(CLI::IsMember({"dense", "sparse"}));
+  app.add_option("--harmonizer", req->options.harmonizer,
+                 "Colour harmonisation after compositing: none, classical, auto (the installed learned model, else "
+                 "classical) or a TorchScript file (docs/models.md)");
   return [=]() {
     SynthRequest r = *req;
     r.options.lidar_realism = !*no_lidar_realism;
+    r.options.light = *light == "road" ? SynthOptions::Light::kRoad : SynthOptions::Light::kEnvironment;
+    r.options.dense_occlusion = *occlusion == "dense";
     if (*format == "kitti") r.log_options.format = LogFormat::kKitti;
     else if (*format == "nuscenes") r.log_options.format = LogFormat::kNuScenesTables;
     else if (*format == "mmdet3d") r.log_options.format.reset();  // v1 vs v0 is probed from the file

@@ -19,10 +19,13 @@
 #include "io/image_io.h"
 #include "io/json.h"
 #include "io/pointcloud_io.h"
+#include "models/harmonization.h"
 #include "render/camera_render.h"
 #include "render/ray_scene.h"
 #include "synth/lidar_sim.h"
+#include "synth/environment.h"
 #include "synth/lighting.h"
+#include "synth/object_light.h"
 #include "synth/occlusion.h"
 #include "synth/report.h"
 #include "synth/road_surface.h"
@@ -183,6 +186,37 @@ std::optional<std::pair<Rigid3d, Rigid3d>> NeighbourSweepPoses(const Log& log, s
                                 reference_time);
 }
 
+// Shadow rays over the sun's disk per road pixel: soft edges without visible noise at 4 samples per pixel.
+constexpr int kShadowSunRays = 8;
+
+std::string Fixed(double v, int digits) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*f", digits, v);
+  return buf;
+}
+
+std::string EnvironmentSummary(const EnvironmentMap& env) {
+  Msg m;
+  m << "environment map " << env.width() << "x" << env.height() << ": sun " << env.sun_source << ", "
+    << (env.sun_road_contrast > 0 ? "sun/sky from real shadows (road contrast " + Fixed(env.sun_road_contrast, 2) + ")"
+                                  : std::string("default sun/sky split"))
+    << ", seam error " << Fixed(env.seam_error_before, 2) << " -> " << Fixed(env.seam_error_after, 2);
+  return m;
+}
+
+// The classical harmoniser as synth uses it: colour cast and a little chroma, no lightness transfer (see
+// SynthOptions::harmonizer).
+models::HarmonizeOptions SynthHarmonizeOptions() {
+  models::HarmonizeOptions o;
+  o.lightness_strength = 0.0f;
+  return o;
+}
+
+models::Harmonizer ResolveSynthHarmonizer(const std::string& choice) {
+  if (choice == "classical") return models::Harmonizer::Classical(SynthHarmonizeOptions());
+  return models::Harmonizer::Resolve(choice, {}, SynthHarmonizeOptions());
+}
+
 int NuScenesVisibility(double fraction) {
   if (fraction < 0.4) return 1;
   if (fraction < 0.6) return 2;
@@ -228,10 +262,43 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
     placed = PlaceObjects(frame_scenario, assets, pin);
   }
 
-  // Scene in the ego frame: objects, then one receiver mesh for shadows.
+  // Camera images, read once; the environment map stitches the whole rig, the road light only needs the
+  // cameras that see the objects.
+  std::vector<std::optional<ImageU8>> images(frame.cameras.size());
+  const auto image_of = [&](size_t k) -> const ImageU8& {
+    if (!images[k]) {
+      const CameraSensor& cam = frame.cameras[k];
+      images[k] = ReadImage(cam.image_path, 3);
+      if (images[k]->width() != cam.intrinsics.width || images[k]->height() != cam.intrinsics.height)
+        throw InputError(cam.image_path, Msg() << "image is " << images[k]->width() << "x" << images[k]->height()
+                                               << " but the calibration says " << cam.intrinsics.width << "x"
+                                               << cam.intrinsics.height);
+    }
+    return *images[k];
+  };
+
+  // Light: the sun, and the environment map it is checked against.
   std::string sun_source;
-  const Eigen::Vector3d sun_dir = SunDirectionEgo(frame, scenario.location ? scenario.location : log.location, scenario.sun, &sun_source);
+  Eigen::Vector3d sun_dir = SunDirectionEgo(frame, scenario.location ? scenario.location : log.location, scenario.sun, &sun_source);
+  std::optional<EnvironmentMap> env;
+  if (options.light == SynthOptions::Light::kEnvironment && !placed.empty()) {
+    std::vector<ImageU8> rig;
+    for (size_t k = 0; k < frame.cameras.size(); ++k) rig.push_back(image_of(k));
+    EnvironmentOptions eo;
+    eo.ephemeris_sun_ego = sun_dir;
+    eo.detect_sun_in_images = !scenario.sun;  // a scenario's sun is the user's word
+    env = BuildEnvironmentMap(frame, rig, eo);
+    if (env->sun_source != "ephemeris") {
+      sun_dir = env->sun_direction;
+      sun_source = env->sun_source;
+    }
+    out.light = EnvironmentSummary(*env);
+  } else {
+    out.light = options.light == SynthOptions::Light::kRoad ? "road calibration per camera" : "no objects";
+  }
   out.sun_source = sun_source;
+
+  // Scene in the ego frame: objects, then one receiver mesh for shadows.
   RayScene scene;
   auto receiver = std::make_shared<TriangleMesh>();
   for (const auto& o : placed) {
@@ -258,45 +325,68 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
     oc.label.annotation.velocity = Eigen::Vector2d::Zero();
   }
 
+  std::shared_ptr<const models::Harmonizer> harmonizer = options.harmonizer_model;
+  if (!harmonizer && options.harmonizer != "none" && !placed.empty())
+    harmonizer = std::make_shared<const models::Harmonizer>(ResolveSynthHarmonizer(options.harmonizer));
+
   // Cameras.
   std::vector<uint8_t> is_ground(points_ego.size(), 0);
   for (int i : ground.ground_indices()) is_ground[i] = 1;
   const std::vector<Eigen::Vector3d> road_points = RoadPointsNear(ground, placed);
+  const PlaneSurface ground_plane(ground.seed_plane().normal, ground.seed_plane().d);
   // Everything a camera may need to redraw: the objects' boxes and their shadow receivers.
   std::vector<Eigen::Vector3d> extent_points;
   for (const auto& o : placed)
     for (const auto& c : o.box.Corners()) extent_points.push_back(c);
   for (const auto& p : receiver->positions) extent_points.push_back(p.cast<double>());
-  for (const auto& cam : frame.cameras) {
+  for (size_t cam_index = 0; cam_index < frame.cameras.size(); ++cam_index) {
+    const CameraSensor& cam = frame.cameras[cam_index];
     const Rigid3d T_cam_ego = cam.T_ego_cam.Inverse();
     const auto rect = ProjectedRect(cam.intrinsics, T_cam_ego, extent_points, 2);
     if (!rect) continue;
 
-    const ImageU8 original = ReadImage(cam.image_path, 3);
-    if (original.width() != cam.intrinsics.width || original.height() != cam.intrinsics.height)
-      throw InputError(cam.image_path, Msg() << "image is " << original.width() << "x" << original.height()
-                                             << " but the calibration says " << cam.intrinsics.width << "x" << cam.intrinsics.height);
+    const ImageU8& original = image_of(cam_index);
     ImageF linear = ToLinear(original);
-    const Lighting lighting = CalibrateLighting(linear, cam, road_points, sun_dir);
+    std::optional<ObjectLight> object_light;
+    Lighting lighting;
+    if (env) {
+      object_light = LightAtObjects(*env, cam_index, cam, linear, road_points);
+      lighting = object_light->lighting;
+    } else {
+      lighting = CalibrateLighting(linear, cam, road_points, sun_dir);
+    }
     CameraRenderOptions ropt;
     ropt.samples_per_pixel = options.samples_per_pixel;
     ropt.ao_samples = options.ao_samples;
     ropt.receiver_mesh = receiver_id;
+    ropt.receiver_shadow = !object_light;  // the map's light shades the road below (ReceiverShadowImage)
     ropt.x0 = (*rect)[0];
     ropt.y0 = (*rect)[1];
     ropt.x1 = (*rect)[2];
     ropt.y1 = (*rect)[3];
     ropt.seed = scenario.seed + static_cast<uint32_t>(frame_index);
     const CameraRender render = RenderCamera(scene, cam.intrinsics, cam.T_ego_cam, lighting, ropt);
+    // The renderer's hard, one-ray shadow is the road light's; the map's light has a sun disk and a sky with
+    // bright and dark sides.
+    ImageF shadow = render.shadow;
+    if (object_light) {
+      EnvShadingOptions so;
+      so.sun_rays = kShadowSunRays;
+      so.sky_rays = options.ao_samples;
+      so.seed = ropt.seed;
+      so.skip_mesh = receiver_id;
+      shadow = ReceiverShadowImage(scene, cam.intrinsics, cam.T_ego_cam, receiver_id, object_light->shading, so, ropt.x0,
+                                   ropt.y0, ropt.x1, ropt.y1);
+    }
 
+    // Occlusion by the real scene: of the objects, and of the road their shadows fall on (the ground under a
+    // shadow must not be hidden by a real object).
     const auto projected = ProjectPoints(points_ego, is_ground, cam.intrinsics, T_cam_ego);
-    const ImageF visibility = ComputeVisibility(projected, render.depth);
-    // Receiver visibility for shadows: the ground under the shadow must not be hidden by a real object.
     ImageF receiver_depth(render.depth.width(), render.depth.height(), 1, std::numeric_limits<float>::infinity());
     const GroundPlane& plane = ground.seed_plane();
     for (int y = ropt.y0; y < ropt.y1; ++y)
       for (int x = ropt.x0; x < ropt.x1; ++x) {
-        if (render.shadow.at(x, y) >= 0.999f) continue;
+        if (shadow.at(x, y) >= 0.999f) continue;
         const Eigen::Vector3d d_cam = cam.intrinsics.RayDirection(Eigen::Vector2d(x + 0.5, y + 0.5));
         const Eigen::Vector3d o = cam.T_ego_cam.translation, d = cam.T_ego_cam.rotation * d_cam;
         const double denom = plane.normal.dot(d);
@@ -304,20 +394,38 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
         const double t = -(plane.normal.dot(o) + plane.d) / denom;
         if (t > 0) receiver_depth.at(x, y) = static_cast<float>(t * d_cam.z());
       }
-    const ImageF receiver_visibility = ComputeVisibility(projected, receiver_depth);
+    ImageF visibility, receiver_visibility;
+    if (options.dense_occlusion) {
+      DepthPriors priors;
+      priors.boxes_ego = real_boxes;
+      priors.surface = &ground_plane;  // ego frame: T_world_ego stays identity
+      const DepthMap scene_depth = DenseDepth(projected, original, cam.intrinsics, T_cam_ego, priors);
+      visibility = DenseVisibility(scene_depth, original, render.depth);
+      receiver_visibility = DenseVisibility(scene_depth, original, receiver_depth);
+    } else {
+      visibility = ComputeVisibility(projected, render.depth);
+      receiver_visibility = ComputeVisibility(projected, receiver_depth);
+    }
 
+    // Composite in linear light: objects over the photo, the photo darkened by their shadows.
     bool changed = false;
+    ImageF object_alpha(linear.width(), linear.height(), 1, 0.0f);
+    ImageF shadow_only_loss(linear.width(), linear.height(), 3, 0.0f);  // what the shadows took from the photo
     std::vector<double> rendered(placed.size(), 0), visible(placed.size(), 0);
     std::vector<Box2> boxes(placed.size(), Box2{1e9, 1e9, -1e9, -1e9});
     for (int y = ropt.y0; y < ropt.y1; ++y)
       for (int x = ropt.x0; x < ropt.x1; ++x) {
         const float a = render.coverage.at(x, y);
         const float vis = visibility.at(x, y);
-        const float shadow = receiver_visibility.at(x, y) > 0.5f ? render.shadow.at(x, y) : 1.0f;
-        if (a <= 0 && shadow >= 1.0f) continue;
+        const float shade = receiver_visibility.at(x, y) > 0.5f ? shadow.at(x, y) : 1.0f;
+        if (a <= 0 && shade >= 1.0f) continue;
         const float av = a * vis;
+        object_alpha.at(x, y) = av;
         float* px = linear.pixel(x, y);
-        for (int c = 0; c < 3; ++c) px[c] = render.color.at(x, y, c) * vis + px[c] * (1 - av) * shadow;
+        for (int c = 0; c < 3; ++c) {
+          shadow_only_loss.at(x, y, c) = px[c] * (1 - av) * (1 - shade);
+          px[c] = render.color.at(x, y, c) * vis + px[c] * (1 - av);  // shadows are taken away below
+        }
         changed = true;
         const int id = render.object.at(x, y);
         if (id >= 0 && id < static_cast<int>(placed.size()) && a >= 0.5f) {
@@ -333,10 +441,44 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
         }
       }
     if (!changed) continue;
+    // Harmonisation sees the objects over the unshadowed photo (their own shadow would otherwise count as the
+    // surroundings they are matched to), one object at a time; the shadows are applied after it.
+    std::string harmonized;
+    if (harmonizer) {
+      ImageF composite(linear.width(), linear.height(), 3);
+      for (size_t i = 0; i < linear.size(); ++i) composite.data()[i] = LinearToSrgb(std::clamp(linear.data()[i], 0.0f, 1.0f));
+      int objects_harmonized = 0;
+      for (size_t k = 0; k < placed.size(); ++k) {
+        if (visible[k] < 4) continue;
+        ImageF mask(linear.width(), linear.height(), 1, 0.0f);
+        for (int y = ropt.y0; y < ropt.y1; ++y)
+          for (int x = ropt.x0; x < ropt.x1; ++x)
+            if (render.object.at(x, y) == static_cast<int>(k)) mask.at(x, y) = object_alpha.at(x, y);
+        composite = harmonizer->Harmonize(composite, mask);
+        ++objects_harmonized;
+      }
+      // Back to linear only where an object is: elsewhere the harmoniser returned the composite bit for bit,
+      // and the round trip through sRGB would not be.
+      for (int y = ropt.y0; y < ropt.y1; ++y)
+        for (int x = ropt.x0; x < ropt.x1; ++x)
+          if (object_alpha.at(x, y) > 0)
+            for (int c = 0; c < 3; ++c) linear.at(x, y, c) = SrgbToLinear(composite.at(x, y, c));
+      harmonized = Msg() << "; harmonised: " << objects_harmonized << " object(s) (" << (harmonizer->learned() ? "learned" : "classical") << ")";
+    }
+    for (int y = ropt.y0; y < ropt.y1; ++y)
+      for (int x = ropt.x0; x < ropt.x1; ++x)
+        for (int c = 0; c < 3; ++c) linear.at(x, y, c) = std::max(0.0f, linear.at(x, y, c) - shadow_only_loss.at(x, y, c));
     CameraOutcome co;
     co.channel = cam.channel;
     co.before = original;
     co.after = ToSrgb8(linear);
+    if (object_light) {
+      co.light = Msg() << "sun visibility " << Fixed(object_light->sun_visibility, 2) << ", scale " << Fixed(object_light->scale, 2)
+                       << " (" << object_light->road_samples << " road pixels)";
+    } else {
+      co.light = "road calibration";
+    }
+    co.light += harmonized;
     for (size_t k = 0; k < placed.size(); ++k) {
       out.objects[k].rendered_pixels += rendered[k];
       out.objects[k].visible_pixels += visible[k];
@@ -420,6 +562,7 @@ struct SynthInputs {
   Scenario scenario;
   std::vector<size_t> selected;  // frame indices, in the order the user named them
   json fingerprint;              // what a part's content depends on (see RequestFingerprint)
+  std::shared_ptr<const models::Harmonizer> harmonizer;  // resolved once; null for "none" and dry runs
   bool world_fixed = false;      // the scenario is planned once per sequence (PlanSynthesis)
   SynthPlan plan;                // when world_fixed (or a dry run)
   const SequencePlan* PlanFor(size_t frame_index) const {
@@ -458,6 +601,9 @@ json RequestFingerprint(const SynthRequest& request, const std::vector<Asset>& a
   j["samples_per_pixel"] = request.options.samples_per_pixel;
   j["ao_samples"] = request.options.ao_samples;
   j["lidar_realism"] = request.options.lidar_realism;
+  j["light"] = request.options.light == SynthOptions::Light::kEnvironment ? "environment" : "road";
+  j["dense_occlusion"] = request.options.dense_occlusion;
+  j["harmonizer"] = request.options.harmonizer;
   return j;
 }
 
@@ -520,6 +666,10 @@ SynthInputs LoadInputs(const SynthRequest& request, bool dry_run = false) {
   }
   if (in.selected.empty()) throw InputError(request.log, "log has no frames");
   in.fingerprint = RequestFingerprint(request, in.assets);
+  if (!dry_run && request.options.harmonizer != "none") {
+    in.harmonizer = std::make_shared<const models::Harmonizer>(ResolveSynthHarmonizer(request.options.harmonizer));
+    SD_LOG(Info, "harmoniser: " << in.harmonizer->Describe());
+  }
   in.world_fixed = WorldFixedScenario(in.scenario);
   if (in.world_fixed || dry_run) {
     in.plan = PlanSynthesis(in.log, in.selected, in.scenario, in.assets, request.scenario, !dry_run);
@@ -622,7 +772,7 @@ AddedObject AddedFrom(const JsonReader& r) {
   return o;
 }
 
-constexpr int kPartVersion = 1;
+constexpr int kPartVersion = 2;
 
 // A part: part.json (the request fingerprint, the frame, the labels and everything synth.json and the report
 // need) + images/<channel>.png (replacement images, lossless, re-encoded by WriteDerivative exactly as a local
@@ -638,7 +788,7 @@ void WritePart(const fs::path& dir, const FrameOutcome& o, const SynthInputs& in
     SD_CHECK(it != o.edit.images.end(), << co.channel);
     const std::string file = "images/" + std::to_string(c) + ".png";
     WriteImage(dir / file, it->second);
-    cameras.push_back({{"channel", co.channel}, {"image", file}, {"objects", co.objects}});
+    cameras.push_back({{"channel", co.channel}, {"image", file}, {"objects", co.objects}, {"light", co.light}});
   }
   json sweep = nullptr;
   if (o.edit.points) {
@@ -667,6 +817,7 @@ void WritePart(const fs::path& dir, const FrameOutcome& o, const SynthInputs& in
             {"request", in.fingerprint},
             {"frame", {{"index", o.frame_index}, {"token", in.log.frames[o.frame_index].token}}},
             {"sun", o.sun_source},
+            {"light", o.light},
             {"objects", objects},
             {"cameras", cameras},
             {"sweep", sweep},
@@ -709,6 +860,7 @@ FrameOutcome ReadPart(const fs::path& dir, size_t frame_index, const SynthInputs
   o.frame_index = frame_index;
   o.edit.frame_index = frame_index;
   o.sun_source = r["sun"].String();
+  o.light = r["light"].String();
   std::map<std::string, const Asset*> by_id;
   for (const Asset& a : in.assets) by_id[a.info.id] = &a;
   for (size_t k = 0; k < r["objects"].Size(); ++k) {
@@ -733,6 +885,7 @@ FrameOutcome ReadPart(const fs::path& dir, size_t frame_index, const SynthInputs
     const JsonReader rc = r["cameras"][c];
     CameraOutcome co;
     co.channel = rc["channel"].String();
+    co.light = rc["light"].String();
     const CameraSensor* cam = frame.FindCamera(co.channel);
     if (!cam) rc["channel"].Fail("the log's frame has no such camera");
     co.after = ReadImage(dir / rc["image"].String(), 3);
@@ -819,7 +972,9 @@ ShardRun SynthesizeParts(const SynthInputs& in, const SynthRequest& request, con
       line["error"] = "";
     } else {
       try {
-        const FrameOutcome outcome = SynthesizeFrame(in.log, fi, in.assets, in.scenario, request.options, in.PlanFor(fi));
+        SynthOptions frame_options = request.options;
+        frame_options.harmonizer_model = in.harmonizer;
+        const FrameOutcome outcome = SynthesizeFrame(in.log, fi, in.assets, in.scenario, frame_options, in.PlanFor(fi));
         StagingDirectory staging(part, false);
         WritePart(staging.path(), outcome, in, request.options);
         staging.Commit();
@@ -870,6 +1025,9 @@ SynthSummary WriteSynthOutput(const SynthInputs& in, const SynthRequest& request
     nlohmann::json jf;
     jf["token"] = log.frames[o.frame_index].token;
     jf["sun"] = o.sun_source;
+    jf["light"] = o.light;
+    jf["camera_light"] = nlohmann::json::object();
+    for (const auto& co : o.cameras) jf["camera_light"][co.channel] = co.light;
     jf["lidar_model"] = o.lidar_model;  // LidarModel::Summary() of the frame's sweep, or "off"
     jf["lidar_ego_motion"] = o.lidar_ego_motion;
     jf["objects"] = nlohmann::json::array();

@@ -8,6 +8,7 @@
 // "shard 0/1, then merge" (RunSynth), so shards + merge write the same bytes as a local run by construction.
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -24,6 +25,9 @@
 #include "synth/sequence_plan.h"
 
 namespace sd {
+namespace models {
+class Harmonizer;
+}
 
 struct SynthOptions {
   int samples_per_pixel = 4;
@@ -37,6 +41,25 @@ struct SynthOptions {
   // its range noise, dropout, intensity and (where neighbouring frames give the ego's motion) rolling-shutter
   // skew. false (`--no-lidar-realism`): the ideal sensor, byte for byte what synth wrote before realism existed.
   bool lidar_realism = true;
+  // Light on the objects (docs/lighting.md). kEnvironment: an HDR environment map stitched from the frame's
+  // cameras (sun from the images or the ephemeris, fitted sky, each camera's exposure and white balance), the
+  // level and the shade at the objects from the real road next to them (synth/object_light.h), soft sun shadows
+  // and radiance-weighted ambient occlusion on the road. kRoad: one sun and one uniform sky per camera from the
+  // road next to the objects (synth/lighting.h), hard shadows; faster (no map).
+  enum class Light { kEnvironment, kRoad };
+  Light light = Light::kEnvironment;
+  // Occlusion by real geometry (docs/occlusion.md). true: dense, edge-aware depth per camera from the sweep with
+  // the annotated boxes and the ground as priors, occluder edges matted from the photograph. false: the sparse
+  // per-ring test (ComputeVisibility).
+  bool dense_occlusion = true;
+  // Harmonisation after compositing (models/harmonization.h): "none", "classical", "auto" (the installed
+  // learned model when there is one, else classical) or a TorchScript file. The classical path moves the colour
+  // cast and a little chroma only: the light already sets the object's exposure, and a lightness transfer
+  // cannot tell exposure from albedo (it would grey a white car on dark asphalt).
+  std::string harmonizer = "classical";
+  // The resolved harmoniser (RunSynth resolves `harmonizer` once per run, so a model loads once). Null: the
+  // frame resolves `harmonizer` itself.
+  std::shared_ptr<const models::Harmonizer> harmonizer_model;
   // Tests only: called while a part is half written (its images and sweep are in the staging folder, its
   // part.json is not), so a test can kill the process mid-part.
   std::function<void(size_t frame_index, const std::filesystem::path& staging)> part_written_hook;
@@ -62,6 +85,7 @@ struct ObjectOutcome {
 
 struct CameraOutcome {
   std::string channel;
+  std::string light;  // for people: the light at the objects in this camera (sun visibility, scale), harmoniser
   ImageU8 before, after;  // only for cameras the objects touch
   std::vector<int> objects;  // indices into FrameOutcome::objects drawn in this camera
 };
@@ -73,6 +97,7 @@ struct FrameOutcome {
   std::vector<CameraOutcome> cameras;
   GroundModel ground;
   std::string sun_source;
+  std::string light;  // for people: the light model of the frame (environment map: sun, sun/sky split, seams)
   PointCloud sweep_before;  // sensor frame
   std::vector<std::pair<int, int>> lidar_object_points;  // (point index in edit.points, object index)
   // The LiDAR model the frame was simulated with: LidarModel::Summary(), or "off" (lidar_realism false, an

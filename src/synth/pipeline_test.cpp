@@ -63,8 +63,13 @@ class PipelineTest : public ::testing::Test {
     SynthOptions ideal;
     ideal.lidar_realism = false;
     ideal_ = new FrameOutcome(SynthesizeFrame(*log_, 0, *assets_, *scenario_, ideal));
+    // The same, not harmonised: what harmonisation changed.
+    SynthOptions unharmonised;
+    unharmonised.harmonizer = "none";
+    unharmonised_ = new FrameOutcome(SynthesizeFrame(*log_, 0, *assets_, *scenario_, unharmonised));
   }
   static void TearDownTestSuite() {
+    delete unharmonised_;
     delete ideal_;
     delete outcome_;
     delete scenario_;
@@ -78,6 +83,7 @@ class PipelineTest : public ::testing::Test {
   static Scenario* scenario_;
   static FrameOutcome* outcome_;
   static FrameOutcome* ideal_;
+  static FrameOutcome* unharmonised_;
 };
 testing::TempDir* PipelineTest::dir_ = nullptr;
 Log* PipelineTest::log_ = nullptr;
@@ -85,6 +91,7 @@ std::vector<Asset>* PipelineTest::assets_ = nullptr;
 Scenario* PipelineTest::scenario_ = nullptr;
 FrameOutcome* PipelineTest::outcome_ = nullptr;
 FrameOutcome* PipelineTest::ideal_ = nullptr;
+FrameOutcome* PipelineTest::unharmonised_ = nullptr;
 
 // Distance from a point (ego frame) to an outcome's object mesh k.
 double DistanceToObject(const FrameOutcome& o, int k, const Eigen::Vector3d& p) {
@@ -345,6 +352,75 @@ TEST_F(PipelineTest, SameSeedSameResult) {
     EXPECT_TRUE(again.objects[i].placement.box.center().isApprox(outcome_->objects[i].placement.box.center(), 1e-12));
   EXPECT_EQ(again.edit.points->data, outcome_->edit.points->data);  // realism's noise and dropout are seeded
   EXPECT_EQ(again.lidar_model, outcome_->lidar_model);
+  ASSERT_EQ(again.cameras.size(), outcome_->cameras.size());
+  for (size_t c = 0; c < again.cameras.size(); ++c)  // soft shadows and AO are seeded per pixel
+    EXPECT_EQ(again.cameras[c].after.vector(), outcome_->cameras[c].after.vector()) << again.cameras[c].channel;
+}
+
+TEST_F(PipelineTest, EnvironmentLightIsRecordedPerFrameAndCamera) {
+  EXPECT_EQ(outcome_->light.rfind("environment map 512x256: sun ", 0), 0u) << outcome_->light;
+  EXPECT_NE(outcome_->light.find("seam error"), std::string::npos) << outcome_->light;
+  ASSERT_FALSE(outcome_->cameras.empty());
+  for (const auto& co : outcome_->cameras) {
+    EXPECT_EQ(co.light.rfind("sun visibility ", 0), 0u) << co.channel << ": " << co.light;
+    EXPECT_NE(co.light.find("road pixels"), std::string::npos) << co.light;
+  }
+}
+
+TEST_F(PipelineTest, ObjectsInFrontOfEveryRealOneAreFullyVisible) {
+  // The road never hides an object standing on it (a few centimetres of road height error at a grazing view
+  // would cut its feet off): an object with no real object nearer to the camera across its camera box keeps
+  // (almost) all its pixels.
+  const Frame& f = log_->frames[0];
+  int checked = 0;
+  for (const auto& ob : outcome_->objects)
+    for (const CameraBox& cb : ob.label.camera_boxes) {
+      const CameraSensor* cam = f.FindCamera(cb.channel);
+      ASSERT_NE(cam, nullptr);
+      const Rigid3d T_cam_ego = cam->T_ego_cam.Inverse();
+      const double depth = (T_cam_ego * ob.placement.box.center()).z();
+      bool occluder = false;
+      for (const auto& a : f.annotations) {
+        double u0 = 1e18, v0 = 1e18, u1 = -1e18, v1 = -1e18, near = 1e18;
+        for (const auto& c : a.box.Corners()) {
+          const Eigen::Vector3d p = T_cam_ego * c;
+          near = std::min(near, p.z());
+          const auto uv = cam->intrinsics.Project(p, 0.1);
+          if (!uv) continue;
+          u0 = std::min(u0, uv->x()), v0 = std::min(v0, uv->y()), u1 = std::max(u1, uv->x()), v1 = std::max(v1, uv->y());
+        }
+        if (near < depth && u0 < cb.box.x2 && cb.box.x1 < u1 && v0 < cb.box.y2 && cb.box.y1 < v1) occluder = true;
+      }
+      if (occluder) continue;
+      EXPECT_GT(cb.visible_fraction, 0.97) << ob.label.category << " in " << cb.channel;
+      ++checked;
+    }
+  EXPECT_GE(checked, 3);
+}
+
+TEST_F(PipelineTest, HarmonisationChangesTheObjectsOnly) {
+  ASSERT_EQ(unharmonised_->cameras.size(), outcome_->cameras.size());
+  size_t changed = 0;
+  for (size_t c = 0; c < outcome_->cameras.size(); ++c) {
+    const CameraOutcome& h = outcome_->cameras[c];
+    const CameraOutcome& u = unharmonised_->cameras[c];
+    ASSERT_EQ(h.channel, u.channel);
+    EXPECT_NE(h.light.find("harmonised"), std::string::npos) << h.light;
+    EXPECT_EQ(u.light.find("harmonised"), std::string::npos) << u.light;
+    for (int y = 0; y < h.after.height(); ++y)
+      for (int x = 0; x < h.after.width(); ++x) {
+        bool differs = false;
+        for (int k = 0; k < 3; ++k) differs |= h.after.at(x, y, k) != u.after.at(x, y, k);
+        if (!differs) continue;
+        ++changed;
+        bool on_object = false;  // within 2 px of an object's visible box in this camera
+        for (const auto& ob : outcome_->objects)
+          for (const CameraBox& cb : ob.label.camera_boxes)
+            on_object |= cb.channel == h.channel && x >= cb.box.x1 - 2 && x < cb.box.x2 + 2 && y >= cb.box.y1 - 2 && y < cb.box.y2 + 2;
+        ASSERT_TRUE(on_object) << h.channel << " pixel " << x << "," << y << " changed off every object";
+      }
+  }
+  EXPECT_GT(changed, 0u) << "harmonisation changed nothing";
 }
 
 TEST_F(PipelineTest, ImpossibleScenarioIsAnErrorNamingTheObject) {

@@ -127,10 +127,15 @@ void WriteSynthReport(const Log& log, const std::vector<FrameOutcome>& frames, c
           "figcaption{font-size:12px;color:#aaa}</style></head><body>";
   html << "<h1>SynthDrive synthesis report</h1><p>Log: " << Escape(log.source.string()) << " (" << ToString(log.format)
        << "). Green: visible 2D box of an inserted object; yellow: its 3D box; blue: real annotations.</p>";
+  // World-fixed runs write the sequence plan beside this report.
+  if (fs::exists(html_path.parent_path() / "plan.html"))
+    html << "<p>Placement plan of the sequence(s): <a href='plan.html'>plan.html</a></p>";
   int img_id = 0;
   for (const auto& o : frames) {
     const Frame& frame = log.frames[o.frame_index];
-    html << "<h2>Frame " << Escape(frame.token) << "</h2><p>Sun: " << Escape(o.sun_source) << "</p>";
+    html << "<h2>Frame " << Escape(frame.token) << "</h2><p>Sun: " << Escape(o.sun_source) << "<br>Light: " << Escape(o.light)
+         << "<br>LiDAR model: " << Escape(o.lidar_model) << (o.lidar_ego_motion ? " (ego motion during the sweep)" : "")
+         << "</p>";
     html << "<table><tr><th>#</th><th>asset</th><th>category</th><th>centre (ego, m)</th><th>size (m)</th>"
             "<th>yaw (deg)</th><th>LiDAR points</th><th>visible</th><th>cameras</th></tr>";
     for (size_t k = 0; k < o.objects.size(); ++k) {
@@ -163,7 +168,7 @@ void WriteSynthReport(const Log& log, const std::vector<FrameOutcome>& frames, c
       const int factor = before.width() > 1000 ? 2 : 1;
       WriteImage(dir / b_name, factor > 1 ? Downscale(before, factor) : before, 88);
       WriteImage(dir / a_name, factor > 1 ? Downscale(after, factor) : after, 88);
-      html << "<h3>" << co.channel << "</h3><div class='pair'><figure><img src='report/" << b_name
+      html << "<h3>" << co.channel << "</h3><p>" << Escape(co.light) << "</p><div class='pair'><figure><img src='report/" << b_name
            << "'><figcaption>before (real annotations)</figcaption></figure><figure><img src='report/" << a_name
            << "'><figcaption>after</figcaption></figure></div>";
     }

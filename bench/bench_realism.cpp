@@ -1,7 +1,10 @@
 // Realism of inserted objects against the real thing (issue 8): each annotated real cone / barrier / car of the
 // repo's nuScenes keyframe (data/driving/nuscenes-scene0061-kf0, mmdet3d info) and, when ../shared is present,
 // of the KITTI frames (../shared/data/driving/kitti-object-openpcdet) is replaced by the demo asset of its
-// category, scaled per axis to the annotated box and placed at it. Then:
+// category, scaled per axis to the annotated box and placed at it. Barriers are evaluated twice: with the demo's
+// MetaDrive road barrier (an open sawhorse barricade; category "barrier", as before) and with the solid New Jersey
+// concrete barrier of data/assets/procedural_jersey_barrier (tools/assets/make_jersey_barrier.py; reported as
+// "barrier (solid)", and left out of the "all" medians so that those keep one mesh per object). Then:
 //  - LiDAR: every beam of the real sweep (sensor origin -> each real return) is cast at the mesh alone
 //    (render/lidar_cast.h CastLidarRays). A hit is a simulated point when the real beam was not blocked before
 //    it: its real return lies inside the box (grown 0.2 m) or beyond the simulated range - 0.2 m. Beams that
@@ -50,12 +53,26 @@ namespace fs = std::filesystem;
 
 using sd::bench::FindRepoRoot;
 
+// One mesh an annotated object of `category` is replaced by; `label` is the category column of the tables and
+// the JSON ("barrier (solid)" for the extra barrier mesh, else the category itself).
+struct BenchMesh {
+  std::string category, label, asset;
+  sd::TriangleMesh mesh;
+  bool Extra() const { return label != category; }
+};
+
 // The demo's meshes canonicalised in memory, as the demo imports them (src/cli/cmd_demo.cpp): y-up, the cone
-// scaled to 0.7 m, the barrier and the car in metres. Canonical frame: x front, y left, z up.
-std::map<std::string, sd::TriangleMesh> LoadDemoMeshes(const fs::path& data) {
-  std::map<std::string, sd::TriangleMesh> out;
-  for (const sd::bench::DemoMesh& m : sd::bench::DemoMeshes())
-    out[m.category] = sd::Canonicalize(sd::LoadMesh(data / m.mesh), m.Options()).mesh;
+// scaled to 0.7 m, the barrier and the car in metres; then the jersey barrier (y-up, metres, its front = the
+// file's +x, the faces toward traffic: like the MetaDrive barrier, the thin side is the front, as the nuScenes
+// boxes' length is). Canonical frame: x front, y left, z up.
+std::vector<BenchMesh> LoadBenchMeshes(const fs::path& data) {
+  std::vector<BenchMesh> out;
+  auto add = [&](const sd::bench::DemoMesh& m, const std::string& label) {
+    out.push_back({m.category, label, m.id, sd::Canonicalize(sd::LoadMesh(data / m.mesh), m.Options()).mesh});
+  };
+  for (const sd::bench::DemoMesh& m : sd::bench::DemoMeshes()) add(m, m.category);
+  add({"assets/procedural_jersey_barrier/jersey_barrier.obj", "procedural_jersey_barrier", "barrier", "+x", 1.0, 0},
+      "barrier (solid)");
   return out;
 }
 
@@ -102,7 +119,8 @@ struct CameraResult {
 };
 
 struct ObjectResult {
-  std::string dataset, frame, category, token;
+  std::string dataset, frame, category, asset, token;  // category: BenchMesh::label
+  bool extra = false;                                 // BenchMesh::Extra(): not in the "all" medians
   double distance = 0;
   int real_points = 0, sim_points = 0;
   double count_ratio = std::numeric_limits<double>::quiet_NaN();
@@ -115,8 +133,8 @@ bool AboveBottom(const sd::Box3& box, const Eigen::Vector3d& p_ego) {
   return q.z() > -0.5 * box.size.z() + 0.05;
 }
 
-void EvaluateFrame(const std::string& dataset, const sd::Frame& frame,
-                   const std::map<std::string, sd::TriangleMesh>& meshes, std::vector<ObjectResult>& results) {
+void EvaluateFrame(const std::string& dataset, const sd::Frame& frame, const std::vector<BenchMesh>& meshes,
+                   std::vector<ObjectResult>& results) {
   if (!frame.lidar) return;
   const sd::PointCloud sweep = sd::ReadLidar(*frame.lidar);
   const Eigen::Vector3d origin_ego = frame.lidar->T_ego_lidar.translation;
@@ -132,96 +150,99 @@ void EvaluateFrame(const std::string& dataset, const sd::Frame& frame,
   for (const auto& ann : frame.annotations) {
     const auto cat = sd::FindCategory(ann.category);
     if (!cat) continue;
-    const auto mesh_it = meshes.find(cat->name);
-    if (mesh_it == meshes.end()) continue;
-    ObjectResult r;
-    r.dataset = dataset;
-    r.frame = frame.token;
-    r.category = cat->name;
-    r.token = ann.token;
-    r.distance = (ann.box.center() - origin_ego).head<2>().norm();
+    for (const BenchMesh& bench_mesh : meshes) {
+      if (bench_mesh.category != cat->name) continue;
+      ObjectResult r;
+      r.dataset = dataset;
+      r.frame = frame.token;
+      r.category = bench_mesh.label;
+      r.asset = bench_mesh.asset;
+      r.extra = bench_mesh.Extra();
+      r.token = ann.token;
+      r.distance = (ann.box.center() - origin_ego).head<2>().norm();
 
-    auto mesh = std::make_shared<const sd::TriangleMesh>(MeshAtBox(mesh_it->second, ann.box));
-    sd::RayScene scene;
-    scene.AddMesh(mesh);
-    scene.Commit();
+      auto mesh = std::make_shared<const sd::TriangleMesh>(MeshAtBox(bench_mesh.mesh, ann.box));
+      sd::RayScene scene;
+      scene.AddMesh(mesh);
+      scene.Commit();
 
-    // Real points on the object.
-    std::vector<Eigen::Vector3d> real, sim;
-    for (const auto& p : points)
-      if (ann.box.Contains(p) && AboveBottom(ann.box, p)) real.push_back(p);
-    // Simulated: the real beams that reach the mesh unblocked. Only beams towards the box's neighbourhood are
-    // cast (a cheap angular prefilter: the box's bounding sphere seen from the sensor).
-    const Eigen::Vector3d to_box = ann.box.center() - origin_ego;
-    const double radius = 0.5 * ann.box.size.norm() + 0.5;
-    const double dist = to_box.norm();
-    const double cos_max = dist > radius ? std::cos(std::asin(radius / dist)) : -1.0;
-    const Eigen::Vector3d axis = to_box / std::max(dist, 1e-9);
-    std::vector<size_t> idx;
-    std::vector<Eigen::Vector3f> cast_dirs;
-    for (size_t i = 0; i < dirs.size(); ++i)
-      if (dirs[i].cast<double>().dot(axis) >= cos_max) {
-        idx.push_back(i);
-        cast_dirs.push_back(dirs[i]);
+      // Real points on the object.
+      std::vector<Eigen::Vector3d> real, sim;
+      for (const auto& p : points)
+        if (ann.box.Contains(p) && AboveBottom(ann.box, p)) real.push_back(p);
+      // Simulated: the real beams that reach the mesh unblocked. Only beams towards the box's neighbourhood are
+      // cast (a cheap angular prefilter: the box's bounding sphere seen from the sensor).
+      const Eigen::Vector3d to_box = ann.box.center() - origin_ego;
+      const double radius = 0.5 * ann.box.size.norm() + 0.5;
+      const double dist = to_box.norm();
+      const double cos_max = dist > radius ? std::cos(std::asin(radius / dist)) : -1.0;
+      const Eigen::Vector3d axis = to_box / std::max(dist, 1e-9);
+      std::vector<size_t> idx;
+      std::vector<Eigen::Vector3f> cast_dirs;
+      for (size_t i = 0; i < dirs.size(); ++i)
+        if (dirs[i].cast<double>().dot(axis) >= cos_max) {
+          idx.push_back(i);
+          cast_dirs.push_back(dirs[i]);
+        }
+      const auto hits = sd::CastLidarRays(scene, origin_ego.cast<float>(), cast_dirs, 200.0f);
+      for (size_t k = 0; k < hits.size(); ++k) {
+        if (!hits[k].hit) continue;
+        const size_t i = idx[k];
+        const bool unblocked = ann.box.Contains(points[i], 0.2) || ranges[i] >= hits[k].range - 0.2;
+        const Eigen::Vector3d p = hits[k].point.cast<double>();
+        if (unblocked && AboveBottom(ann.box, p)) sim.push_back(p);
       }
-    const auto hits = sd::CastLidarRays(scene, origin_ego.cast<float>(), cast_dirs, 200.0f);
-    for (size_t k = 0; k < hits.size(); ++k) {
-      if (!hits[k].hit) continue;
-      const size_t i = idx[k];
-      const bool unblocked = ann.box.Contains(points[i], 0.2) || ranges[i] >= hits[k].range - 0.2;
-      const Eigen::Vector3d p = hits[k].point.cast<double>();
-      if (unblocked && AboveBottom(ann.box, p)) sim.push_back(p);
-    }
-    r.real_points = static_cast<int>(real.size());
-    r.sim_points = static_cast<int>(sim.size());
-    if (!real.empty()) r.count_ratio = static_cast<double>(sim.size()) / static_cast<double>(real.size());
-    if (!real.empty() && !sim.empty()) r.chamfer = 0.5 * (MeanNearest(real, sim) + MeanNearest(sim, real));
+      r.real_points = static_cast<int>(real.size());
+      r.sim_points = static_cast<int>(sim.size());
+      if (!real.empty()) r.count_ratio = static_cast<double>(sim.size()) / static_cast<double>(real.size());
+      if (!real.empty() && !sim.empty()) r.chamfer = 0.5 * (MeanNearest(real, sim) + MeanNearest(sim, real));
 
-    // Cameras with a dataset 2D box.
-    for (const auto& [channel, real_box] : ann.box2d_by_camera) {
-      const sd::CameraSensor* cam = frame.FindCamera(channel);
-      if (!cam || real_box.Empty()) continue;
-      const sd::Rigid3d T_cam_ego = cam->T_ego_cam.Inverse();
-      const auto corners = ann.box.Corners();
-      bool straddles = false;
-      for (const auto& c : corners) straddles |= (T_cam_ego * c).z() <= 1e-3;
-      double box_iou = std::numeric_limits<double>::quiet_NaN();
-      sd::CameraRenderOptions ro;
-      ro.samples_per_pixel = 1;
-      ro.ao_samples = 0;
-      if (!straddles) {
-        const auto rect = sd::ProjectedRect(cam->intrinsics, T_cam_ego,
-                                            std::vector<Eigen::Vector3d>(corners.begin(), corners.end()), 2);
-        if (!rect) continue;
-        const auto tight = sd::ProjectedRect(cam->intrinsics, T_cam_ego,
-                                             std::vector<Eigen::Vector3d>(corners.begin(), corners.end()), 0);
-        if (tight) box_iou = sd::IoU(sd::Box2{double((*tight)[0]), double((*tight)[1]), double((*tight)[2]),
-                                              double((*tight)[3])},
-                                     real_box);
-        ro.x0 = (*rect)[0];
-        ro.y0 = (*rect)[1];
-        ro.x1 = (*rect)[2];
-        ro.y1 = (*rect)[3];
+      // Cameras with a dataset 2D box.
+      for (const auto& [channel, real_box] : ann.box2d_by_camera) {
+        const sd::CameraSensor* cam = frame.FindCamera(channel);
+        if (!cam || real_box.Empty()) continue;
+        const sd::Rigid3d T_cam_ego = cam->T_ego_cam.Inverse();
+        const auto corners = ann.box.Corners();
+        bool straddles = false;
+        for (const auto& c : corners) straddles |= (T_cam_ego * c).z() <= 1e-3;
+        double box_iou = std::numeric_limits<double>::quiet_NaN();
+        sd::CameraRenderOptions ro;
+        ro.samples_per_pixel = 1;
+        ro.ao_samples = 0;
+        if (!straddles) {
+          const auto rect = sd::ProjectedRect(cam->intrinsics, T_cam_ego,
+                                              std::vector<Eigen::Vector3d>(corners.begin(), corners.end()), 2);
+          if (!rect) continue;
+          const auto tight = sd::ProjectedRect(cam->intrinsics, T_cam_ego,
+                                               std::vector<Eigen::Vector3d>(corners.begin(), corners.end()), 0);
+          if (tight) box_iou = sd::IoU(sd::Box2{double((*tight)[0]), double((*tight)[1]), double((*tight)[2]),
+                                                double((*tight)[3])},
+                                       real_box);
+          ro.x0 = (*rect)[0];
+          ro.y0 = (*rect)[1];
+          ro.x1 = (*rect)[2];
+          ro.y1 = (*rect)[3];
+        }
+        const sd::CameraRender render = sd::RenderCamera(scene, cam->intrinsics, cam->T_ego_cam, sd::Lighting{}, ro);
+        int x1 = std::numeric_limits<int>::max(), y1 = x1, x2 = -1, y2 = -1;
+        for (int y = 0; y < render.object.height(); ++y)
+          for (int x = 0; x < render.object.width(); ++x)
+            if (render.object.at(x, y) >= 0) {
+              x1 = std::min(x1, x);
+              y1 = std::min(y1, y);
+              x2 = std::max(x2, x + 1);
+              y2 = std::max(y2, y + 1);
+            }
+        CameraResult c;
+        c.camera = channel;
+        c.real = real_box;
+        if (x2 >= 0) c.rendered = sd::Box2{double(x1), double(y1), double(x2), double(y2)};
+        c.iou = sd::IoU(c.rendered, real_box);
+        c.box_iou = box_iou;
+        r.cameras.push_back(c);
       }
-      const sd::CameraRender render = sd::RenderCamera(scene, cam->intrinsics, cam->T_ego_cam, sd::Lighting{}, ro);
-      int x1 = std::numeric_limits<int>::max(), y1 = x1, x2 = -1, y2 = -1;
-      for (int y = 0; y < render.object.height(); ++y)
-        for (int x = 0; x < render.object.width(); ++x)
-          if (render.object.at(x, y) >= 0) {
-            x1 = std::min(x1, x);
-            y1 = std::min(y1, y);
-            x2 = std::max(x2, x + 1);
-            y2 = std::max(y2, y + 1);
-          }
-      CameraResult c;
-      c.camera = channel;
-      c.real = real_box;
-      if (x2 >= 0) c.rendered = sd::Box2{double(x1), double(y1), double(x2), double(y2)};
-      c.iou = sd::IoU(c.rendered, real_box);
-      c.box_iou = box_iou;
-      r.cameras.push_back(c);
+      results.push_back(std::move(r));
     }
-    results.push_back(std::move(r));
   }
 }
 
@@ -250,7 +271,7 @@ int main(int argc, char** argv) {
   if (out_path.empty()) out_path = *root / "bench" / "results" / "realism.json";
   sd::SetLogLevel(sd::LogLevel::kWarn);
   try {
-    const auto meshes = LoadDemoMeshes(*root / "data");
+    const auto meshes = LoadBenchMeshes(*root / "data");
     std::vector<ObjectResult> results;
     const sd::Log nus =
         sd::OpenLog(*root / "data/driving/nuscenes-scene0061-kf0/mmdet3d_info/n015-2018-07-24-11-22-45+0800.json");
@@ -263,7 +284,7 @@ int main(int argc, char** argv) {
       std::printf("(KITTI skipped: %s)\n", kitti ? "../shared/data/driving/kitti-object-openpcdet not found" : "--no-kitti");
     }
 
-    std::printf("%-8s %-7s %-12s %6s %5s %5s %6s %8s  %s\n", "dataset", "frame", "category", "dist_m", "real",
+    std::printf("%-8s %-7s %-15s %6s %5s %5s %6s %8s  %s\n", "dataset", "frame", "category", "dist_m", "real",
                 "sim", "ratio", "chamf_m", "2D IoU per camera");
     nlohmann::json objects = nlohmann::json::array();
     struct Agg { std::vector<double> ratio, chamfer, iou, box_iou; int n = 0; };
@@ -271,10 +292,10 @@ int main(int argc, char** argv) {
     for (const auto& r : results) {
       std::string cams;
       nlohmann::json jc = nlohmann::json::array();
-      Agg& a = agg[{r.dataset, r.category}];
-      Agg& all = agg[{r.dataset, "all"}];
-      ++a.n;
-      ++all.n;
+      // The extra barrier mesh's rows count in their own category only: "all" keeps one mesh per object.
+      std::vector<Agg*> into = {&agg[{r.dataset, r.category}]};
+      if (!r.extra) into.push_back(&agg[{r.dataset, "all"}]);
+      for (Agg* a : into) ++a->n;
       for (const auto& c : r.cameras) {
         char buf[96];
         std::snprintf(buf, sizeof buf, "%s=%.2f ", c.camera.c_str(), c.iou);
@@ -286,34 +307,30 @@ int main(int argc, char** argv) {
                                                                             c.rendered.x2, c.rendered.y2})},
                       {"iou", c.iou},
                       {"box_projection_iou", Num(c.box_iou)}});
-        a.iou.push_back(c.iou);
-        all.iou.push_back(c.iou);
-        if (std::isfinite(c.box_iou)) {
-          a.box_iou.push_back(c.box_iou);
-          all.box_iou.push_back(c.box_iou);
+        for (Agg* a : into) {
+          a->iou.push_back(c.iou);
+          if (std::isfinite(c.box_iou)) a->box_iou.push_back(c.box_iou);
         }
       }
-      std::printf("%-8s %-7.7s %-12s %6.1f %5d %5d %6.2f %8.3f  %s\n", r.dataset.c_str(), r.frame.c_str(),
+      std::printf("%-8s %-7.7s %-15s %6.1f %5d %5d %6.2f %8.3f  %s\n", r.dataset.c_str(), r.frame.c_str(),
                   r.category.c_str(), r.distance, r.real_points, r.sim_points, r.count_ratio, r.chamfer, cams.c_str());
       // Medians over objects with enough real points for the LiDAR figures to mean something.
-      if (r.real_points >= 5) {
-        a.ratio.push_back(r.count_ratio);
-        all.ratio.push_back(r.count_ratio);
-        if (std::isfinite(r.chamfer)) {
-          a.chamfer.push_back(r.chamfer);
-          all.chamfer.push_back(r.chamfer);
+      if (r.real_points >= 5)
+        for (Agg* a : into) {
+          a->ratio.push_back(r.count_ratio);
+          if (std::isfinite(r.chamfer)) a->chamfer.push_back(r.chamfer);
         }
-      }
-      objects.push_back({{"dataset", r.dataset}, {"frame", r.frame}, {"category", r.category}, {"token", r.token},
-                         {"distance_m", r.distance}, {"real_points", r.real_points}, {"sim_points", r.sim_points},
+      objects.push_back({{"dataset", r.dataset}, {"frame", r.frame}, {"category", r.category}, {"asset", r.asset},
+                         {"token", r.token}, {"distance_m", r.distance}, {"real_points", r.real_points},
+                         {"sim_points", r.sim_points},
                          {"count_ratio", Num(r.count_ratio)}, {"chamfer_m", Num(r.chamfer)}, {"cameras", jc}});
     }
     std::printf("\nMedians (LiDAR over objects with >= 5 real points; IoU over every object-camera pair):\n");
-    std::printf("%-8s %-12s %5s %8s %11s %9s %8s %9s %9s\n", "dataset", "category", "objs", "lidar_n", "count_ratio",
+    std::printf("%-8s %-15s %5s %8s %11s %9s %8s %9s %9s\n", "dataset", "category", "objs", "lidar_n", "count_ratio",
                 "chamfer_m", "cam_n", "2D_IoU", "boxprj_IoU");
     nlohmann::json medians = nlohmann::json::array();
     for (const auto& [key, a] : agg) {
-      std::printf("%-8s %-12s %5d %8zu %11.2f %9.3f %8zu %9.2f %9.2f\n", key.first.c_str(), key.second.c_str(), a.n,
+      std::printf("%-8s %-15s %5d %8zu %11.2f %9.3f %8zu %9.2f %9.2f\n", key.first.c_str(), key.second.c_str(), a.n,
                   a.ratio.size(), Median(a.ratio), Median(a.chamfer), a.iou.size(), Median(a.iou), Median(a.box_iou));
       medians.push_back({{"dataset", key.first}, {"category", key.second}, {"objects", a.n},
                          {"lidar_objects", a.ratio.size()}, {"median_count_ratio", Num(Median(a.ratio))},
@@ -321,9 +338,10 @@ int main(int argc, char** argv) {
                          {"median_iou", Num(Median(a.iou))},
                          {"median_box_projection_iou", Num(Median(a.box_iou))}});
     }
+    nlohmann::json assets = nlohmann::json::object();  // category column -> asset id
+    for (const BenchMesh& m : meshes) assets[m.label] = m.asset;
     nlohmann::json doc = {{"benchmark", "bench_realism"},
-                          {"assets", {{"traffic_cone", "metadrive_traffic_cone"}, {"barrier", "metadrive_road_barrier"},
-                                      {"car", "torcs_p406"}}},
+                          {"assets", assets},
                           {"medians", medians},
                           {"objects", objects}};
     fs::create_directories(out_path.parent_path());

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <exception>
 #include <limits>
+#include <optional>
 
 #include <Eigen/Dense>
 
@@ -173,11 +174,21 @@ bool SegmentHitsBox(const Eigen::Vector3d& o, const Eigen::Vector3d& p, const Bo
   return true;
 }
 
+// Distance from p to the segment [a, b] (2D).
+double SegmentDistance(const Eigen::Vector2d& p, const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+  const Eigen::Vector2d ab = b - a;
+  const double len2 = ab.squaredNorm();
+  const double t = len2 > 0 ? std::clamp((p - a).dot(ab) / len2, 0.0, 1.0) : 0.0;
+  return (p - (a + t * ab)).norm();
+}
+
 std::vector<GroundPatch> SampleGroundPatches(const Frame& frame, const std::vector<ImageF>& linear, const ShadowCheckOptions& opt) {
-  std::vector<GroundPatch> patches;
-  for (size_t ai = 0; ai < frame.annotations.size(); ++ai) {
+  // One patch per annotation, in parallel; each cell tests only the boxes that can reach it (the answers are
+  // those of testing every box: the others are farther than their bounding circle).
+  std::vector<std::optional<GroundPatch>> slots(frame.annotations.size());
+  ParallelFor(0, frame.annotations.size(), [&](size_t ai) {
     const Box3& box = frame.annotations[ai].box;
-    if (box.size.z() < opt.min_height_m || box.center().head<2>().norm() > opt.max_distance_m) continue;
+    if (box.size.z() < opt.min_height_m || box.center().head<2>().norm() > opt.max_distance_m) return;
     // The camera that sees the box centre nearest its image centre.
     int best = -1;
     double best_r = 1e9;
@@ -188,7 +199,7 @@ std::vector<GroundPatch> SampleGroundPatches(const Frame& frame, const std::vect
       const double r = std::hypot(uv->x() / cam.intrinsics.width - 0.5, uv->y() / cam.intrinsics.height - 0.5);
       if (r < best_r) best_r = r, best = static_cast<int>(k);
     }
-    if (best < 0) continue;
+    if (best < 0) return;
     const auto& cam = frame.cameras[best];
     const Rigid3d T_cam_ego = cam.T_ego_cam.Inverse();
     GroundPatch g;
@@ -203,20 +214,32 @@ std::vector<GroundPatch> SampleGroundPatches(const Frame& frame, const std::vect
     g.origin = box.center().head<2>() - Eigen::Vector2d::Constant(reach);
     g.lum.assign(static_cast<size_t>(g.n) * g.n, std::numeric_limits<float>::quiet_NaN());
     const Eigen::Vector3d cam_o = cam.T_ego_cam.translation;
+    // Candidates: boxes (bounding circle, margins included) overlapping the patch square, and boxes near the
+    // sight lines from the camera to it (within the square's half-diagonal of the line to its centre).
+    const Eigen::Vector2d centre = box.center().head<2>();
+    const double half_diagonal = std::sqrt(2.0) * (g.n * g.cell / 2 + g.cell);  // cell centres lie within it
+    std::vector<size_t> under, between;
+    for (size_t bi = 0; bi < frame.annotations.size(); ++bi) {
+      const Box3& b = frame.annotations[bi].box;
+      const double radius = 0.5 * b.size.norm() + std::sqrt(2.0) * std::max(opt.footprint_margin_m, 0.05) + g.cell;
+      const Eigen::Vector2d c = b.center().head<2>();
+      if ((c - centre).norm() <= half_diagonal + radius) under.push_back(bi);
+      if (SegmentDistance(c, cam_o.head<2>(), centre) <= half_diagonal + radius) between.push_back(bi);
+    }
     for (int j = 0; j < g.n; ++j)
       for (int i = 0; i < g.n; ++i) {
         const Eigen::Vector3d p(g.origin.x() + (i + 0.5) * g.cell, g.origin.y() + (j + 0.5) * g.cell, g.z);
         bool blocked = false;
-        for (const auto& a : frame.annotations)
-          if (a.box.Contains(p + Eigen::Vector3d(0, 0, 0.05), &a == &frame.annotations[ai] ? opt.footprint_margin_m : 0.05)) {
+        for (size_t bi : under)
+          if (frame.annotations[bi].box.Contains(p + Eigen::Vector3d(0, 0, 0.05), bi == ai ? opt.footprint_margin_m : 0.05)) {
             blocked = true;
             break;
           }
         if (blocked) continue;
         const auto uv = cam.intrinsics.Project(T_cam_ego * p, 0.5);
         if (!uv || !cam.intrinsics.InImage(*uv)) continue;
-        for (const auto& a : frame.annotations)
-          if (SegmentHitsBox(cam_o, p + Eigen::Vector3d(0, 0, 0.02), a.box, 0.05)) {
+        for (size_t bi : between)
+          if (SegmentHitsBox(cam_o, p + Eigen::Vector3d(0, 0, 0.02), frame.annotations[bi].box, 0.05)) {
             blocked = true;
             break;
           }
@@ -225,8 +248,11 @@ std::vector<GroundPatch> SampleGroundPatches(const Frame& frame, const std::vect
         SampleBilinear(linear[best], uv->x(), uv->y(), rgb);
         g.lum[static_cast<size_t>(j) * g.n + i] = Luma(rgb);
       }
-    patches.push_back(std::move(g));
-  }
+    slots[ai] = std::move(g);
+  });
+  std::vector<GroundPatch> patches;
+  for (auto& slot : slots)
+    if (slot) patches.push_back(std::move(*slot));
   return patches;
 }
 
@@ -630,6 +656,8 @@ EnvironmentMap BuildEnvironmentMap(const Frame& frame, const std::vector<ImageU8
         for (int c = 0; c < 3; ++c) p[q * linear[k].channels() + c] *= gains[k][c];
     }
     const ShadowCheck check = CheckSunAgainstShadows(frame, linear, map.sun_direction);
+    map.shadow_objects = static_cast<int>(check.boxes.size());
+    map.shadow_agreement = check.agreement;
     std::vector<double> ratios;
     for (const auto& b : check.boxes)
       if (b.Ratio() > 1.0) ratios.push_back(b.Ratio());

@@ -87,6 +87,10 @@ struct EnvironmentMap {
   Eigen::Vector3f sun_irradiance = Eigen::Vector3f::Zero();
   double sun_angular_radius_rad = 0;
   double sun_road_contrast = 0;        // measured lit/shadow road ratio (0 = none measured, default split used)
+  // The sun checked against the real shadows of annotated objects (CheckSunAgainstShadows): how many objects
+  // could be judged, and the share of them whose predicted shadow is darker than its mirror image.
+  int shadow_objects = 0;
+  double shadow_agreement = 0;
   std::vector<CameraGain> gains;       // parallel to frame.cameras
   // Median relative luminance difference |Y_i - Y_j| / mean(Y_i, Y_j) over all overlap pixels, with unit
   // gains and with the estimated gains; overlap_pixels = how many map pixels entered it.

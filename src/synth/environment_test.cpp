@@ -443,6 +443,12 @@ TEST_F(KeyframeTest, SunIntensityAndRendererLighting) {
   // shadows underestimates it (their polygons mix shade and light; here ~2 against ~3.9 between the sunlit and
   // the building-shaded road of CAM_FRONT), so only the order of magnitude is pinned.
   EXPECT_GT(m.sun_road_contrast, 1.0 / EnvironmentOptions{}.shadow_sky_visibility);
+  // The map keeps its check of the sun against the real shadows (on gain-corrected images): at least the three
+  // objects the contrast needs, and more agreeing than not.
+  std::cout << "[figures] map's shadow check: " << m.shadow_objects << " objects, agreement " << m.shadow_agreement << "\n";
+  EXPECT_GE(m.shadow_objects, 3);
+  EXPECT_GT(m.shadow_agreement, 0.5);
+  EXPECT_LE(m.shadow_agreement, 1.0);
   EXPECT_GT(direct_over_sky, 0.3);
   EXPECT_LT(direct_over_sky, 8.0);
   // The renderer's two-term light per camera reproduces the map's upward irradiance in that camera's units.

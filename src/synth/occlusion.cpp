@@ -194,6 +194,9 @@ DepthMap DenseDepth(const std::vector<ProjectedPoint>& points, const ImageU8& im
                                << image.channels() << " but the camera is " << W << "x" << H << " RGB");
   if (options.max_fill_px < 1 || !(options.sigma_space_px > 0) || !(options.sigma_color > 0) || !(options.cluster_rel > 0))
     throw InputError({}, "dense depth: max_fill_px, sigma_space_px, sigma_color and cluster_rel must be positive");
+  const bool whole = options.x0 == 0 && options.y0 == 0 && options.x1 == 0 && options.y1 == 0;
+  const int rx0 = whole ? 0 : std::clamp(options.x0, 0, W), rx1 = whole ? W : std::clamp(options.x1, 0, W);
+  const int ry0 = whole ? 0 : std::clamp(options.y0, 0, H), ry1 = whole ? H : std::clamp(options.y1, 0, H);
 
   const std::vector<ProjectedPoint> kept = FilterHiddenPoints(points, W, H, options);
   // One candidate per pixel: its nearest kept point.
@@ -221,12 +224,12 @@ DepthMap DenseDepth(const std::vector<ProjectedPoint>& points, const ImageU8& im
   DepthMap out{ImageF(W, H, 1, kInf), ImageF(W, H, 1, 0.0f), ImageU8(W, H, 1, 0)};
   const float R = static_cast<float>(options.max_fill_px), R2 = R * R;
   const double inv_sc = 1.0 / (2 * options.sigma_color * options.sigma_color);
-  ParallelFor(0, static_cast<size_t>(H), [&](size_t yi) {
+  ParallelFor(static_cast<size_t>(ry0), static_cast<size_t>(ry1), [&](size_t yi) {
     const int y = static_cast<int>(yi);
     const float pv = y + 0.5f;
     std::vector<Vote> votes;
     const int cy0 = std::max(0, static_cast<int>((pv - R) / kCell)), cy1 = std::min(gh - 1, static_cast<int>((pv + R) / kCell));
-    for (int x = 0; x < W; ++x) {
+    for (int x = rx0; x < rx1; ++x) {
       const float pu = x + 0.5f;
       const int cx0 = std::max(0, static_cast<int>((pu - R) / kCell)), cx1 = std::min(gw - 1, static_cast<int>((pu + R) / kCell));
       votes.clear();
@@ -296,9 +299,9 @@ DepthMap DenseDepth(const std::vector<ProjectedPoint>& points, const ImageU8& im
   const Rigid3d T_world_cam = priors.T_world_ego * T_ego_cam;
   std::vector<std::pair<Rigid3d, Eigen::Vector3d>> boxes;  // T_box_cam, half size
   for (const auto& b : priors.boxes_ego) boxes.push_back({(T_cam_ego * b.T_frame_box).Inverse(), 0.5 * b.size});
-  ParallelFor(0, static_cast<size_t>(H), [&](size_t yi) {
+  ParallelFor(static_cast<size_t>(ry0), static_cast<size_t>(ry1), [&](size_t yi) {
     const int y = static_cast<int>(yi);
-    for (int x = 0; x < W; ++x) {
+    for (int x = rx0; x < rx1; ++x) {
       if (out.confidence.at(x, y) > 0) continue;
       const Eigen::Vector3d dir = camera.RayDirection(Eigen::Vector2d(x + 0.5, y + 0.5));
       float d = kInf;

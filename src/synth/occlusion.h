@@ -76,6 +76,9 @@ struct DenseDepthOptions {
   double nearest_within_px = 4.0;
   double cluster_rel = 0.06;    // neighbouring candidate depths within this relative step form one surface
   bool edge_aware = true;       // false: plain nearest-neighbour fill (the baseline the figures compare with)
+  // Pixel rectangle [x0, x1) x [y0, y1) to fill (all zero: the whole image); outside it depth is +inf and
+  // confidence 0. Points outside it still count for the pixels inside (the result inside is the same).
+  int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
   double box_confidence = 0.5;      // of depth from the annotated boxes' faces
   double surface_confidence = 0.35; // of depth from the road surface
 };

@@ -113,6 +113,30 @@ TEST(DenseDepth, BoxAndRoadPriorsFillWhereTheLidarIsSilent) {
   EXPECT_EQ(d.confidence.at(20, 10), 0.0f);
 }
 
+TEST(DenseDepth, ARectangleGivesTheWholeImagesValuesInsideIt) {
+  EdgeScene s = MakeEdgeScene();
+  for (auto& p : s.points) p.ground = p.v > 40;
+  const PinholeCamera cam = SmallCamera(120, 80);
+  DepthPriors priors;
+  const PlaneSurface road(Eigen::Vector3d(0, -1, 0), 3);  // some prior, so that its fill is compared too
+  priors.surface = &road;
+  DenseDepthOptions o;
+  const DepthMap whole = DenseDepth(s.points, s.image, cam, Rigid3d(), priors, o);
+  o.x0 = 50, o.y0 = 30, o.x1 = 75, o.y1 = 80;
+  const DepthMap part = DenseDepth(s.points, s.image, cam, Rigid3d(), priors, o);
+  for (int y = 0; y < 80; ++y)
+    for (int x = 0; x < 120; ++x) {
+      if (x >= 50 && x < 75 && y >= 30) {
+        ASSERT_EQ(part.depth.at(x, y), whole.depth.at(x, y)) << x << "," << y;
+        ASSERT_EQ(part.confidence.at(x, y), whole.confidence.at(x, y)) << x << "," << y;
+        ASSERT_EQ(part.ground.at(x, y), whole.ground.at(x, y)) << x << "," << y;
+      } else {
+        ASSERT_EQ(part.depth.at(x, y), kInf) << x << "," << y;
+        ASSERT_EQ(part.confidence.at(x, y), 0.0f) << x << "," << y;
+      }
+    }
+}
+
 TEST(DenseDepth, MarksWhereTheDepthIsTheRoads) {
   // Ground points in the lower half, an obstacle's points in the upper half: the map says which is which, from
   // the nearest point and from the winning cluster alike; the road prior counts as road, a box as not.

@@ -186,6 +186,10 @@ std::optional<std::pair<Rigid3d, Rigid3d>> NeighbourSweepPoses(const Log& log, s
                                 reference_time);
 }
 
+// Pixels of dense depth around the rendered rectangle: DenseVisibility reads the scene depth up to twice its
+// guide radius (2) beyond an object's box.
+constexpr int kDepthMargin = 8;
+
 // Shadow rays over the sun's disk per road pixel: soft edges without visible noise at 4 samples per pixel.
 constexpr int kShadowSunRays = 8;
 
@@ -197,7 +201,10 @@ std::string Fixed(double v, int digits) {
 
 std::string EnvironmentSummary(const EnvironmentMap& env) {
   Msg m;
-  m << "environment map " << env.width() << "x" << env.height() << ": sun " << env.sun_source << ", "
+  m << "environment map " << env.width() << "x" << env.height() << ": sun " << env.sun_source;
+  if (env.shadow_objects > 0)
+    m << " (real shadows of " << env.shadow_objects << " objects agree " << Fixed(env.shadow_agreement, 2) << ")";
+  m << ", "
     << (env.sun_road_contrast > 0 ? "sun/sky from real shadows (road contrast " + Fixed(env.sun_road_contrast, 2) + ")"
                                   : std::string("default sun/sky split"))
     << ", seam error " << Fixed(env.seam_error_before, 2) << " -> " << Fixed(env.seam_error_after, 2);
@@ -399,7 +406,11 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
       DepthPriors priors;
       priors.boxes_ego = real_boxes;
       priors.surface = &ground_plane;  // ego frame: T_world_ego stays identity
-      const DepthMap scene_depth = DenseDepth(projected, original, cam.intrinsics, T_cam_ego, priors);
+      // Only where objects or their shadows are, plus the band the visibility mattes from (guide radius 2).
+      DenseDepthOptions dopt;
+      dopt.x0 = ropt.x0 - kDepthMargin, dopt.y0 = ropt.y0 - kDepthMargin;
+      dopt.x1 = ropt.x1 + kDepthMargin, dopt.y1 = ropt.y1 + kDepthMargin;
+      const DepthMap scene_depth = DenseDepth(projected, original, cam.intrinsics, T_cam_ego, priors, dopt);
       visibility = DenseVisibility(scene_depth, original, render.depth);
       receiver_visibility = DenseVisibility(scene_depth, original, receiver_depth);
     } else {
@@ -445,15 +456,22 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
     // surroundings they are matched to), one object at a time; the shadows are applied after it.
     std::string harmonized;
     if (harmonizer) {
-      ImageF composite(linear.width(), linear.height(), 3);
-      for (size_t i = 0; i < linear.size(); ++i) composite.data()[i] = LinearToSrgb(std::clamp(linear.data()[i], 0.0f, 1.0f));
+      // On a crop: the objects' rectangle grown by the widest background ring the classical transfer reads
+      // (0.25 sqrt(object pixels), HarmonizeOptions::ring_px), so the whole photograph is not converted per camera.
+      const int margin = 2 + static_cast<int>(std::ceil(0.25 * std::sqrt(double(ropt.x1 - ropt.x0) * (ropt.y1 - ropt.y0))));
+      const int cx0 = std::max(0, ropt.x0 - margin), cy0 = std::max(0, ropt.y0 - margin);
+      const int cx1 = std::min(linear.width(), ropt.x1 + margin), cy1 = std::min(linear.height(), ropt.y1 + margin);
+      ImageF composite(cx1 - cx0, cy1 - cy0, 3);
+      for (int y = cy0; y < cy1; ++y)
+        for (int x = cx0; x < cx1; ++x)
+          for (int c = 0; c < 3; ++c) composite.at(x - cx0, y - cy0, c) = LinearToSrgb(std::clamp(linear.at(x, y, c), 0.0f, 1.0f));
       int objects_harmonized = 0;
       for (size_t k = 0; k < placed.size(); ++k) {
         if (visible[k] < 4) continue;
-        ImageF mask(linear.width(), linear.height(), 1, 0.0f);
+        ImageF mask(composite.width(), composite.height(), 1, 0.0f);
         for (int y = ropt.y0; y < ropt.y1; ++y)
           for (int x = ropt.x0; x < ropt.x1; ++x)
-            if (render.object.at(x, y) == static_cast<int>(k)) mask.at(x, y) = object_alpha.at(x, y);
+            if (render.object.at(x, y) == static_cast<int>(k)) mask.at(x - cx0, y - cy0) = object_alpha.at(x, y);
         composite = harmonizer->Harmonize(composite, mask);
         ++objects_harmonized;
       }
@@ -462,7 +480,7 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
       for (int y = ropt.y0; y < ropt.y1; ++y)
         for (int x = ropt.x0; x < ropt.x1; ++x)
           if (object_alpha.at(x, y) > 0)
-            for (int c = 0; c < 3; ++c) linear.at(x, y, c) = SrgbToLinear(composite.at(x, y, c));
+            for (int c = 0; c < 3; ++c) linear.at(x, y, c) = SrgbToLinear(composite.at(x - cx0, y - cy0, c));
       harmonized = Msg() << "; harmonised: " << objects_harmonized << " object(s) (" << (harmonizer->learned() ? "learned" : "classical") << ")";
     }
     for (int y = ropt.y0; y < ropt.y1; ++y)

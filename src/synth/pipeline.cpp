@@ -199,15 +199,16 @@ std::string Fixed(double v, int digits) {
   return buf;
 }
 
-std::string EnvironmentSummary(const EnvironmentMap& env) {
+// `sun_source`: where the frame's sun came from (SunDirectionEgo's note, or the camera that sees it).
+std::string EnvironmentSummary(const EnvironmentMap& env, const std::string& sun_source) {
   Msg m;
-  m << "environment map " << env.width() << "x" << env.height() << ": sun " << env.sun_source;
+  m << "environment map " << env.width() << "x" << env.height() << ": sun " << sun_source;
   if (env.shadow_objects > 0)
-    m << " (real shadows of " << env.shadow_objects << " objects agree " << Fixed(env.shadow_agreement, 2) << ")";
-  m << ", "
-    << (env.sun_road_contrast > 0 ? "sun/sky from real shadows (road contrast " + Fixed(env.sun_road_contrast, 2) + ")"
-                                  : std::string("default sun/sky split"))
-    << ", seam error " << Fixed(env.seam_error_before, 2) << " -> " << Fixed(env.seam_error_after, 2);
+    m << " (checked against the real shadows of " << env.shadow_objects << " object(s): agreement " << Fixed(env.shadow_agreement, 2) << ")";
+  m << ", " << (env.sun_road_contrast > 0 ? "sun/sky from real shadows (road contrast " + Fixed(env.sun_road_contrast, 2) + ")"
+                                          : std::string("default sun/sky split"));
+  if (env.overlap_pixels > 0)
+    m << ", seam error " << Fixed(env.seam_error_before, 2) << " -> " << Fixed(env.seam_error_after, 2);
   return m;
 }
 
@@ -299,7 +300,7 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
       sun_dir = env->sun_direction;
       sun_source = env->sun_source;
     }
-    out.light = EnvironmentSummary(*env);
+    out.light = EnvironmentSummary(*env, sun_source);
   } else {
     out.light = options.light == SynthOptions::Light::kRoad ? "road calibration per camera" : "no objects";
   }

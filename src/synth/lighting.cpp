@@ -56,9 +56,8 @@ Eigen::Vector3d SunDirectionEgo(const Frame& frame, const std::optional<GeoLocat
   return from_ego_angles(150.0, 45.0);
 }
 
-Lighting CalibrateLighting(const ImageF& linear_image, const CameraSensor& camera,
-                           const std::vector<Eigen::Vector3d>& road_points_ego, const Eigen::Vector3d& sun_dir_ego,
-                           const LightingOptions& options) {
+Eigen::Vector3f MedianRoadColour(const ImageF& linear_image, const CameraSensor& camera,
+                                 const std::vector<Eigen::Vector3d>& road_points_ego, int* samples) {
   const Rigid3d T_cam_ego = camera.T_ego_cam.Inverse();
   std::vector<float> ch[3];
   for (const auto& p : road_points_ego) {
@@ -68,13 +67,23 @@ Lighting CalibrateLighting(const ImageF& linear_image, const CameraSensor& camer
     SampleBilinear(linear_image, uv->x(), uv->y(), rgb);
     for (int c = 0; c < 3; ++c) ch[c].push_back(rgb[c]);
   }
-  Eigen::Vector3f road(0.08f, 0.08f, 0.08f);  // neutral mid exposure when the road is not visible
-  if (ch[0].size() >= 20) {
-    for (int c = 0; c < 3; ++c) {
-      std::nth_element(ch[c].begin(), ch[c].begin() + ch[c].size() / 2, ch[c].end());
-      road[c] = ch[c][ch[c].size() / 2];
-    }
-  } else {
+  *samples = static_cast<int>(ch[0].size());
+  Eigen::Vector3f median = Eigen::Vector3f::Zero();
+  if (ch[0].empty()) return median;
+  for (int c = 0; c < 3; ++c) {
+    std::nth_element(ch[c].begin(), ch[c].begin() + ch[c].size() / 2, ch[c].end());
+    median[c] = ch[c][ch[c].size() / 2];
+  }
+  return median;
+}
+
+Lighting CalibrateLighting(const ImageF& linear_image, const CameraSensor& camera,
+                           const std::vector<Eigen::Vector3d>& road_points_ego, const Eigen::Vector3d& sun_dir_ego,
+                           const LightingOptions& options) {
+  int samples = 0;
+  Eigen::Vector3f road = MedianRoadColour(linear_image, camera, road_points_ego, &samples);
+  if (samples < 20) {
+    road = Eigen::Vector3f::Constant(0.08f);  // neutral mid exposure when the road is not visible
     SD_LOG(Debug, camera.channel << ": road not visible near the objects; neutral exposure");
   }
   const Eigen::Vector3f E = road * static_cast<float>(M_PI / options.road_albedo);  // horizontal irradiance

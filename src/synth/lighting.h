@@ -39,6 +39,11 @@ struct LightingOptions {
   double direct_fraction = 0.65;  // share of horizontal irradiance from the sun (clear sky ~0.7-0.85)
 };
 
+// Per-channel median of the linear image under those of `road_points_ego` (ego frame) that project into it;
+// `samples` receives how many did (0: the median is zero).
+Eigen::Vector3f MedianRoadColour(const ImageF& linear_image, const CameraSensor& camera,
+                                 const std::vector<Eigen::Vector3d>& road_points_ego, int* samples);
+
 // `road_points_ego`: ground points near the objects, ego frame. Falls back to a neutral mid-grey exposure
 // when fewer than 20 of them project into the image.
 Lighting CalibrateLighting(const ImageF& linear_image, const CameraSensor& camera,

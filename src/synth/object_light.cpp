@@ -4,33 +4,12 @@
 #include <cmath>
 
 #include "core/error.h"
+#include "synth/lighting.h"
 
 namespace sd {
 namespace {
 
 float Luma(const Eigen::Vector3f& rgb) { return 0.2126f * rgb[0] + 0.7152f * rgb[1] + 0.0722f * rgb[2]; }
-
-// Per-channel median of the image under the road points that project into it; the count in `samples`.
-Eigen::Vector3f MedianRoadColour(const ImageF& linear, const CameraSensor& camera, const std::vector<Eigen::Vector3d>& road_points_ego,
-                                 int* samples) {
-  const Rigid3d T_cam_ego = camera.T_ego_cam.Inverse();
-  std::vector<float> ch[3];
-  for (const auto& p : road_points_ego) {
-    const auto uv = camera.intrinsics.Project(T_cam_ego * p, 1.0);
-    if (!uv || !camera.intrinsics.InImage(*uv)) continue;
-    float rgb[4];
-    SampleBilinear(linear, uv->x(), uv->y(), rgb);
-    for (int c = 0; c < 3; ++c) ch[c].push_back(rgb[c]);
-  }
-  *samples = static_cast<int>(ch[0].size());
-  Eigen::Vector3f median = Eigen::Vector3f::Zero();
-  if (ch[0].empty()) return median;
-  for (int c = 0; c < 3; ++c) {
-    std::nth_element(ch[c].begin(), ch[c].begin() + ch[c].size() / 2, ch[c].end());
-    median[c] = ch[c][ch[c].size() / 2];
-  }
-  return median;
-}
 
 }  // namespace
 

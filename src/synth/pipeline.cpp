@@ -688,6 +688,9 @@ SynthInputs LoadInputs(const SynthRequest& request, bool dry_run = false) {
   if (!dry_run && request.options.harmonizer != "none") {
     in.harmonizer = std::make_shared<const models::Harmonizer>(ResolveSynthHarmonizer(request.options.harmonizer));
     SD_LOG(Info, "harmoniser: " << in.harmonizer->Describe());
+    // "auto" is learned on a machine with the model installed and classical on one without: parts made on
+    // both are of different requests.
+    in.fingerprint["harmonizer_path"] = in.harmonizer->learned() ? "learned" : "classical";
   }
   in.world_fixed = WorldFixedScenario(in.scenario);
   if (in.world_fixed || dry_run) {

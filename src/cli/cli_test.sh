@@ -219,6 +219,9 @@ printf '{"arrangements": [{"type": "ego_lane_object", "category": "debris", "dis
 expect_error "synth: arrangement without an asset of its category" "debris.json: arrangements.0. places a debris" "$T/wf2" -- synth --log "$INFO" --asset "$T/cone" --scenario "$T/debris.json" --out "$T/wf2"
 printf '{"world_fixed": "yes", "objects": [{"category": "traffic_cone"}]}\n' > "$T/wf_bad.json"
 expect_error "synth: world_fixed not a boolean" "wf_bad.json: .world_fixed: expected true/false" "$T/wf3" -- synth --log "$INFO" --asset "$T/cone" --scenario "$T/wf_bad.json" --out "$T/wf3"
+expect_error "synth: unknown harmoniser" "clasical: no such harmoniser: give none, classical, auto" "$T/h1" -- synth --log "$INFO" --asset "$T/cone" --scenario "$T/one_cone.json" --out "$T/h1" --harmonizer clasical
+printf 'not a zip' > "$T/bad_harmonizer.pt"
+expect_error "synth: harmoniser file that is not TorchScript" "bad_harmonizer.pt: " "$T/h2" -- synth --log "$INFO" --asset "$T/cone" --scenario "$T/one_cone.json" --out "$T/h2" --harmonizer "$T/bad_harmonizer.pt"
 
 # Bank: catalogue a folder of asset folders, reruns are no-ops, queries, verify finds changed files, one-line errors.
 BANK=$T/bank.sqlite

@@ -222,6 +222,8 @@ models::HarmonizeOptions SynthHarmonizeOptions() {
 
 models::Harmonizer ResolveSynthHarmonizer(const std::string& choice) {
   if (choice == "classical") return models::Harmonizer::Classical(SynthHarmonizeOptions());
+  if (choice != "auto" && !fs::exists(choice))
+    throw InputError(choice, "no such harmoniser: give none, classical, auto or a TorchScript file (docs/models.md)");
   return models::Harmonizer::Resolve(choice, {}, SynthHarmonizeOptions());
 }
 

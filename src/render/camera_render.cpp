@@ -150,15 +150,19 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
           continue;
         }
 
-        // Object: Lambertian, L = a * E / pi.
-        const bool sun_visible = cos_sun > 0 && !scene.Occluded(f.p_offset, sun_dir, 0.0f, inf);
+        // Object: Lambertian, L = a * E / pi, under its own light where the caller gives one.
+        const bool own = static_cast<size_t>(hit.mesh) < options.mesh_lighting.size();
+        const Lighting& l = own ? options.mesh_lighting[static_cast<size_t>(hit.mesh)] : lighting;
+        const Eigen::Vector3f obj_sun_dir = own ? l.sun_direction.normalized() : sun_dir;
+        const float obj_cos_sun = own ? std::max(0.0f, f.n_shade.dot(obj_sun_dir)) : cos_sun;
+        const bool sun_visible = obj_cos_sun > 0 && !scene.Occluded(f.p_offset, obj_sun_dir, 0.0f, inf);
         int sky_open = 0;
         for (int k = 0; k < n_ao; ++k) {
           const Eigen::Vector3f d = CosineDirection(f.n_shade, Stratified(k, n_ao, rng));
           if (d.z() > 0 && !scene.Occluded(f.p_offset, d, 0.0f, inf)) ++sky_open;
         }
         const float ao = n_ao > 0 ? static_cast<float>(sky_open) / n_ao : 1.0f;
-        const Eigen::Vector3f E = sun * (sun_visible ? cos_sun : 0.0f) + sky * (kPi * ao);
+        const Eigen::Vector3f E = l.sun_irradiance * (sun_visible ? obj_cos_sun : 0.0f) + l.sky_radiance * (kPi * ao);
         const Eigen::Vector3f albedo = scene.BaseColor(hit).head<3>();
         color += albedo.cwiseProduct(E) / kPi;
         depth = std::min(depth, hit.t * static_cast<float>(d_cam.z()));

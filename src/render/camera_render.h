@@ -36,6 +36,9 @@ struct CameraRenderOptions {
   int ao_samples = 16;         // hemisphere rays for sky visibility per shaded sample
   int receiver_mesh = -1;      // mesh id of the road receiver (shadows only, never drawn); -1 = none
   bool receiver_shadow = true; // false: the receiver only blocks rays (shadow stays 1): for callers that shade it themselves
+  // Per-mesh light (indexed by mesh id; empty: `lighting` for every mesh): objects standing in the sun and in a
+  // shade within one view. The receiver's shadow uses `lighting`.
+  std::vector<Lighting> mesh_lighting;
   // Pixel rectangle to render [x0, x1) x [y0, y1); outside it the result is "no object, no shadow".
   // Default (all zero) = the whole image.
   int x0 = 0, y0 = 0, x1 = 0, y1 = 0;

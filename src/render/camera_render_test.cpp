@@ -58,6 +58,40 @@ TEST(RenderCamera, UniformSkyOnUpwardPlaneGivesAlbedoTimesSky) {
   }
 }
 
+// Two planes under their own light (an object in the sun, one in a shade): each gets a * S of its own sky.
+TEST(RenderCamera, PerMeshLightingLightsEachMeshWithItsOwn) {
+  auto left = Quad({-2, 0, 0}, {1, 0, 0}, {0, 1, 0}, 1.5, 3);
+  auto right = Quad({2, 0, 0}, {1, 0, 0}, {0, 1, 0}, 1.5, 3);
+  Material m;
+  m.base_color_factor = Eigen::Vector4f(0.5f, 0.5f, 0.5f, 1.0f);
+  left->materials = right->materials = {m};
+  RayScene scene;
+  scene.AddMesh(left);
+  scene.AddMesh(right);
+  scene.Commit();
+  Lighting shared, lit, shade;
+  shared.sun_irradiance.setZero();
+  shared.sky_radiance = Eigen::Vector3f::Constant(0.1f);
+  lit = shade = shared;
+  lit.sky_radiance = Eigen::Vector3f(0.4f, 0.3f, 0.2f);
+  shade.sky_radiance = Eigen::Vector3f(0.05f, 0.06f, 0.07f);
+  CameraRenderOptions o;
+  o.mesh_lighting = {lit, shade};
+  const PinholeCamera cam = Camera(80, 40, 10, 40, 20);
+  const CameraRender r = RenderCamera(scene, cam, LookingDown({0, 0, 5}), shared, o);
+  const int xl = 40 - 4, xr = 40 + 4, y = 20;  // ground x = -2 and +2 at 5 m with f = 10
+  ASSERT_EQ(r.object.at(xl, y), 0);
+  ASSERT_EQ(r.object.at(xr, y), 1);
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_NEAR(r.color.at(xl, y, c), 0.5f * lit.sky_radiance[c], 1e-6f);
+    EXPECT_NEAR(r.color.at(xr, y, c), 0.5f * shade.sky_radiance[c], 1e-6f);
+  }
+  // Without per-mesh light both take the shared one.
+  const CameraRender plain = RenderCamera(scene, cam, LookingDown({0, 0, 5}), shared);
+  EXPECT_NEAR(plain.color.at(xl, y, 0), 0.05f, 1e-6f);
+  EXPECT_NEAR(plain.color.at(xr, y, 0), 0.05f, 1e-6f);
+}
+
 // Sun only on a plane whose normal is tilted by theta from the sun: L = a * E * cos(theta) / pi, on either
 // side of the plane (normals are flipped towards the camera).
 TEST(RenderCamera, SunOnTiltedPlaneFollowsCosineLaw) {

@@ -883,8 +883,12 @@ float ReceiverShadowRatio(const RayScene& scene, const Eigen::Vector3d& p, const
   return static_cast<float>(std::clamp(with / without, 0.0, 1.0));
 }
 
-ImageF ReceiverShadowImage(const RayScene& scene, const PinholeCamera& camera, const Rigid3d& T_scene_cam, int receiver_mesh,
-                           const EnvironmentLight& light, const EnvShadingOptions& options, int x0, int y0, int x1, int y1) {
+namespace {
+
+// ReceiverShadowImage for any rule giving a hit face its light.
+template <typename LightOfFace>
+ImageF ReceiverShadowImageWith(const RayScene& scene, const PinholeCamera& camera, const Rigid3d& T_scene_cam, int receiver_mesh,
+                               const LightOfFace& light_of_face, const EnvShadingOptions& options, int x0, int y0, int x1, int y1) {
   ImageF out(camera.width, camera.height, 1, 1.0f);
   if (x1 <= x0 || y1 <= y0) x0 = 0, y0 = 0, x1 = camera.width, y1 = camera.height;
   x0 = std::max(0, x0), y0 = std::max(0, y0), x1 = std::min(camera.width, x1), y1 = std::min(camera.height, y1);
@@ -904,7 +908,7 @@ ImageF ReceiverShadowImage(const RayScene& scene, const PinholeCamera& camera, c
         EnvShadingOptions o = options;
         o.skip_mesh = receiver_mesh;
         o.seed = options.seed * 0x9E3779B1u + static_cast<uint32_t>(y * camera.width + x);
-        out.at(x, y) = ReceiverShadowRatio(scene, scene.HitPoint(hit).cast<double>(), n, light, o);
+        out.at(x, y) = ReceiverShadowRatio(scene, scene.HitPoint(hit).cast<double>(), n, light_of_face(hit.face), o);
       }
     } catch (...) {
       errors[yy - static_cast<size_t>(y0)] = std::current_exception();
@@ -913,6 +917,26 @@ ImageF ReceiverShadowImage(const RayScene& scene, const PinholeCamera& camera, c
   for (auto& e : errors)
     if (e) std::rethrow_exception(e);
   return out;
+}
+
+}  // namespace
+
+ImageF ReceiverShadowImage(const RayScene& scene, const PinholeCamera& camera, const Rigid3d& T_scene_cam, int receiver_mesh,
+                           const EnvironmentLight& light, const EnvShadingOptions& options, int x0, int y0, int x1, int y1) {
+  return ReceiverShadowImageWith(scene, camera, T_scene_cam, receiver_mesh,
+                                 [&](int) -> const EnvironmentLight& { return light; }, options, x0, y0, x1, y1);
+}
+
+ImageF ReceiverShadowImage(const RayScene& scene, const PinholeCamera& camera, const Rigid3d& T_scene_cam, int receiver_mesh,
+                           const std::vector<const EnvironmentLight*>& light_of_face, const EnvShadingOptions& options,
+                           int x0, int y0, int x1, int y1) {
+  return ReceiverShadowImageWith(scene, camera, T_scene_cam, receiver_mesh,
+                                 [&](int face) -> const EnvironmentLight& {
+                                   SD_CHECK(face >= 0 && static_cast<size_t>(face) < light_of_face.size() && light_of_face[face],
+                                            << "no light for receiver face " << face << " of " << light_of_face.size());
+                                   return *light_of_face[static_cast<size_t>(face)];
+                                 },
+                                 options, x0, y0, x1, y1);
 }
 
 Lighting RendererLighting(const EnvironmentMap& map, size_t k) {

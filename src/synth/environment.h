@@ -200,6 +200,12 @@ float ReceiverShadowRatio(const RayScene& scene, const Eigen::Vector3d& p, const
 ImageF ReceiverShadowImage(const RayScene& scene, const PinholeCamera& camera, const Rigid3d& T_scene_cam, int receiver_mesh,
                            const EnvironmentLight& light, const EnvShadingOptions& options = {}, int x0 = 0, int y0 = 0,
                            int x1 = 0, int y1 = 0);
+// The same with a light per receiver face: the receiver of several objects is made of their patches, each under
+// the light where its object stands (sun or shade). `light_of_face[f]` (non-null) for every face f of
+// `receiver_mesh`.
+ImageF ReceiverShadowImage(const RayScene& scene, const PinholeCamera& camera, const Rigid3d& T_scene_cam, int receiver_mesh,
+                           const std::vector<const EnvironmentLight*>& light_of_face, const EnvShadingOptions& options = {},
+                           int x0 = 0, int y0 = 0, int x1 = 0, int y1 = 0);
 
 // The existing renderer's (render/camera_render.h) two-term light for camera k, from the map: the same sun,
 // and the uniform sky that gives the map's SH irradiance on an upward surface; both in camera k's pixel units.

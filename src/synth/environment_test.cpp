@@ -213,6 +213,45 @@ TEST(EnvShading, ReceiverShadowImageDarkensTheRealShadowOnly) {
   EXPECT_GT(at(-6, 6), 0.97f);
 }
 
+TEST(EnvShading, ReceiverShadowImageTakesEachFacesLight) {
+  // The scene above; the ground's faces all under one light give exactly the single-light image, and faces under
+  // a sunless light (a building's shade) keep only the sky's occlusion there.
+  RayScene scene;
+  scene.AddMesh(Quad({0, 0, 1.5f}, 1, 1));
+  auto ground_mesh = Quad({0, 0, 0}, 10, 10);
+  const int ground = scene.AddMesh(ground_mesh);
+  scene.Commit();
+  const ImageF map = MakeMap(128, [](const Eigen::Vector3d& d) { return Eigen::Vector3f::Constant(d.z() > 0 ? 0.3f : 0.0f); });
+  EnvironmentLight sun;
+  sun.sh = ProjectToSh(map);
+  sun.radiance = &map;
+  sun.sun_direction = Eigen::Vector3d(1, 0, 1).normalized();
+  sun.sun_irradiance = Eigen::Vector3f::Constant(3.0f);
+  EnvironmentLight shade = sun;
+  shade.sun_irradiance.setZero();
+  PinholeCamera cam;
+  cam.width = cam.height = 200;
+  cam.fx = cam.fy = 100;
+  cam.cx = cam.cy = 100;
+  Eigen::Matrix3d R;
+  R << 1, 0, 0, 0, -1, 0, 0, 0, -1;
+  const Rigid3d T_scene_cam(R, Eigen::Vector3d(0, 0, 20));
+  EnvShadingOptions o;
+  o.sun_rays = 8;
+  o.sky_rays = 64;
+  const ImageF single = ReceiverShadowImage(scene, cam, T_scene_cam, ground, sun, o);
+  const std::vector<const EnvironmentLight*> all_sun(ground_mesh->faces.size(), &sun);
+  EXPECT_EQ(ReceiverShadowImage(scene, cam, T_scene_cam, ground, all_sun, o).vector(), single.vector());
+  const std::vector<const EnvironmentLight*> all_shade(ground_mesh->faces.size(), &shade);
+  const ImageF shaded = ReceiverShadowImage(scene, cam, T_scene_cam, ground, all_shade, o);
+  auto at = [&](const ImageF& img, double gx, double gy) {
+    return img.at(static_cast<int>(100 + 100 * gx / 20), static_cast<int>(100 - 100 * gy / 20));
+  };
+  EXPECT_LT(at(single, -1.8, 0), 0.31f) << "umbra in the sun: the sun is gone";
+  EXPECT_GT(at(shaded, -1.8, 0), 0.7f) << "in a shade there is no sun to lose, only a little sky";
+  EXPECT_LT(at(shaded, -1.8, 0), 1.0f);
+}
+
 // ---- Shadows: synthetic ground truth ----
 
 // Slab test of the ray o + t d (t > 0) against an oriented box.

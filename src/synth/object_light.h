@@ -15,7 +15,10 @@
 // than full sun: clipped sky; darker than shade). Objects get the same s and sky share; their cast shadows are
 // drawn with the sun dimmed by s (no hard sun shadow inside a building's shade).
 //
-// One light per camera: objects standing in sun and shade in the same view share the median road's verdict.
+// Per object: the pipeline decides each object's sun visibility once, from the road next to it as every camera
+// shows it (SunVisibilityAt, in map units), so an object seen by two cameras is in the sun in both or in neither;
+// each camera then fits only the scale to its own view of that road (LightAtObjects with the verdict).
+#include <optional>
 #include <vector>
 
 #include <Eigen/Core>
@@ -43,9 +46,21 @@ struct ObjectLight {
 
 // `map` must outlive the result (`shading` points into it). `linear_image`: camera `camera_index` of the
 // frame (map.gains is parallel to frame.cameras), linearised; `road_points_ego`: ground points near the
-// objects, ego frame.
+// objects, ego frame. `sun_visibility`: a verdict made for all cameras (SunVisibilityAt); then only the scale
+// is fitted to this camera's road (1 where it sees too little of it).
 ObjectLight LightAtObjects(const EnvironmentMap& map, size_t camera_index, const CameraSensor& camera,
                            const ImageF& linear_image, const std::vector<Eigen::Vector3d>& road_points_ego,
-                           const ObjectLightOptions& options = {});
+                           const ObjectLightOptions& options = {}, std::optional<double> sun_visibility = std::nullopt);
+
+// The sun's visibility at a spot, decided once for every camera: the road next to it as each camera shows it,
+// brought to map units by the camera's gain, pooled (median). Per camera, a view that sees only the sunlit part
+// of that road and a view that sees only its shaded part would light the same object differently.
+struct SunVerdict {
+  double sun_visibility = 1;
+  int road_samples = 0;  // pooled road pixels; 0: fewer than min_road_samples, no verdict
+};
+// `images`: the frame's photographs (sRGB), parallel to frame.cameras and map.gains; null entries are skipped.
+SunVerdict SunVisibilityAt(const EnvironmentMap& map, const Frame& frame, const std::vector<const ImageU8*>& images,
+                           const std::vector<Eigen::Vector3d>& road_points_ego, const ObjectLightOptions& options = {});
 
 }  // namespace sd

@@ -6,6 +6,8 @@
 
 #include <gtest/gtest.h>
 
+#include "datasets/log.h"
+
 namespace sd {
 namespace {
 
@@ -119,6 +121,49 @@ TEST_F(ObjectLightTest, NoRoadInViewKeepsTheMapsLight) {
   EXPECT_EQ(l.sun_visibility, 1.0);
   EXPECT_EQ(l.scale, 1.0);
   EXPECT_TRUE(l.lighting.sun_irradiance.isApprox(base_.sun_irradiance));
+}
+
+TEST_F(ObjectLightTest, AGivenSunVerdictKeepsItsSunAndFitsTheScale) {
+  // The road is in full sun in this view, but the verdict for the spot (made from every camera) says shade: the
+  // sun stays off, and the scale alone makes the road's brightness.
+  const ObjectLight l = LightAtObjects(map_, 0, cam_, Photo(Y_sun_ + Y_sky_), road_, {}, 0.0);
+  EXPECT_EQ(l.sun_visibility, 0.0);
+  EXPECT_NEAR(l.scale, (Y_sun_ + Y_sky_) / (0.6 * Y_sky_), 1e-3);
+  EXPECT_LT(l.lighting.sun_irradiance.norm(), 1e-6f);
+  // A verdict and no road in view: the verdict, at the map's level.
+  std::vector<Eigen::Vector3d> behind;
+  for (const auto& p : road_) behind.push_back(Eigen::Vector3d(-p.x(), p.y(), p.z()));
+  const ObjectLight unseen = LightAtObjects(map_, 0, cam_, Photo(Y_sky_), behind, {}, 0.25);
+  EXPECT_EQ(unseen.road_samples, 0);
+  EXPECT_EQ(unseen.sun_visibility, 0.25);
+  EXPECT_EQ(unseen.scale, 1.0);
+}
+
+TEST_F(ObjectLightTest, OneSunVerdictFromCamerasOfDifferentExposure) {
+  // Two cameras on the same road, the second exposed half as long (gain 2): in map units both show the same
+  // road, so the pooled verdict is the single camera's.
+  Frame frame;
+  CameraSensor second = cam_;
+  second.channel = "CAM_FRONT_2";
+  frame.cameras = {cam_, second};
+  CameraGain g2 = map_.gains[0];
+  g2.channel = second.channel;
+  g2.exposure = 4.0f;  // twice the first camera's 2
+  map_.gains.push_back(g2);
+  const double s = 0.4;
+  const double Y = s * Y_sun_ + (s + (1 - s) * 0.6) * Y_sky_;  // camera 0 units
+  const auto photo8 = [&](double irradiance) {
+    const float L = static_cast<float>(0.15 / M_PI * irradiance);
+    return ImageU8(cam_.intrinsics.width, cam_.intrinsics.height, 3, static_cast<uint8_t>(std::lround(255 * LinearToSrgb(L))));
+  };
+  const ImageU8 first = photo8(Y), darker = photo8(Y / 2);
+  const SunVerdict one = SunVisibilityAt(map_, frame, {&first, nullptr}, road_);
+  const SunVerdict both = SunVisibilityAt(map_, frame, {&first, &darker}, road_);
+  EXPECT_GT(one.road_samples, 100);
+  EXPECT_EQ(both.road_samples, 2 * one.road_samples);
+  EXPECT_NEAR(one.sun_visibility, s, 0.02);  // 8-bit quantisation of the photo
+  EXPECT_NEAR(both.sun_visibility, s, 0.02);
+  EXPECT_EQ(SunVisibilityAt(map_, frame, {nullptr, nullptr}, road_).road_samples, 0);
 }
 
 }  // namespace

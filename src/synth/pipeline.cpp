@@ -56,12 +56,14 @@ void AddReceiverPatch(const PlacedObject& o, const Eigen::Vector3d& sun_dir, Tri
     }
 }
 
-std::vector<Eigen::Vector3d> RoadPointsNear(const GroundModel& ground, const std::vector<PlacedObject>& objects) {
+// Drivable ground points within `margin_m` of the objects' footprints (their bounding circles).
+std::vector<Eigen::Vector3d> RoadPointsNear(const GroundModel& ground, const std::vector<PlacedObject>& objects,
+                                            double margin_m = 6.0) {
   std::vector<Eigen::Vector3d> out;
   for (const auto& p : ground.ground_points()) {
     for (const auto& o : objects) {
       const double d = (p.head<2>() - o.box.center().head<2>()).norm();
-      if (d < 0.5 * o.box.size.head<2>().norm() + 6.0 && ground.IsDrivable(p.x(), p.y())) {
+      if (d < 0.5 * o.box.size.head<2>().norm() + margin_m && ground.IsDrivable(p.x(), p.y())) {
         out.push_back(p);
         break;
       }
@@ -190,6 +192,10 @@ std::optional<std::pair<Rigid3d, Rigid3d>> NeighbourSweepPoses(const Log& log, s
 // guide radius (2) beyond an object's box.
 constexpr int kDepthMargin = 8;
 
+// The road that decides whether an object stands in the sun: within this of its footprint. Shade boundaries
+// are sharp; the 6 m the level of the light is read from would mix a shaded spot with the sunlit road beside it.
+constexpr double kOwnRoadMargin = 1.5;
+
 // Shadow rays over the sun's disk per road pixel: soft edges without visible noise at 4 samples per pixel.
 constexpr int kShadowSunRays = 8;
 
@@ -311,12 +317,14 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
   // Scene in the ego frame: objects, then one receiver mesh for shadows.
   RayScene scene;
   auto receiver = std::make_shared<TriangleMesh>();
+  std::vector<size_t> receiver_faces_end;  // object k's patch: faces [end of k - 1, end of k) of the receiver
   for (const auto& o : placed) {
     auto mesh = std::make_shared<TriangleMesh>(o.asset->mesh);
     mesh->Transform(o.T_ego_asset);
     if (mesh->normals.empty()) mesh->ComputeVertexNormals();
     scene.AddMesh(mesh);
     AddReceiverPatch(o, sun_dir, receiver.get());
+    receiver_faces_end.push_back(receiver->faces.size());
   }
   const int receiver_id = scene.AddMesh(receiver);
   scene.Commit();
@@ -343,6 +351,25 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
   std::vector<uint8_t> is_ground(points_ego.size(), 0);
   for (int i : ground.ground_indices()) is_ground[i] = 1;
   const std::vector<Eigen::Vector3d> road_points = RoadPointsNear(ground, placed);
+  // The sun's visibility per object, decided once from every camera that sees its road (a building's shade
+  // can cover one cone of a closure and not the next); objects whose road no camera shows enough of take the
+  // verdict over all objects' road.
+  std::vector<std::vector<Eigen::Vector3d>> road_points_of(placed.size());  // each object's own road
+  std::optional<double> sun_at_objects;
+  std::vector<std::optional<double>> sun_at_object(placed.size());
+  std::vector<bool> own_verdict(placed.size(), false);
+  if (env) {
+    std::vector<const ImageU8*> rig;
+    for (size_t k = 0; k < frame.cameras.size(); ++k) rig.push_back(&image_of(k));
+    const SunVerdict all = SunVisibilityAt(*env, frame, rig, road_points);
+    if (all.road_samples > 0) sun_at_objects = all.sun_visibility;
+    for (size_t k = 0; k < placed.size(); ++k) {
+      road_points_of[k] = RoadPointsNear(ground, {placed[k]}, kOwnRoadMargin);
+      const SunVerdict own = SunVisibilityAt(*env, frame, rig, road_points_of[k]);
+      own_verdict[k] = own.road_samples > 0;
+      sun_at_object[k] = own_verdict[k] ? std::optional<double>(own.sun_visibility) : sun_at_objects;
+    }
+  }
   const PlaneSurface ground_plane(ground.seed_plane().normal, ground.seed_plane().d);
   // Everything a camera may need to redraw: the objects' boxes and their shadow receivers.
   std::vector<Eigen::Vector3d> extent_points;
@@ -358,10 +385,17 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
     const ImageU8& original = image_of(cam_index);
     ImageF linear = ToLinear(original);
     std::optional<ObjectLight> object_light;
+    // Each object under its own sun verdict; the level from its road in this view, else from all objects' road.
+    std::vector<ObjectLight> light_of_object;
     Lighting lighting;
     if (env) {
-      object_light = LightAtObjects(*env, cam_index, cam, linear, road_points);
+      object_light = LightAtObjects(*env, cam_index, cam, linear, road_points, {}, sun_at_objects);
       lighting = object_light->lighting;
+      for (size_t k = 0; k < placed.size(); ++k) {
+        ObjectLight own = LightAtObjects(*env, cam_index, cam, linear, road_points_of[k], {}, sun_at_object[k]);
+        if (own.road_samples == 0) own = LightAtObjects(*env, cam_index, cam, linear, road_points, {}, sun_at_object[k]);
+        light_of_object.push_back(own);
+      }
     } else {
       lighting = CalibrateLighting(linear, cam, road_points, sun_dir);
     }
@@ -370,6 +404,7 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
     ropt.ao_samples = options.ao_samples;
     ropt.receiver_mesh = receiver_id;
     ropt.receiver_shadow = !object_light;  // the map's light shades the road below (ReceiverShadowImage)
+    for (const ObjectLight& l : light_of_object) ropt.mesh_lighting.push_back(l.lighting);  // mesh k = object k
     ropt.x0 = (*rect)[0];
     ropt.y0 = (*rect)[1];
     ropt.x1 = (*rect)[2];
@@ -385,8 +420,11 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
       so.sky_rays = options.ao_samples;
       so.seed = ropt.seed;
       so.skip_mesh = receiver_id;
-      shadow = ReceiverShadowImage(scene, cam.intrinsics, cam.T_ego_cam, receiver_id, object_light->shading, so, ropt.x0,
-                                   ropt.y0, ropt.x1, ropt.y1);
+      std::vector<const EnvironmentLight*> light_of_face(receiver->faces.size());
+      for (size_t k = 0, f = 0; k < placed.size(); ++k)
+        for (; f < receiver_faces_end[k]; ++f) light_of_face[f] = &light_of_object[k].shading;
+      shadow = ReceiverShadowImage(scene, cam.intrinsics, cam.T_ego_cam, receiver_id, light_of_face, so, ropt.x0, ropt.y0,
+                                   ropt.x1, ropt.y1);
     }
 
     // Occlusion by the real scene: of the objects, and of the road their shadows fall on (the ground under a
@@ -496,6 +534,12 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
     if (object_light) {
       co.light = Msg() << "sun visibility " << Fixed(object_light->sun_visibility, 2) << ", scale " << Fixed(object_light->scale, 2)
                        << " (" << object_light->road_samples << " road pixels)";
+      std::string own;
+      for (size_t k = 0; k < placed.size(); ++k)
+        if (own_verdict[k] && visible[k] >= 4)
+          own += Msg() << (own.empty() ? "" : ", ") << "#" << k << " " << Fixed(light_of_object[k].sun_visibility, 2) << " x"
+                       << Fixed(light_of_object[k].scale, 2);
+      if (!own.empty()) co.light += "; per object (sun visibility x scale): " + own;
     } else {
       co.light = "road calibration";
     }

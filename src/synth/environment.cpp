@@ -676,6 +676,7 @@ EnvironmentMap BuildEnvironmentMap(const Frame& frame, const std::vector<ImageU8
   // The sun's colour is not measurable from a clipped or unseen disk; take it white in map units (the
   // gains already carry the cameras' white balance) at the sky's luminance scale.
   map.sun_irradiance = Eigen::Vector3f::Constant(static_cast<float>(direct_over_sky * Luma(E_sky) / sin_el));
+  map.sh = ProjectToSh(map.radiance);
   return map;
 }
 
@@ -785,9 +786,11 @@ Eigen::Vector3f ShIrradiance::Irradiance(const Eigen::Vector3d& n) const {
   return e.cwiseMax(0.0).cast<float>();
 }
 
+ShIrradiance MapSh(const EnvironmentMap& map) { return map.sh ? *map.sh : ProjectToSh(map.radiance); }
+
 EnvironmentLight MakeEnvironmentLight(const EnvironmentMap& map) {
   EnvironmentLight l;
-  l.sh = ProjectToSh(map.radiance);
+  l.sh = MapSh(map);
   l.radiance = &map.radiance;
   l.sun_direction = map.sun_direction;
   l.sun_irradiance = map.sun_irradiance;
@@ -942,7 +945,7 @@ ImageF ReceiverShadowImage(const RayScene& scene, const PinholeCamera& camera, c
 Lighting RendererLighting(const EnvironmentMap& map, size_t k) {
   SD_CHECK(k < map.gains.size(), << k << " of " << map.gains.size());
   const Eigen::Vector3f g = map.gains[k].Gain();
-  const ShIrradiance sh = ProjectToSh(map.radiance);
+  const ShIrradiance sh = MapSh(map);
   Lighting l;
   l.sun_direction = map.sun_direction.cast<float>().normalized();
   l.sun_irradiance = map.sun_irradiance.cwiseQuotient(g);

@@ -78,6 +78,14 @@ struct EnvironmentOptions {
   double min_overlap_elevation_deg = -8;  // overlaps below this (the near road: parallax) do not set gains
 };
 
+// Irradiance as order-2 spherical harmonics (Ramamoorthi & Hanrahan 2001): 9 RGB coefficients of the
+// radiance, convolved with the clamped cosine on evaluation. Error < ~3% of the mean for smooth skies.
+struct ShIrradiance {
+  std::array<Eigen::Vector3f, 9> L{};  // radiance coefficients L_lm, order (0,0) (1,-1) (1,0) (1,1) (2,-2) (2,-1) (2,0) (2,1) (2,2)
+  Eigen::Vector3f Irradiance(const Eigen::Vector3d& normal) const;  // E(n), unoccluded
+};
+ShIrradiance ProjectToSh(const ImageF& latlong_radiance);
+
 struct EnvironmentMap {
   ImageF radiance;   // width x height x 3, linear, map units (see top), no sun
   ImageF coverage;   // width x height x 1, sum of camera blend weights (0 = sky model or ground fill)
@@ -96,6 +104,9 @@ struct EnvironmentMap {
   // gains and with the estimated gains; overlap_pixels = how many map pixels entered it.
   double seam_error_before = 0, seam_error_after = 0;
   int overlap_pixels = 0;
+  // ProjectToSh(radiance), kept by BuildEnvironmentMap (every light made from the map needs it); empty in a map
+  // put together by hand, whose readers then project it themselves (MapSh).
+  std::optional<ShIrradiance> sh;
 
   int width() const { return radiance.width(); }
   int height() const { return radiance.height(); }
@@ -103,6 +114,9 @@ struct EnvironmentMap {
   // Horizontal irradiance the upper hemisphere of `radiance` gives a surface facing up (no sun, no occlusion).
   Eigen::Vector3f SkyIrradianceUp() const;
 };
+
+// map.sh, or the projection of map.radiance where the map has none.
+ShIrradiance MapSh(const EnvironmentMap& map);
 
 // `images`: 8-bit sRGB, parallel to frame.cameras (same sizes as the calibrations). Throws InputError when a
 // size disagrees.
@@ -153,14 +167,6 @@ std::optional<Eigen::Vector3d> EstimateSunFromShadows(const Frame& frame, const 
                                                       std::optional<double> elevation_deg = std::nullopt);
 
 // ---- Lighting inserted objects from the map ----
-
-// Irradiance as order-2 spherical harmonics (Ramamoorthi & Hanrahan 2001): 9 RGB coefficients of the
-// radiance, convolved with the clamped cosine on evaluation. Error < ~3% of the mean for smooth skies.
-struct ShIrradiance {
-  std::array<Eigen::Vector3f, 9> L{};  // radiance coefficients L_lm, order (0,0) (1,-1) (1,0) (1,1) (2,-2) (2,-1) (2,0) (2,1) (2,2)
-  Eigen::Vector3f Irradiance(const Eigen::Vector3d& normal) const;  // E(n), unoccluded
-};
-ShIrradiance ProjectToSh(const ImageF& latlong_radiance);
 
 // Everything a shading point needs, in map units (divide by a camera's gain for its pixels).
 struct EnvironmentLight {

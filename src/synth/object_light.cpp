@@ -80,7 +80,7 @@ SunVerdict SunVisibilityAt(const EnvironmentMap& map, const Frame& frame, const 
   if (static_cast<int>(Y.size()) < options.min_road_samples) return out;
   std::nth_element(Y.begin(), Y.begin() + Y.size() / 2, Y.end());
   const double sin_el = std::max(0.0, map.sun_direction.normalized().z());
-  const RoadTerms terms{Luma(map.sun_irradiance) * sin_el, Luma(ProjectToSh(map.radiance).Irradiance(Eigen::Vector3d::UnitZ()))};
+  const RoadTerms terms{Luma(map.sun_irradiance) * sin_el, Luma(MapSh(map).Irradiance(Eigen::Vector3d::UnitZ()))};
   out.road_samples = static_cast<int>(Y.size());
   out.sun_visibility = terms.SunVisibility(Y[Y.size() / 2], options.shade_sky_visibility);
   return out;

@@ -176,80 +176,71 @@ TEST(EnvShading, ReceiverRatioWeighsTheBlockedSkyByItsRadiance) {
   EXPECT_NEAR(ReceiverShadowRatio(below, {0, 0, 0.001}, {0, 0, 1}, plain, o), 1.0f, 1e-6);
 }
 
-TEST(EnvShading, ReceiverShadowImageDarkensTheRealShadowOnly) {
-  // A 2 m x 2 m roof 1.5 m up, sun 45 deg up towards +x: its shadow is the roof moved 1.5 m towards -x. A
-  // camera 20 m up looking down sees roof, shadow and open ground.
+// A 2 m x 2 m roof 1.5 m up, sun 45 deg up towards +x: its shadow is the roof moved 1.5 m towards -x. A camera
+// 20 m up looking down sees roof, shadow and open ground.
+struct RoofScene {
   RayScene scene;
-  scene.AddMesh(Quad({0, 0, 1.5f}, 1, 1));
-  const int ground = scene.AddMesh(Quad({0, 0, 0}, 10, 10));
-  scene.Commit();
-  const ImageF map = MakeMap(128, [](const Eigen::Vector3d& d) { return Eigen::Vector3f::Constant(d.z() > 0 ? 0.3f : 0.0f); });
+  std::shared_ptr<TriangleMesh> ground_mesh = Quad({0, 0, 0}, 10, 10);
+  int ground = -1;
+  ImageF map = MakeMap(128, [](const Eigen::Vector3d& d) { return Eigen::Vector3f::Constant(d.z() > 0 ? 0.3f : 0.0f); });
   EnvironmentLight light;
-  light.sh = ProjectToSh(map);
-  light.radiance = &map;
-  light.sun_direction = Eigen::Vector3d(1, 0, 1).normalized();
-  light.sun_irradiance = Eigen::Vector3f::Constant(3.0f);  // E_sun cos45 = 2.1 against E_sky = 0.94
   PinholeCamera cam;
-  cam.width = cam.height = 200;
-  cam.fx = cam.fy = 100;
-  cam.cx = cam.cy = 100;
-  Eigen::Matrix3d R;
-  R << 1, 0, 0, 0, -1, 0, 0, 0, -1;
-  const Rigid3d T_scene_cam(R, Eigen::Vector3d(0, 0, 20));
+  Rigid3d T_scene_cam;
+
+  RoofScene() {
+    scene.AddMesh(Quad({0, 0, 1.5f}, 1, 1));
+    ground = scene.AddMesh(ground_mesh);
+    scene.Commit();
+    light.sh = ProjectToSh(map);
+    light.radiance = &map;
+    light.sun_direction = Eigen::Vector3d(1, 0, 1).normalized();
+    light.sun_irradiance = Eigen::Vector3f::Constant(3.0f);  // E_sun cos45 = 2.1 against E_sky = 0.94
+    cam.width = cam.height = 200;
+    cam.fx = cam.fy = 100;
+    cam.cx = cam.cy = 100;
+    Eigen::Matrix3d R;
+    R << 1, 0, 0, 0, -1, 0, 0, 0, -1;
+    T_scene_cam = Rigid3d(R, Eigen::Vector3d(0, 0, 20));
+  }
+  // The image's value at ground point (gx, gy) (camera x = ego x, camera y = -ego y).
+  static float At(const ImageF& img, double gx, double gy) {
+    return img.at(static_cast<int>(100 + 100 * gx / 20), static_cast<int>(100 - 100 * gy / 20));
+  }
+};
+
+TEST(EnvShading, ReceiverShadowImageDarkensTheRealShadowOnly) {
+  const RoofScene r;
   EnvShadingOptions o;
   o.sun_rays = 16;
   o.sky_rays = 256;
-  const ImageF shadow = ReceiverShadowImage(scene, cam, T_scene_cam, ground, light, o);
-  auto at = [&](double gx, double gy) {  // ground point -> pixel (camera x = ego x, camera y = -ego y)
-    return shadow.at(static_cast<int>(100 + 100 * gx / 20), static_cast<int>(100 - 100 * gy / 20));
-  };
-  EXPECT_EQ(at(0, 0), 1.0f);   // the roof itself: not the receiver
-  EXPECT_EQ(at(9.9, 9.9), 1.0f) << "open ground, nothing above";
+  const ImageF shadow = ReceiverShadowImage(r.scene, r.cam, r.T_scene_cam, r.ground, r.light, o);
+  EXPECT_EQ(RoofScene::At(shadow, 0, 0), 1.0f);   // the roof itself: not the receiver
+  EXPECT_EQ(RoofScene::At(shadow, 9.9, 9.9), 1.0f) << "open ground, nothing above";
   // In the umbra (ground x in [-2.5, -0.5]) the sun is gone and the roof, 1.5 m up at 1.5 m, hides part of the
   // sky: ratio below the sky share 0.94 / (0.94 + 2.1) = 0.31.
-  EXPECT_LT(at(-1.8, 0), 0.31f);
-  EXPECT_GT(at(-1.8, 0), 0.15f);
+  EXPECT_LT(RoofScene::At(shadow, -1.8, 0), 0.31f);
+  EXPECT_GT(RoofScene::At(shadow, -1.8, 0), 0.15f);
   // 6 m away: only a sliver of sky is hidden.
-  EXPECT_GT(at(-6, 6), 0.97f);
+  EXPECT_GT(RoofScene::At(shadow, -6, 6), 0.97f);
 }
 
 TEST(EnvShading, ReceiverShadowImageTakesEachFacesLight) {
-  // The scene above; the ground's faces all under one light give exactly the single-light image, and faces under
-  // a sunless light (a building's shade) keep only the sky's occlusion there.
-  RayScene scene;
-  scene.AddMesh(Quad({0, 0, 1.5f}, 1, 1));
-  auto ground_mesh = Quad({0, 0, 0}, 10, 10);
-  const int ground = scene.AddMesh(ground_mesh);
-  scene.Commit();
-  const ImageF map = MakeMap(128, [](const Eigen::Vector3d& d) { return Eigen::Vector3f::Constant(d.z() > 0 ? 0.3f : 0.0f); });
-  EnvironmentLight sun;
-  sun.sh = ProjectToSh(map);
-  sun.radiance = &map;
-  sun.sun_direction = Eigen::Vector3d(1, 0, 1).normalized();
-  sun.sun_irradiance = Eigen::Vector3f::Constant(3.0f);
-  EnvironmentLight shade = sun;
+  // The ground's faces all under one light give exactly the single-light image; faces under a sunless light (a
+  // building's shade) keep only the sky's occlusion there.
+  const RoofScene r;
+  EnvironmentLight shade = r.light;
   shade.sun_irradiance.setZero();
-  PinholeCamera cam;
-  cam.width = cam.height = 200;
-  cam.fx = cam.fy = 100;
-  cam.cx = cam.cy = 100;
-  Eigen::Matrix3d R;
-  R << 1, 0, 0, 0, -1, 0, 0, 0, -1;
-  const Rigid3d T_scene_cam(R, Eigen::Vector3d(0, 0, 20));
   EnvShadingOptions o;
   o.sun_rays = 8;
   o.sky_rays = 64;
-  const ImageF single = ReceiverShadowImage(scene, cam, T_scene_cam, ground, sun, o);
-  const std::vector<const EnvironmentLight*> all_sun(ground_mesh->faces.size(), &sun);
-  EXPECT_EQ(ReceiverShadowImage(scene, cam, T_scene_cam, ground, all_sun, o).vector(), single.vector());
-  const std::vector<const EnvironmentLight*> all_shade(ground_mesh->faces.size(), &shade);
-  const ImageF shaded = ReceiverShadowImage(scene, cam, T_scene_cam, ground, all_shade, o);
-  auto at = [&](const ImageF& img, double gx, double gy) {
-    return img.at(static_cast<int>(100 + 100 * gx / 20), static_cast<int>(100 - 100 * gy / 20));
-  };
-  EXPECT_LT(at(single, -1.8, 0), 0.31f) << "umbra in the sun: the sun is gone";
-  EXPECT_GT(at(shaded, -1.8, 0), 0.7f) << "in a shade there is no sun to lose, only a little sky";
-  EXPECT_LT(at(shaded, -1.8, 0), 1.0f);
+  const ImageF single = ReceiverShadowImage(r.scene, r.cam, r.T_scene_cam, r.ground, r.light, o);
+  const std::vector<const EnvironmentLight*> all_sun(r.ground_mesh->faces.size(), &r.light);
+  EXPECT_EQ(ReceiverShadowImage(r.scene, r.cam, r.T_scene_cam, r.ground, all_sun, o).vector(), single.vector());
+  const std::vector<const EnvironmentLight*> all_shade(r.ground_mesh->faces.size(), &shade);
+  const ImageF shaded = ReceiverShadowImage(r.scene, r.cam, r.T_scene_cam, r.ground, all_shade, o);
+  EXPECT_LT(RoofScene::At(single, -1.8, 0), 0.31f) << "umbra in the sun: the sun is gone";
+  EXPECT_GT(RoofScene::At(shaded, -1.8, 0), 0.7f) << "in a shade there is no sun to lose, only a little sky";
+  EXPECT_LT(RoofScene::At(shaded, -1.8, 0), 1.0f);
 }
 
 // ---- Shadows: synthetic ground truth ----

@@ -35,6 +35,9 @@ class Msg {
   std::ostringstream os_;
 };
 
+// `v` with `digits` decimals ("%.*f", C locale), for messages and text records (KITTI labels, reports).
+std::string Fixed(double v, int digits);
+
 [[noreturn]] void CheckFailed(const char* file, int line, const char* cond, const std::string& msg);
 
 }  // namespace sd

@@ -674,12 +674,6 @@ std::vector<fs::path> WriteNuScenesTables(const Log& log, const std::vector<Fram
 // ---------------------------------------------------------------------------------------------------------
 // KITTI
 
-std::string Fixed(double v, int digits = 2) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.*f", digits, v);
-  return buf;
-}
-
 std::vector<fs::path> WriteKitti(const Log& log, const std::vector<FrameEdit>& edits, const fs::path& out_dir) {
   std::vector<fs::path> written;
   for (const FrameEdit& e : edits) {
@@ -710,8 +704,9 @@ std::vector<fs::path> WriteKitti(const Log& log, const std::vector<FrameEdit>& e
       // KITTI occlusion: 0 fully visible, 1 partly, 2 largely occluded, 3 unknown.
       const int occluded = visible < 0 ? 3 : visible > 0.8 ? 0 : visible > 0.4 ? 1 : 2;
       std::ostringstream line;
-      line << ClassName(obj, LogFormat::kKitti) << ' ' << Fixed(std::clamp(truncation, 0.0, 1.0)) << ' ' << occluded << ' '
-           << Fixed(alpha) << ' ' << Fixed(box2.x1) << ' ' << Fixed(box2.y1) << ' ' << Fixed(box2.x2) << ' ' << Fixed(box2.y2)
+      line << ClassName(obj, LogFormat::kKitti) << ' ' << Fixed(std::clamp(truncation, 0.0, 1.0), 2) << ' ' << occluded
+           << ' ' << Fixed(alpha, 2) << ' ' << Fixed(box2.x1, 2) << ' ' << Fixed(box2.y1, 2) << ' ' << Fixed(box2.x2, 2)
+           << ' ' << Fixed(box2.y2, 2)
            // Sub-millimetre digits (official labels carry 2) so the box survives a round trip to 1e-4 m.
            << ' ' << Fixed(h, 6) << ' ' << Fixed(w, 6) << ' ' << Fixed(l, 6) << ' ' << Fixed(bottom.x(), 6) << ' '
            << Fixed(bottom.y(), 6) << ' ' << Fixed(bottom.z(), 6) << ' ' << Fixed(ry, 6) << '\n';

@@ -240,14 +240,6 @@ std::string HtmlEscape(const std::string& s) {
   return out;
 }
 
-std::string Fixed(double v, int digits) {
-  std::ostringstream os;
-  os.setf(std::ios::fixed);
-  os.precision(digits);
-  os << v;
-  return os.str();
-}
-
 std::string ContactSheet(const MiningIndex& index, const std::vector<PromptResult>& results) {
   std::ostringstream h;
   h << "<!doctype html><html><head><meta charset=\"utf-8\"><title>SynthDrive mining run</title><style>"

@@ -199,12 +199,6 @@ constexpr double kOwnRoadMargin = 1.5;
 // Shadow rays over the sun's disk per road pixel: soft edges without visible noise at 4 samples per pixel.
 constexpr int kShadowSunRays = 8;
 
-std::string Fixed(double v, int digits) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.*f", digits, v);
-  return buf;
-}
-
 // `sun_source`: where the frame's sun came from (SunDirectionEgo's note, or the camera that sees it).
 std::string EnvironmentSummary(const EnvironmentMap& env, const std::string& sun_source) {
   Msg m;

@@ -160,26 +160,36 @@ sd::Scenario ScenarioWithObjects(const sd::Scenario& demo, int cones, int barrie
   return s;
 }
 
+// What ground estimation and placement read of frame 0, prepared as SynthesizeFrame prepares it: the ground
+// options for `seed`, and the placement input (the sweep in the ego frame, the annotated boxes, the cameras; no
+// ground yet).
+struct PlacementSetup {
+  sd::GroundOptions ground_options;
+  sd::PlacementInput input;
+};
+// nullopt when frame 0 has no sweep.
+std::optional<PlacementSetup> SetUpPlacement(const Inputs& in, uint32_t seed) {
+  const sd::Frame& frame = in.log.frames.at(0);
+  if (!frame.lidar) return std::nullopt;
+  PlacementSetup s;
+  const sd::PointCloud sweep = sd::ReadLidar(*frame.lidar);
+  s.input.points_ego.resize(sweep.size());
+  for (size_t i = 0; i < sweep.size(); ++i) s.input.points_ego[i] = frame.lidar->T_ego_lidar * sweep.xyz(i).cast<double>();
+  for (const auto& a : frame.annotations) s.input.real_boxes.push_back(a.box);
+  s.ground_options.seed = seed;
+  s.ground_options.sensor_xy = frame.lidar->T_ego_lidar.translation.head<2>();
+  for (const auto& c : frame.cameras) s.input.cameras.push_back(&c);
+  return s;
+}
+
 // Places `scenario` on frame 0 the way SynthesizeFrame does; the number placed, or -1 when placement fails.
 int TryPlace(const Inputs& in, const sd::Scenario& scenario) {
-  const sd::Frame& frame = in.log.frames.at(0);
-  if (!frame.lidar) return -1;
-  const sd::PointCloud sweep = sd::ReadLidar(*frame.lidar);
-  std::vector<Eigen::Vector3d> points_ego(sweep.size());
-  for (size_t i = 0; i < sweep.size(); ++i) points_ego[i] = frame.lidar->T_ego_lidar * sweep.xyz(i).cast<double>();
-  std::vector<sd::Box3> real_boxes;
-  for (const auto& a : frame.annotations) real_boxes.push_back(a.box);
-  sd::GroundOptions gopt;
-  gopt.seed = scenario.seed;
-  gopt.sensor_xy = frame.lidar->T_ego_lidar.translation.head<2>();
-  const sd::GroundModel ground = sd::GroundModel::Estimate(points_ego, real_boxes, gopt);
-  sd::PlacementInput pin;
-  pin.ground = &ground;
-  pin.points_ego = points_ego;
-  pin.real_boxes = real_boxes;
-  for (const auto& c : frame.cameras) pin.cameras.push_back(&c);
+  std::optional<PlacementSetup> s = SetUpPlacement(in, scenario.seed);
+  if (!s) return -1;
+  const sd::GroundModel ground = sd::GroundModel::Estimate(s->input.points_ego, s->input.real_boxes, s->ground_options);
+  s->input.ground = &ground;
   try {
-    return static_cast<int>(sd::PlaceObjects(scenario, in.assets, pin).size());
+    return static_cast<int>(sd::PlaceObjects(scenario, in.assets, s->input).size());
   } catch (const std::exception&) {
     return -1;
   }
@@ -232,34 +242,22 @@ BENCHMARK(BM_SynthesizeKeyframeObjects)
 // read and moved to the ego frame outside the timed loop.
 void BM_GroundAndPlacement(benchmark::State& state) {
   const Inputs& in = GetInputs();
-  const sd::Frame& frame = in.log.frames.at(0);
-  if (!frame.lidar) {
+  std::optional<PlacementSetup> s = SetUpPlacement(in, in.scenario.seed);
+  if (!s) {
     state.SkipWithError("frame 0 has no LiDAR sweep");
     return;
   }
-  const sd::PointCloud sweep = sd::ReadLidar(*frame.lidar);
-  std::vector<Eigen::Vector3d> points_ego(sweep.size());
-  for (size_t i = 0; i < sweep.size(); ++i) points_ego[i] = frame.lidar->T_ego_lidar * sweep.xyz(i).cast<double>();
-  std::vector<sd::Box3> real_boxes;
-  for (const auto& a : frame.annotations) real_boxes.push_back(a.box);
-  sd::GroundOptions gopt;
-  gopt.seed = in.scenario.seed;
-  gopt.sensor_xy = frame.lidar->T_ego_lidar.translation.head<2>();
-  sd::PlacementInput pin;
-  pin.points_ego = points_ego;
-  pin.real_boxes = real_boxes;
-  for (const auto& c : frame.cameras) pin.cameras.push_back(&c);
   sd::Scenario frame_scenario = in.scenario;  // frame 0: the pipeline's per-frame seed is scenario.seed + 0
   size_t placed_count = 0;
   for (auto _ : state) {
-    const sd::GroundModel ground = sd::GroundModel::Estimate(points_ego, real_boxes, gopt);
-    pin.ground = &ground;
-    const std::vector<sd::PlacedObject> placed = sd::PlaceObjects(frame_scenario, in.assets, pin);
+    const sd::GroundModel ground = sd::GroundModel::Estimate(s->input.points_ego, s->input.real_boxes, s->ground_options);
+    s->input.ground = &ground;
+    const std::vector<sd::PlacedObject> placed = sd::PlaceObjects(frame_scenario, in.assets, s->input);
     placed_count = placed.size();
     benchmark::DoNotOptimize(placed.data());
   }
   state.counters["objects"] = static_cast<double>(placed_count);
-  state.counters["lidar_points"] = static_cast<double>(points_ego.size());
+  state.counters["lidar_points"] = static_cast<double>(s->input.points_ego.size());
 }
 BENCHMARK(BM_GroundAndPlacement)->Unit(benchmark::kMillisecond)->UseRealTime()->MeasureProcessCPUTime();
 

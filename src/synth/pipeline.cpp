@@ -274,17 +274,17 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
 
   // Camera images, read once; the environment map stitches the whole rig, the road light only needs the
   // cameras that see the objects.
-  std::vector<std::optional<ImageU8>> images(frame.cameras.size());
+  std::vector<ImageU8> images(frame.cameras.size());  // empty until read
   const auto image_of = [&](size_t k) -> const ImageU8& {
-    if (!images[k]) {
+    if (images[k].empty()) {
       const CameraSensor& cam = frame.cameras[k];
       images[k] = ReadImage(cam.image_path, 3);
-      if (images[k]->width() != cam.intrinsics.width || images[k]->height() != cam.intrinsics.height)
-        throw InputError(cam.image_path, Msg() << "image is " << images[k]->width() << "x" << images[k]->height()
+      if (images[k].width() != cam.intrinsics.width || images[k].height() != cam.intrinsics.height)
+        throw InputError(cam.image_path, Msg() << "image is " << images[k].width() << "x" << images[k].height()
                                                << " but the calibration says " << cam.intrinsics.width << "x"
                                                << cam.intrinsics.height);
     }
-    return *images[k];
+    return images[k];
   };
 
   // Light: the sun, and the environment map it is checked against.
@@ -292,12 +292,11 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
   Eigen::Vector3d sun_dir = SunDirectionEgo(frame, scenario.location ? scenario.location : log.location, scenario.sun, &sun_source);
   std::optional<EnvironmentMap> env;
   if (options.light == SynthOptions::Light::kEnvironment && !placed.empty()) {
-    std::vector<ImageU8> rig;
-    for (size_t k = 0; k < frame.cameras.size(); ++k) rig.push_back(image_of(k));
+    for (size_t k = 0; k < frame.cameras.size(); ++k) image_of(k);
     EnvironmentOptions eo;
     eo.ephemeris_sun_ego = sun_dir;
     eo.detect_sun_in_images = !scenario.sun;  // a scenario's sun is the user's word
-    env = BuildEnvironmentMap(frame, rig, eo);
+    env = BuildEnvironmentMap(frame, images, eo);
     if (env->sun_source != "ephemeris") {
       sun_dir = env->sun_direction;
       sun_source = env->sun_source;

@@ -174,7 +174,8 @@ for k in 0 1; do "$BIN" -q mine index --log "$INFO" --log "$DATA/driving/kitti-o
 [ "$(ls "$T/mi_split/shards" | sort)" = "$(ls "$T/mi/shards" | sort)" ] && ok || bad "mine index --shard 0/2 + 1/2 = the whole index"
 expect_error "mine: missing log" "nope.json: no such file" "$T/mi2" -- "$BIN" -q mine index --log "$T/nope.json" --out "$T/mi2" --clip none
 expect_error "mine: bad shard" "--shard '2/2'" "$T/mi3" -- "$BIN" -q mine index --log "$INFO" --out "$T/mi3" --clip none --shard 2/2
-expect_error "mine: not an index" "not a mining index" "$T/mr2" -- "$BIN" -q mine query --index "$T" --prompt car --out "$T/mr2"
+mkdir -p "$T/not_an_index"
+expect_error "mine: not an index" "not a mining index" "$T/mr2" -- "$BIN" -q mine query --index "$T/not_an_index" --prompt car --out "$T/mr2"
 expect_error "mine: prompt without a category and no CLIP" "names no known category" "$T/mr3" -- "$BIN" -q mine query --index "$T/mi" --prompt "purple elephant" --out "$T/mr3"
 expect_error "mine: existing run" "mr: exists" "" -- "$BIN" -q mine query --index "$T/mi" --prompt car --out "$T/mr"
 printf '{"id": 1}\n' > "$T/bad_manifest.jsonl"
@@ -272,6 +273,44 @@ expect_error "bank: text query without CLIP" "needs a CLIP model" "" -- "$BIN" -
 expect_error "bank: not a bank" "not a SynthDrive bank" "" -- "$BIN" -q bank list --bank "$T/one_cone.json"
 printf '{"categroy": "car"}\n' > "$T/bad_query.json"
 expect_error "bank: bad JSON query" "unknown key 'categroy'" "" -- "$BIN" -q bank query --bank "$BANK" --from "$T/bad_query.json"
+
+# Data loss: an output that is, holds, or lies inside an input is refused before anything is written, with or
+# without --overwrite; every input stays byte-identical (checksums of the whole tree before and after).
+mkdir -p "$T/dl/parent" && cp -r "$DATA/driving/nuscenes-scene0061-kf0" "$T/dl/parent/log" && chmod -R u+w "$T/dl/parent"
+printf 'unrelated\n' > "$T/dl/parent/notes.txt"
+cp -r "$T/cone" "$T/dl/cone" && cp -r "$DATA/assets/metadrive_traffic_cone" "$T/dl/mesh"
+"$BIN" -q asset import --mesh "$T/dl/mesh/scene.gltf" --up +y --height 0.7 --category traffic_cone --out "$T/dl/cone.glb.d" \
+  && cp "$T/dl/cone.glb.d/mesh.glb" "$T/dl/pred.glb" && cp "$T/dl/cone.glb.d/preview.png" "$T/dl/photo.png" || bad "data loss: set-up"
+sums() { (cd "$T/dl" && find . -type f ! -name '*.tmp-*' | LC_ALL=C sort | xargs sha256sum); }
+sums > "$T/dl_before.txt"
+DLINFO=$T/dl/parent/log/mmdet3d_info/n015-2018-07-24-11-22-45+0800.json
+expect_data_safe() {
+  local name=$1 fragment=$2
+  shift 2
+  expect_error "$name" "$fragment" "" -- "$@"
+  sums > "$T/dl_after.txt"
+  if ! cmp -s "$T/dl_before.txt" "$T/dl_after.txt"; then bad "$name: inputs changed: $(diff "$T/dl_before.txt" "$T/dl_after.txt" | head -3)"; sums > "$T/dl_before.txt"; fi
+  if ls "$T/dl" "$T/dl/parent" | grep -q '\.tmp-\|\.parts'; then bad "$name: temporary output left behind"; fi
+}
+DLS=(--asset "$T/dl/cone" --scenario "$T/one_cone.json" --spp 1 --ao-samples 2 --overwrite)
+expect_data_safe "data loss: synth --out the log root" "is the input folder" synth --log "$DLINFO" "${DLS[@]}" --out "$T/dl/parent/log"
+expect_data_safe "data loss: synth --out the log's parent" "holds the input" synth --log "$DLINFO" "${DLS[@]}" --out "$T/dl/parent"
+expect_data_safe "data loss: synth --out the asset folder" "is the input folder" synth --log "$DLINFO" "${DLS[@]}" --out "$T/dl/cone"
+expect_data_safe "data loss: synth --out the info file's folder" "lies inside the input folder" synth --log "$DLINFO" "${DLS[@]}" --out "$T/dl/parent/log/mmdet3d_info"
+expect_data_safe "data loss: synth --out inside the log" "lies inside the input folder" synth --log "$DLINFO" "${DLS[@]}" --out "$T/dl/parent/log/synth"
+expect_data_safe "data loss: synth --out another spelling of the folder holding everything" "holds the input" synth --log "$DLINFO" "${DLS[@]}" --out "$T/dl/parent/log/../.."
+expect_data_safe "data loss: synth --shard over the log" "is the input folder" synth --log "$DLINFO" "${DLS[@]}" --out "$T/dl/parent/log" --shard 0/1
+expect_data_safe "data loss: synth --dry-run over the log" "is the input folder" synth --log "$DLINFO" --scenario "$T/one_cone.json" --overwrite --dry-run --out "$T/dl/parent/log"
+expect_data_safe "data loss: asset import over the mesh folder" "holds the input" "$BIN" -q asset import --mesh "$T/dl/mesh/scene.gltf" --up +y --height 0.7 --category traffic_cone --out "$T/dl/mesh" --overwrite
+expect_data_safe "data loss: eval geometry --out the ground truth" "is the input file" "$BIN" -q eval geometry --pred "$T/dl/pred.glb" --gt "$T/dl/mesh/scene.gltf" --out "$T/dl/mesh/scene.gltf" --overwrite
+expect_data_safe "data loss: eval texture --out the prediction" "is the input file" "$BIN" -q eval texture --pred "$T/dl/pred.glb" --gt "$T/dl/pred.glb" --out "$T/dl/pred.glb" --overwrite
+expect_data_safe "data loss: upscale in place" "is the input file" "$BIN" -q upscale --in "$T/dl/photo.png" --out "$T/dl/photo.png" --model bicubic --overwrite
+expect_data_safe "data loss: upscale a folder into itself" "is the input folder" "$BIN" -q upscale --in "$T/dl/cone.glb.d" --out "$T/dl/cone.glb.d" --model bicubic --overwrite
+expect_data_safe "data loss: refine --out the coarse mesh" "is the input file" "$BIN" -q refine --views "$T/dl/mesh" --mesh "$T/dl/pred.glb" --out "$T/dl/pred.glb" --overwrite
+expect_data_safe "data loss: mine index --out the image folder" "is the input folder" "$BIN" -q mine index --images "$T/dl/cone.glb.d" --out "$T/dl/cone.glb.d" --clip none
+ln -s "$T/dl/parent/log" "$T/dl_link"
+expect_data_safe "data loss: synth --out a symlink to the log" "is the input folder" synth --log "$DLINFO" "${DLS[@]}" --out "$T/dl_link"
+rm "$T/dl_link"
 
 echo "$pass passed, $fail failed"
 [ $fail -eq 0 ]

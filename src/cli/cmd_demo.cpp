@@ -41,6 +41,7 @@ Runner AddDemoCommand(CLI::App& app) {
   app.add_flag("--overwrite", *overwrite, "Replace an existing output directory");
   return [=]() {
     const fs::path data_dir = FindDataDir(*data);
+    RefuseOutputOverInputs(*out, {data_dir});
     StagingDirectory staging(*out, *overwrite);
 
     // 0. Mining: index the shipped logs' objects (crops, LiDAR masks, quality figures) and find the demo's

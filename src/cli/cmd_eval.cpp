@@ -6,11 +6,12 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include "assetgen/texture_eval.h"
 #include "cli/commands.h"
 #include "cli/mesh_files.h"
 #include "core/log.h"
-#include "assetgen/texture_eval.h"
 #include "geometry/metrics.h"
+#include "io/files.h"
 #include "io/json.h"
 
 namespace sd::cli {
@@ -53,6 +54,7 @@ Runner AddEvalCommand(CLI::App& app) {
     if (tex->parsed()) {
       std::filesystem::path out = t->out;
       if (out.empty()) out = std::filesystem::path(t->pred).replace_extension(".texture.json");
+      RefuseOutputOverInputs(out, {t->pred, t->gt});
       RefuseExisting(out, t->overwrite);
       const TriangleMesh pred = ReadMeshFile(t->pred);
       const TriangleMesh gt = ReadMeshFile(t->gt);
@@ -69,6 +71,7 @@ Runner AddEvalCommand(CLI::App& app) {
     }
     std::filesystem::path out = a->out;
     if (out.empty()) out = std::filesystem::path(a->pred).replace_extension(".geometry.json");
+    RefuseOutputOverInputs(out, {a->pred, a->gt});
     RefuseExisting(out, a->overwrite);
     const TriangleMesh pred = ReadMeshFile(a->pred);
     const TriangleMesh gt = ReadMeshFile(a->gt);

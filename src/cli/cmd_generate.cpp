@@ -19,6 +19,7 @@
 #include "core/log.h"
 #include "core/shard.h"
 #include "datasets/categories.h"
+#include "io/files.h"
 #include "io/image_io.h"
 #include "mining/query.h"
 #include "models/multiview_diffusion.h"
@@ -269,6 +270,7 @@ Runner AddGenerateCommand(CLI::App& app) {
 
   return [a]() {
     const fs::path model_dir = a->model_dir.empty() ? models::DefaultModelDir() : fs::path(a->model_dir);
+    RefuseOutputOverInputs(a->out, {a->views, a->image, a->manifest});
     if (!a->manifest.empty()) return RunManifest(*a, model_dir);
     if (a->category.empty()) throw InputError({}, "--category is required with --views and --image");
     RefuseExisting(a->out, a->overwrite);

@@ -12,6 +12,7 @@
 #include "core/error.h"
 #include "core/log.h"
 #include "core/shard.h"
+#include "io/files.h"
 #include "mining/index.h"
 #include "mining/query.h"
 #include "models/clip.h"
@@ -86,6 +87,12 @@ void AddIndexCommand(CLI::App& app, std::function<int()>& run) {
     for (const auto& p : a->logs) o.sources.push_back({mining::SourceKind::kLog, p});
     for (const auto& p : a->folders) o.sources.push_back({mining::SourceKind::kFolder, p});
     for (const auto& p : a->url_lists) o.sources.push_back({mining::SourceKind::kUrl, p});
+    {
+      std::vector<fs::path> inputs(a->logs.begin(), a->logs.end());
+      inputs.insert(inputs.end(), a->folders.begin(), a->folders.end());
+      inputs.insert(inputs.end(), a->url_lists.begin(), a->url_lists.end());
+      RefuseOutputOverInputs(a->out, inputs);
+    }
     o.shard = ParseShard(a->shard);
     o.chunk_size = a->chunk_size;
     o.crops.cameras = a->cameras;
@@ -153,6 +160,11 @@ void AddQueryCommand(CLI::App& app, std::function<int()>& run) {
     for (const auto& e : a->examples) o.examples.push_back(e);
     o.mode = mining::QueryModeFromString(a->mode);
     if (o.prompts.empty() && o.examples.empty()) throw InputError({}, "mine query: give --prompt or --example");
+    {
+      std::vector<fs::path> inputs(a->examples.begin(), a->examples.end());
+      inputs.push_back(a->index);
+      RefuseOutputOverInputs(a->out, inputs);
+    }
     if (fs::exists(a->out) && !a->overwrite) throw InputError(a->out, "exists (pass --overwrite to replace it)");
     const mining::MiningIndex index = mining::MiningIndex::Open(a->index);
     SD_LOG(Info, "index " << a->index << ": " << index.size() << " object images in " << index.shard_count()

@@ -10,6 +10,7 @@
 #include "cli/commands.h"
 #include "cli/mesh_files.h"
 #include "core/log.h"
+#include "io/files.h"
 #include "io/json.h"
 
 namespace sd::cli {
@@ -43,6 +44,8 @@ Runner AddRefineCommand(CLI::App& app) {
   app.add_flag("--overwrite", a->overwrite, "Replace an existing output file");
 
   return [a]() {
+    RefuseOutputOverInputs(a->out, {a->views, a->mesh});
+    if (!a->log.empty()) RefuseOutputOverInputs(a->log, {a->views, a->mesh});
     RefuseExisting(a->out, a->overwrite);
     if (!a->log.empty()) RefuseExisting(a->log, a->overwrite);
     CheckMeshExtension(a->out);
@@ -95,6 +98,7 @@ Runner AddViewsCommand(CLI::App& app) {
              "optionally degraded, in the folder format `synthdrive refine --views` reads.");
 
   return [a]() {
+    RefuseOutputOverInputs(a->out, {a->mesh});
     const TriangleMesh mesh = ReadMeshFile(a->mesh);
     // The rig is defined for the unit sphere; place it around this mesh's bounding sphere instead of moving the
     // mesh, so views, refined meshes and the ground truth share the mesh's own frame.

@@ -11,6 +11,7 @@
 #include "cli/mesh_files.h"
 #include "core/error.h"
 #include "core/log.h"
+#include "io/files.h"
 #include "models/super_resolution.h"
 
 namespace sd::cli {
@@ -35,6 +36,7 @@ Runner AddTextureCommand(CLI::App& app) {
   app.add_flag("--overwrite", a->overwrite, "Replace an existing output file");
 
   return [a]() {
+    RefuseOutputOverInputs(a->out, {a->mesh, a->views});
     RefuseExisting(a->out, a->overwrite);
     CheckMeshExtension(a->out);
     TriangleMesh mesh = ReadMeshFile(a->mesh);

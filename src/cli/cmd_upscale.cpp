@@ -63,6 +63,7 @@ Runner AddUpscaleCommand(CLI::App& app) {
     if (!fs::exists(in, ec)) throw InputError(in, "no such file or folder");
     const bool folder = fs::is_directory(in, ec);
     if (!folder && !IsImageFile(out)) throw InputError(out, "output must be a .png or .jpg file");
+    RefuseOutputOverInputs(out, {in});
     RefuseExisting(out, a->overwrite);
     const std::vector<fs::path> inputs = folder ? ImagesIn(in) : std::vector<fs::path>{in};
 

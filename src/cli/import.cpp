@@ -2,11 +2,13 @@
 
 #include "core/error.h"
 #include "datasets/categories.h"
+#include "io/files.h"
 #include "io/mesh_io.h"
 
 namespace sd::cli {
 
 Asset ImportAsset(const ImportRequest& r) {
+  RefuseOutputOverInputs(r.out, {r.mesh});
   const auto category = FindCategory(r.category);
   if (!category) throw InputError(r.mesh, "unknown category '" + r.category + "' (see `synthdrive categories`)");
   TriangleMesh mesh = LoadMesh(r.mesh);

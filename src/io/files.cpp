@@ -7,6 +7,7 @@
 #include <cerrno>
 #include <cstring>
 #include <fstream>
+#include <map>
 #include <sstream>
 
 #include "core/error.h"
@@ -58,6 +59,58 @@ void WriteFileAtomic(const fs::path& path, std::string_view bytes) {
   if (ec) {
     fs::remove(tmp);
     throw InputError(path, "cannot rename into place: " + ec.message());
+  }
+}
+
+namespace {
+
+// The canonical spelling of `p`: symlinks and ".." resolved as far as the path exists, the rest lexical.
+fs::path Resolved(const fs::path& p) {
+  std::error_code ec;
+  fs::path r = fs::weakly_canonical(fs::absolute(p), ec);
+  if (ec) r = fs::absolute(p).lexically_normal();
+  if (r.filename().empty() && r.has_parent_path() && r != r.root_path()) r = r.parent_path();
+  return r;
+}
+
+// True when `inner` is `outer` or lies below it (component-wise, so /a/bc is not inside /a/b).
+bool IsWithin(const fs::path& inner, const fs::path& outer) {
+  auto i = inner.begin();
+  for (auto o = outer.begin(); o != outer.end(); ++o, ++i) {
+    if (o->empty()) continue;  // a trailing separator
+    if (i == inner.end() || *i != *o) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+void RefuseOutputOverInputs(const fs::path& out, const std::vector<fs::path>& inputs) {
+  const fs::path target = Resolved(out);
+  // Files are checked through their folder: the folder's canonical form is computed once, however many of a
+  // log's sensor files sit in it.
+  std::map<fs::path, fs::path> resolved_dirs;
+  for (const fs::path& input : inputs) {
+    if (input.empty()) continue;
+    std::error_code ec;
+    const fs::file_status st = fs::status(input, ec);
+    if (ec || !fs::exists(st)) continue;
+    if (fs::is_directory(st)) {
+      const fs::path dir = Resolved(input);
+      if (dir == target) throw InputError(out, "is the input folder " + input.string() + "; choose another output");
+      if (IsWithin(dir, target))
+        throw InputError(out, "holds the input " + input.string() + " (replacing it would delete that); choose another output");
+      if (IsWithin(target, dir))
+        throw InputError(out, "lies inside the input folder " + input.string() + "; choose an output outside it");
+      continue;
+    }
+    const fs::path parent = fs::absolute(input).parent_path();
+    auto it = resolved_dirs.find(parent);
+    if (it == resolved_dirs.end()) it = resolved_dirs.emplace(parent, Resolved(parent)).first;
+    const fs::path file = it->second / Resolved(input).filename();
+    if (file == target) throw InputError(out, "is the input file " + input.string() + "; choose another output");
+    if (IsWithin(it->second, target))
+      throw InputError(out, "holds the input " + input.string() + " (replacing it would delete that); choose another output");
   }
 }
 

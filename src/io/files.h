@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <string>
 #include <string_view>
+#include <vector>
 
 namespace sd {
 
@@ -13,6 +14,13 @@ std::string ReadFileToString(const std::filesystem::path& path);
 void WriteFileAtomic(const std::filesystem::path& path, std::string_view bytes);
 // A temporary sibling name for `path` that no other process uses ("<name>.tmp-<pid>-<n>").
 std::filesystem::path TemporarySibling(const std::filesystem::path& path);
+
+// InputError naming `out` when writing it could destroy or change an input: `out` is one of `inputs`, holds one
+// (replacing it with --overwrite would delete the input), or lies inside an input folder. Paths are compared
+// after resolving symlinks and ".." (std::filesystem::weakly_canonical), so a link or another spelling of the
+// same place does not slip past. Inputs that do not exist are skipped (their readers report them). Costs one
+// canonicalisation per distinct input folder, so a log's thousands of sensor files are cheap to pass.
+void RefuseOutputOverInputs(const std::filesystem::path& out, const std::vector<std::filesystem::path>& inputs);
 
 // An output directory built under a temporary name and published by Commit():
 //   StagingDirectory out(dir, overwrite);  ...write under out.path()...;  out.Commit();

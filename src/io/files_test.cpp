@@ -104,6 +104,48 @@ TEST(Files, StagingRefusesExistingOutputUnlessOverwrite) {
   EXPECT_EQ(CountEntries(tmp.path()), 1u);
 }
 
+// The message RefuseOutputOverInputs gives, or "" when it lets `out` through.
+std::string OverInputs(const fs::path& out, const std::vector<fs::path>& inputs) {
+  try {
+    RefuseOutputOverInputs(out, inputs);
+    return "";
+  } catch (const InputError& e) {
+    return e.what();
+  }
+}
+
+TEST(Files, OutputOverInputsIsRefused) {
+  testing::TempDir tmp;
+  const fs::path log = tmp / "log", info = log / "info" / "x.json", photo = tmp / "photo.png";
+  WriteFileAtomic(info, "{}");
+  WriteFileAtomic(photo, "png");
+  // The output is an input file, an input folder, holds one, or lies inside one: all refused.
+  EXPECT_NE(OverInputs(photo, {photo}).find("is the input file"), std::string::npos);
+  EXPECT_NE(OverInputs(log, {log}).find("is the input folder"), std::string::npos);
+  EXPECT_NE(OverInputs(tmp.path(), {log}).find("holds the input"), std::string::npos);
+  EXPECT_NE(OverInputs(log / "info", {info}).find("holds the input"), std::string::npos);
+  EXPECT_NE(OverInputs(log / "out", {log}).find("lies inside the input folder"), std::string::npos);
+  // Other spellings of the same place: "..", a trailing separator, a relative path, a symlink.
+  EXPECT_NE(OverInputs(log / "info" / ".." / "info" / "x.json", {info}), "");
+  EXPECT_NE(OverInputs(fs::path(log.string() + "/"), {info}), "");
+  fs::create_symlink(log, tmp / "link");
+  EXPECT_NE(OverInputs(tmp / "link", {info}), "");
+  EXPECT_NE(OverInputs(tmp / "link" / "info" / "x.json", {info}), "");
+  const fs::path cwd = fs::current_path();
+  fs::current_path(tmp.path());
+  EXPECT_NE(OverInputs("log", {info}), "");
+  EXPECT_NE(OverInputs("photo.png", {tmp / "photo.png"}), "");
+  fs::current_path(cwd);
+  // Siblings, names sharing a prefix, and missing inputs pass.
+  EXPECT_EQ(OverInputs(tmp / "out", {log, photo}), "");
+  EXPECT_EQ(OverInputs(tmp / "lo", {log}), "");
+  EXPECT_EQ(OverInputs(tmp / "logs", {log}), "");
+  EXPECT_EQ(OverInputs(tmp / "photo.png.x2.png", {photo}), "");
+  EXPECT_EQ(OverInputs(tmp / "nothing", {tmp / "nothing" / "missing.bin"}), "");
+  // The message names the output first, as every located error does.
+  EXPECT_EQ(OverInputs(photo, {photo}).rfind(photo.string(), 0), 0u);
+}
+
 TEST(JsonLines, CallsBackPerLineAndNamesTheBadLine) {
   sd::testing::TempDir tmp;
   const fs::path file = tmp / "x.jsonl";

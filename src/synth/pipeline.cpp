@@ -747,9 +747,23 @@ fs::path NormalOut(const fs::path& out) {
   return p;
 }
 
-// The check StagingDirectory makes at the merge, made up front so a shard does not work for a refused output.
-void CheckOutputFree(const SynthRequest& request) {
+// The check StagingDirectory makes at the merge, made up front so a shard does not work for a refused output;
+// and the output (or its parts folder, which a local run removes) must not be, hold, or lie inside anything
+// the run reads: with --overwrite, replacing it would delete the log, its sensor files or the assets.
+void CheckOutputFree(const SynthRequest& request, const SynthInputs& in) {
   const fs::path out = NormalOut(request.out);
+  // Folders first, so the message names the folder the output would replace rather than a file inside it.
+  std::vector<fs::path> inputs = {in.log.data_root};
+  for (const Asset& a : in.assets) inputs.push_back(a.dir);
+  for (const fs::path& p : {request.log, in.log.source, in.log.annotation_path, request.scenario}) inputs.push_back(p);
+  const std::string& h = request.options.harmonizer;
+  if (h != "none" && h != "classical" && h != "auto") inputs.push_back(h);  // a TorchScript file
+  for (const Frame& f : in.log.frames) {
+    for (const CameraSensor& c : f.cameras) inputs.push_back(c.image_path);
+    if (f.lidar) inputs.push_back(f.lidar->path);
+  }
+  RefuseOutputOverInputs(out, inputs);
+  RefuseOutputOverInputs(SynthPartsDir(out), inputs);
   std::error_code ec;
   if (fs::exists(out, ec) && !request.options.overwrite)
     throw InputError(out, "output already exists (pass --overwrite to replace it)");
@@ -1159,20 +1173,20 @@ fs::path SynthPartsDir(const fs::path& out) {
 
 SynthShardSummary RunSynthShard(const SynthRequest& request, const ShardSpec& shard) {
   const SynthInputs in = LoadInputs(request);
-  CheckOutputFree(request);
+  CheckOutputFree(request, in);
   ShardRun run = SynthesizeParts(in, request, shard, true);
   return run.summary;
 }
 
 SynthSummary MergeSynthParts(const SynthRequest& request) {
   const SynthInputs in = LoadInputs(request);
-  CheckOutputFree(request);
+  CheckOutputFree(request, in);
   return Merge(in, request);
 }
 
 SynthSummary RunSynth(const SynthRequest& request) {
   const SynthInputs in = LoadInputs(request);
-  CheckOutputFree(request);
+  CheckOutputFree(request, in);
   const ShardRun run = SynthesizeParts(in, request, ShardSpec{}, false);
   std::error_code ec;
   if (!run.failures.empty()) {
@@ -1372,7 +1386,7 @@ json SynthPlanToJson(const SynthPlan& plan) {
 
 DryRunSummary RunSynthDryRun(const SynthRequest& request) {
   const SynthInputs in = LoadInputs(request, true);
-  CheckOutputFree(request);
+  CheckOutputFree(request, in);
   DryRunSummary summary;
   StagingDirectory staging(request.out, request.options.overwrite);
   WriteJsonFile(staging.path() / "plan.json", PlanFileJson(in, request));

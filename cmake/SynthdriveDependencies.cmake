@@ -11,6 +11,8 @@ find_package(PkgConfig REQUIRED)
 pkg_check_modules(STB REQUIRED IMPORTED_TARGET stb)
 find_package(CLI11 REQUIRED)
 find_package(Threads REQUIRED)
+# gzip: PandaSet's .pkl.gz files, CLIP's published BPE vocabulary.
+find_package(ZLIB REQUIRED)
 # Asset mining: FAISS (Debian's static libfaiss, which links OpenMP and BLAS) searches the embedding index;
 # libcurl fetches URL-list images.
 find_package(OpenMP REQUIRED)

@@ -8,12 +8,14 @@ PACKAGES=(
   build-essential cmake pkg-config
   libeigen3-dev nlohmann-json3-dev libcli11-dev libtbb-dev libembree-dev
   libstb-dev libtinygltf-dev libtinyobjloader-dev
-  libnanoflann-dev
+  libnanoflann-dev zlib1g-dev
   libfaiss-dev libcurl4-openssl-dev libsqlite3-dev libssl-dev
   # OpenBLAS takes over libblas.so.3 (Debian alternatives) from the netlib reference BLAS: LibTorch's matrix
   # products (CLIP, the learned stages) and FAISS's batched search run about 11x faster with it.
   libopenblas0-pthread
   libtorch-dev python3-torch python3-onnx
+  # Python's own pickle consumers: the tests check that numpy and pandas load the pickles we write.
+  python3-numpy python3-pandas
   libgtest-dev libgmock-dev libbenchmark-dev
 )
 # npm fetches the super-resolution weights; Node may already come from elsewhere (keep that one).

@@ -6,6 +6,7 @@
 #include "core/error.h"
 #include "core/log.h"
 #include "core/shard.h"
+#include "datasets/format.h"
 #include "synth/pipeline.h"
 
 namespace sd::cli {
@@ -30,8 +31,10 @@ Runner AddSynthCommand(CLI::App& app) {
   app.add_option("--out", req->out, "Output directory for the derivative dataset (must not exist unless --overwrite)")
       ->required();
   app.add_option("--frame", req->options.frames, "Frame token(s) or index(es) to synthesise (default: all)");
-  app.add_option("--format", *format, "Force the log reader: nuscenes, mmdet3d, kitti (default: probe)")
-      ->check(CLI::IsMember({"nuscenes", "mmdet3d", "kitti"}));
+  std::string format_words;
+  for (const std::string& w : LogFormatOptions()) format_words += (format_words.empty() ? "" : ", ") + w;
+  app.add_option("--format", *format, "Force the log reader: " + format_words + " (default: probe)")
+      ->check(CLI::IsMember(LogFormatOptions()));
   app.add_option("--data-root", *data_root, "Directory the log's relative sensor paths resolve against (default: probe)");
   app.add_option("--spp", req->options.samples_per_pixel, "Camera samples per pixel (anti-aliasing)")->check(CLI::Range(1, 64));
   app.add_option("--ao-samples", req->options.ao_samples, "Sky-visibility rays per shaded sample")->check(CLI::Range(1, 256));
@@ -66,9 +69,7 @@ Runner AddSynthCommand(CLI::App& app) {
     r.options.lidar_realism = !*no_lidar_realism;
     r.options.light = *light == "road" ? SynthOptions::Light::kRoad : SynthOptions::Light::kEnvironment;
     r.options.dense_occlusion = *occlusion == "dense";
-    if (*format == "kitti") r.log_options.format = LogFormat::kKitti;
-    else if (*format == "nuscenes") r.log_options.format = LogFormat::kNuScenesTables;
-    else if (*format == "mmdet3d") r.log_options.format.reset();  // v1 vs v0 is probed from the file
+    if (!format->empty()) r.log_options.format = LogFormatFromOption(*format);
     if (!data_root->empty()) r.log_options.data_root = *data_root;
     if (*symlink) r.options.write.unchanged = UnchangedFiles::kSymlink;
     if (*dry_run) {

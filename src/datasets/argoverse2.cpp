@@ -102,7 +102,9 @@ Log ReadArgoverse2(const fs::path& log_dir, const OpenLogOptions& options) {
       l.relpath = datasets_internal::RelativePath(e.path(), log.data_root);
       l.layout = PointLayout{5, {"x", "y", "z", "intensity", "laser_number"}};
       l.timestamp = f.timestamp;
-      // The two stacked lidars' points are already merged in the ego frame: T_ego_lidar = identity.
+      // The two stacked lidars' points are already merged in the ego frame: T_ego_lidar = identity, and no
+      // one beam pattern describes the sweep.
+      l.one_beam_pattern = false;
       f.lidar = l;
     }
   }
@@ -133,5 +135,18 @@ Log ReadArgoverse2(const fs::path& log_dir, const OpenLogOptions& options) {
                               "annotations.json");
   return log;
 }
+
+namespace datasets_internal {
+
+LogFormatInfo Argoverse2Format() {
+  return {LogFormat::kArgoverse2, "argoverse2", "argoverse2",
+          [](const fs::path& p) {
+            return fs::is_regular_file(p / "city_SE3_egovehicle.json") && fs::is_regular_file(p / "annotations.json");
+          },
+          &ReadArgoverse2, nullptr, "writing Argoverse 2 logs is not supported (their tables are Apache Arrow files)",
+          [](const CategoryInfo& c) { return c.name; }};
+}
+
+}  // namespace datasets_internal
 
 }  // namespace sd

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cctype>
 
+#include "datasets/format.h"
+
 namespace sd {
 
 namespace {
@@ -73,14 +75,7 @@ std::optional<CategoryInfo> FindCategory(const std::string& name) {
 }
 
 std::string DatasetCategoryName(const CategoryInfo& category, LogFormat format) {
-  switch (format) {
-    case LogFormat::kNuScenesTables: return category.nuscenes_name;
-    case LogFormat::kKitti: return category.kitti_name;
-    case LogFormat::kMmdet3dV1:
-    case LogFormat::kMmdet3dV0:
-    case LogFormat::kArgoverse2: return category.name;
-  }
-  return category.name;
+  return FormatInfo(format).class_name(category);
 }
 
 }  // namespace sd

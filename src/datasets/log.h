@@ -46,6 +46,12 @@ struct LidarSensor {
   PointLayout layout;          // record layout of the file
   double timestamp = 0;        // seconds
   Rigid3d T_ego_lidar;
+  // Facts about the sweep its reader knows, so synthesis need not know the dataset (docs/lidar.md):
+  int spin_direction = 0;            // record order: +1 counter-clockwise seen from above, -1 clockwise, 0: inferred
+  double start_azimuth = std::numeric_limits<double>::quiet_NaN();  // azimuth of the first record; NaN: inferred
+  bool motion_compensated = true;    // de-skewed to one pose and stamped at the end of the turn (nuScenes), not raw (KITTI)
+  bool one_beam_pattern = true;      // one spinning sensor's returns; false where several LiDARs are merged (AV2):
+                                     // no beam model is fitted to such a sweep
 };
 
 struct Annotation {
@@ -78,7 +84,8 @@ struct GeoLocation {
   std::string name;  // e.g. "singapore-onenorth"
 };
 
-// kArgoverse2 is read (for sequences: poses, tracks, sweeps) but not written: its tables are Arrow files.
+// Each has one row in datasets/format.h (reader, writer, names). kArgoverse2 is read (for sequences: poses,
+// tracks, sweeps) but not written: its tables are Arrow files.
 enum class LogFormat { kNuScenesTables, kMmdet3dV1, kMmdet3dV0, kKitti, kArgoverse2 };
 const char* ToString(LogFormat f);
 
@@ -94,6 +101,9 @@ struct Log {
   std::vector<std::string> categories;  // the dataset's class list where it defines one (mmdet3d metainfo)
   std::optional<GeoLocation> location;
   std::vector<Frame> frames;
+  // Facts about the frames their reader knows:
+  bool sequential = true;            // frames are a time series with world poses (KITTI object frames are not)
+  bool ego_origin_on_ground = true;  // the ego origin lies on the road (nuScenes' rear axle); KITTI's Velodyne frame does not
 };
 
 }  // namespace sd

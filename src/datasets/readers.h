@@ -1,8 +1,7 @@
 #pragma once
-// Opening driving logs. Each reader converts its dataset's conventions into datasets/log.h once.
-//
-// How to add a reader: implement `Log ReadXxx(path, options)`, add a probe to the table in readers.cpp
-// (a cheap check of the directory layout or file content), and pin its conventions in a test on real data.
+// Opening driving logs. Each reader converts its dataset's conventions into datasets/log.h once; each lives
+// with its writer in one file per format, and the format table (datasets/format.h, which says how to add one)
+// is what OpenLog probes and dispatches through.
 #include <filesystem>
 #include <optional>
 

@@ -15,6 +15,7 @@
 #include "core/parallel.h"
 #include "datasets/categories.h"
 #include "datasets/coco.h"
+#include "datasets/format.h"
 #include "io/files.h"
 #include "io/image_io.h"
 #include "io/json.h"
@@ -135,21 +136,18 @@ void DropUnobserved(FrameOutcome* out) {
   out->lidar_object_points = std::move(points);
 }
 
-// The LiDAR model of a frame's own sweep (docs/lidar.md), or nullopt where none applies: Argoverse 2 (its
-// converted sweeps hold two lidars in the ego frame; synth cannot write AV2 anyway) or a sweep too small to
-// fit (the caller falls back to the ideal sensor, which is not worth failing the frame for).
-std::optional<LidarModel> FitFrameLidarModel(const Log& log, const Frame& frame, const PointCloud& sweep) {
-  if (log.format == LogFormat::kArgoverse2) return std::nullopt;
+// The LiDAR model of a frame's own sweep (docs/lidar.md), or nullopt where none applies: a sweep of several
+// merged lidars (Argoverse 2) or one too small to fit (the caller falls back to the ideal sensor, which is not
+// worth failing the frame for).
+std::optional<LidarModel> FitFrameLidarModel(const Frame& frame, const PointCloud& sweep) {
+  if (!frame.lidar->one_beam_pattern) return std::nullopt;
   LidarFitOptions fit;
   const Rigid3d T_lidar_ego = frame.lidar->T_ego_lidar.Inverse();
   for (const auto& a : frame.annotations)
     if (!a.category.empty()) fit.annotated.push_back({a.category, a.box.Transformed(T_lidar_ego)});
-  if (log.format == LogFormat::kKitti) {
-    // KITTI stores scan lines in azimuth order, not firing order: the sensor spins clockwise and the sweep
-    // starts behind it.
-    fit.spin_direction = -1;
-    fit.start_azimuth = M_PI;
-  }
+  // The record order, where the reader knows it (KITTI: azimuth order, clockwise, starting behind).
+  fit.spin_direction = frame.lidar->spin_direction;
+  if (std::isfinite(frame.lidar->start_azimuth)) fit.start_azimuth = frame.lidar->start_azimuth;
   try {
     return FitLidarModel(sweep, fit);
   } catch (const InputError& e) {
@@ -172,7 +170,7 @@ uint64_t LidarSeed(uint32_t scenario_seed, size_t frame_index) {
 // its one neighbour); nullopt without one (KITTI object frames have no world pose, nor a sequence).
 std::optional<std::pair<Rigid3d, Rigid3d>> NeighbourSweepPoses(const Log& log, size_t frame_index, double period,
                                                                double reference_time) {
-  if (log.format == LogFormat::kKitti) return std::nullopt;
+  if (!log.sequential) return std::nullopt;
   const double max_gap = SequencePlanOptions{}.max_frame_gap_s;
   const Frame& f = log.frames[frame_index];
   auto near = [&](size_t k) {
@@ -575,7 +573,7 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
   lin.T_ego_lidar = frame.lidar->T_ego_lidar;
   lin.objects = ptrs;
   lin.reference_intensity = ReferenceIntensities(sweep, points_ego, ground.ground_indices(), annotated, ptrs);
-  if (options.lidar_realism) out.lidar_model_fit = FitFrameLidarModel(log, frame, sweep);
+  if (options.lidar_realism) out.lidar_model_fit = FitFrameLidarModel(frame, sweep);
   if (out.lidar_model_fit) {
     const LidarModel& model = *out.lidar_model_fit;
     out.lidar_model = model.Summary();
@@ -584,7 +582,7 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
     re.noise = re.dropout = re.intensity = true;
     re.seed = LidarSeed(scenario.seed, frame_index);
     // nuScenes (tables and mmdet3d infos) de-skew their sweeps and stamp them at the end of the turn.
-    re.motion_compensated_output = log.format != LogFormat::kKitti;
+    re.motion_compensated_output = frame.lidar->motion_compensated;
     if (const auto poses = NeighbourSweepPoses(log, frame_index, model.SweepPeriod(), model.SweepPeriod())) {
       re.ego_motion = out.lidar_ego_motion = true;
       std::tie(re.T_ref_ego_start, re.T_ref_ego_end) = *poses;
@@ -693,9 +691,8 @@ SynthInputs LoadInputs(const SynthRequest& request, bool dry_run = false) {
   in.log = OpenLog(request.log, request.log_options);
   const Log& log = in.log;
   SD_LOG(Info, "log: " << request.log.string() << " (" << ToString(log.format) << ", " << log.frames.size() << " frames)");
-  if (log.format == LogFormat::kArgoverse2 && !dry_run)  // refused now rather than after synthesising every frame
-    throw InputError(request.log, "writing Argoverse 2 logs is not supported (their tables are Apache Arrow files); "
-                                  "--dry-run plans on them");
+  if (!FormatInfo(log.format).write && !dry_run)  // refused now rather than after synthesising every frame
+    throw InputError(request.log, std::string(FormatInfo(log.format).read_only_message) + "; --dry-run plans on them");
   in.scenario = ReadScenario(request.scenario);
   std::vector<fs::path> asset_dirs = request.assets;
   for (const fs::path& dir : BankAssets(in.scenario, request.scenario)) asset_dirs.push_back(dir);
@@ -1222,7 +1219,7 @@ namespace {
 
 // Frames a < b of one sequence: every step between them within the planner's time gap.
 bool OneSequence(const Log& log, size_t a, size_t b, double max_gap_s) {
-  if (log.format == LogFormat::kKitti) return false;  // object frames: no world pose, no time order
+  if (!log.sequential) return false;  // object frames: no world pose, no time order
   for (size_t k = a; k < b; ++k) {
     const double gap = log.frames[k + 1].timestamp - log.frames[k].timestamp;
     if (!(gap >= 0 && gap <= max_gap_s)) return false;
@@ -1347,9 +1344,10 @@ SynthPlan PlanSynthesis(const Log& log, const std::vector<size_t>& selected, con
       seq.surface = "ego_poses";
       seq.surface_detail = "no LiDAR files on disk: the height of the nearest ego origin (on the ground in nuScenes and "
                            "Argoverse 2), drivable everywhere";
-      // The road under the ego origin: on it by convention, except KITTI's Velodyne frame: there the boxes say.
+      // The road under the ego origin: on it by convention, except where the ego frame is a sensor's (KITTI's
+      // Velodyne): there the boxes say.
       std::vector<double> bottoms;
-      if (log.format == LogFormat::kKitti)
+      if (!log.ego_origin_on_ground)
         for (size_t k = first; k <= last; ++k)
           for (const auto& a : log.frames[k].annotations) bottoms.push_back(a.box.center().z() - 0.5 * a.box.size.z());
       surface = std::make_unique<EgoPoseSurface>(poses, bottoms.empty() ? 0.0 : Median(bottoms));

@@ -1,0 +1,224 @@
+#include "datasets/internal.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+
+#include "core/error.h"
+#include "core/log.h"
+#include "io/files.h"
+#include "io/image_io.h"
+#include "io/pointcloud_io.h"
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace sd::datasets_internal {
+
+std::string RelativePath(const fs::path& path, const fs::path& root) {
+  if (!root.empty()) {
+    const fs::path rel = path.lexically_normal().lexically_relative(root.lexically_normal());
+    if (!rel.empty() && *rel.begin() != "..") return rel.generic_string();
+  }
+  return path.filename().string();
+}
+
+std::string HexToken(const std::string& seed) {
+  // Two FNV-1a 64-bit hashes with different offsets give 128 bits: deterministic, no RNG state.
+  auto fnv = [&](uint64_t h) {
+    for (unsigned char c : seed) h = (h ^ c) * 1099511628211ull;
+    return h;
+  };
+  char buf[33];
+  std::snprintf(buf, sizeof buf, "%016llx%016llx", static_cast<unsigned long long>(fnv(14695981039346656037ull)),
+                static_cast<unsigned long long>(fnv(0x84222325cbf29ce4ull)));
+  return buf;
+}
+
+std::array<int, 2> ImageSizeFromHeader(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return {0, 0};
+  std::string head(64 * 1024, '\0');
+  in.read(head.data(), static_cast<std::streamsize>(head.size()));
+  head.resize(static_cast<size_t>(in.gcount()));
+  auto u8 = [&](size_t i) { return static_cast<unsigned>(static_cast<unsigned char>(head[i])); };
+  auto be16 = [&](size_t i) { return static_cast<int>((u8(i) << 8) | u8(i + 1)); };
+  auto be32 = [&](size_t i) { return static_cast<int>((u8(i) << 24) | (u8(i + 1) << 16) | (u8(i + 2) << 8) | u8(i + 3)); };
+  if (head.size() >= 24 && head.compare(0, 8, "\x89PNG\r\n\x1a\n") == 0 && head.compare(12, 4, "IHDR") == 0)
+    return {be32(16), be32(20)};
+  if (head.size() >= 4 && u8(0) == 0xFF && u8(1) == 0xD8) {
+    size_t i = 2;
+    while (i + 9 < head.size()) {
+      if (u8(i) != 0xFF) return {0, 0};
+      const unsigned marker = u8(i + 1);
+      if (marker == 0xFF) { ++i; continue; }
+      // SOF0..SOF15 except DHT (C4), JPG (C8), DAC (CC) carry height, width.
+      if (marker >= 0xC0 && marker <= 0xCF && marker != 0xC4 && marker != 0xC8 && marker != 0xCC)
+        return {be16(i + 7), be16(i + 5)};
+      i += 2 + static_cast<size_t>(be16(i + 2));
+    }
+  }
+  return {0, 0};
+}
+
+// Python's json module writes NaN / Infinity / -Infinity, which strict JSON (and nlohmann) rejects: pickle
+// conversions of mmdet3d infos contain them (e.g. gt_velocity of boxes without a track). Read them as null.
+json ReadPythonJson(const fs::path& path) {
+  const std::string text = ReadFileToString(path);
+  std::string clean;
+  clean.reserve(text.size());
+  bool in_string = false;
+  for (size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (in_string) {
+      clean += c;
+      if (c == '\\' && i + 1 < text.size()) clean += text[++i];
+      else if (c == '"') in_string = false;
+      continue;
+    }
+    if (c == '"') in_string = true;
+    if (text.compare(i, 3, "NaN") == 0) { clean += "null"; i += 2; continue; }
+    if (text.compare(i, 8, "Infinity") == 0) { clean += "null"; i += 7; continue; }
+    if (text.compare(i, 9, "-Infinity") == 0) { clean += "null"; i += 8; continue; }
+    clean += c;
+  }
+  try {
+    return json::parse(clean);
+  } catch (const json::parse_error& e) {
+    const std::string what = e.what();
+    const size_t pos = what.find("] ");
+    throw InputError(path, "malformed JSON: " + (pos == std::string::npos ? what : what.substr(pos + 2)));
+  }
+}
+
+double CameraYaw(const Eigen::Matrix3d& R_cam_box) {
+  const Eigen::Vector3d x = R_cam_box.col(0);
+  return std::atan2(-x.z(), x.x());
+}
+
+Eigen::Matrix4d Mat4(const JsonReader& r) {
+  if (r.Size() != 4) r.Fail(Msg() << "expected a 4x4 matrix, found " << r.Size() << " rows");
+  Eigen::Matrix4d m;
+  for (size_t i = 0; i < 4; ++i) {
+    if (r[i].Size() != 4) r[i].Fail(Msg() << "expected 4 columns, found " << r[i].Size());
+    for (size_t j = 0; j < 4; ++j) m(i, j) = r[i][j].Number();
+  }
+  return m;
+}
+
+Eigen::Matrix3d Mat3(const JsonReader& r) {
+  if (r.Size() < 3) r.Fail(Msg() << "expected a 3x3 matrix, found " << r.Size() << " rows");
+  Eigen::Matrix3d m;
+  for (size_t i = 0; i < 3; ++i) {
+    if (r[i].Size() < 3) r[i].Fail(Msg() << "expected 3 columns, found " << r[i].Size());
+    for (size_t j = 0; j < 3; ++j) m(i, j) = r[i][j].Number();
+  }
+  return m;
+}
+
+std::vector<double> Vec(const JsonReader& r, size_t n) {
+  if (r.Size() != n) r.Fail(Msg() << "expected " << n << " numbers, found " << r.Size());
+  std::vector<double> v(n);
+  for (size_t i = 0; i < n; ++i) v[i] = r[i].raw().is_null() ? std::nan("") : r[i].Number();
+  return v;
+}
+
+Eigen::Vector3d Vec3(const JsonReader& r) {
+  const std::vector<double> v = Vec(r, 3);
+  return {v[0], v[1], v[2]};
+}
+
+Rigid3d PoseWxyz(const JsonReader& rotation, const JsonReader& translation) {
+  const std::vector<double> q = Vec(rotation, 4);
+  return Rigid3d::FromWxyz(q[0], q[1], q[2], q[3], Vec3(translation));
+}
+
+Eigen::Vector2d RotateVelocity(const Rigid3d& T_ego_sensor, double vx, double vy) {
+  if (!std::isfinite(vx) || !std::isfinite(vy)) return Eigen::Vector2d::Constant(std::nan(""));
+  return (T_ego_sensor.rotation * Eigen::Vector3d(vx, vy, 0)).head<2>();
+}
+
+fs::path AncestorHolding(const fs::path& start, std::initializer_list<const char*> children) {
+  for (fs::path p = fs::absolute(start).lexically_normal(); !p.empty(); p = p.parent_path()) {
+    for (const char* c : children)
+      if (fs::is_directory(p / c)) return p;
+    if (p == p.parent_path()) break;
+  }
+  return {};
+}
+
+std::string StripToDataComponent(const std::string& p) {
+  const fs::path path(p);
+  std::vector<std::string> parts;
+  for (const auto& c : path) parts.push_back(c.string());
+  for (size_t i = 0; i < parts.size(); ++i) {
+    if (parts[i] == "samples" || parts[i] == "sweeps") {
+      fs::path rel;
+      for (size_t k = i; k < parts.size(); ++k) rel /= parts[k];
+      return rel.generic_string();
+    }
+  }
+  return path.lexically_normal().generic_string();
+}
+
+std::string ClassName(const AddedObject& obj, LogFormat format) {
+  const std::optional<CategoryInfo> c = FindCategory(obj.category);
+  return c ? DatasetCategoryName(*c, format) : obj.category;
+}
+
+void SensorFileWriter::Image(const CameraSensor& cam, const ImageU8* replacement) {
+  const fs::path dst = out_ / RelativePath(cam.image_path, log_.data_root);
+  if (replacement) {
+    if (cam.intrinsics.width > 0 && (replacement->width() != cam.intrinsics.width || replacement->height() != cam.intrinsics.height))
+      throw InputError(cam.image_path, Msg() << "replacement image is " << replacement->width() << "x" << replacement->height()
+                                             << ", the original is " << cam.intrinsics.width << "x" << cam.intrinsics.height);
+    WriteImage(dst, *replacement, options_.jpeg_quality);
+  } else {
+    Unchanged(cam.image_path, dst);
+  }
+}
+
+void SensorFileWriter::Lidar(const LidarSensor& lidar, const PointCloud* replacement) {
+  const fs::path dst = out_ / RelativePath(lidar.path, log_.data_root);
+  if (replacement) {
+    if (replacement->num_features != lidar.layout.num_features)
+      throw InputError(lidar.path, Msg() << "replacement sweep has " << replacement->num_features << " features per point, the original "
+                                         << lidar.layout.num_features);
+    WritePointCloudBin(dst, *replacement);
+  } else {
+    Unchanged(lidar.path, dst);
+  }
+}
+
+void SensorFileWriter::Unchanged(const fs::path& src, const fs::path& dst) {
+  if (!fs::exists(src)) {
+    if (options_.require_sensor_files) throw InputError(src, "sensor file referenced by the log is missing");
+    SD_LOG(Warn, src.string() << ": missing, not written to the derivative");
+    return;
+  }
+  if (fs::exists(dst)) return;
+  fs::create_directories(dst.parent_path());
+  if (options_.unchanged == UnchangedFiles::kSymlink) {
+    fs::create_symlink(fs::absolute(src), dst);
+  } else {
+    WriteFileAtomic(dst, ReadFileToString(src));
+  }
+}
+
+void SensorFileWriter::Frame(const sd::Frame& frame, const FrameEdit& edit) {
+  for (const CameraSensor& cam : frame.cameras) {
+    auto it = edit.images.find(cam.channel);
+    Image(cam, it == edit.images.end() ? nullptr : &it->second);
+  }
+  for (const auto& [channel, img] : edit.images)
+    if (!frame.FindCamera(channel)) throw InputError(log_.source, "edit replaces an image of unknown camera " + channel);
+  if (frame.lidar) Lidar(*frame.lidar, edit.points ? &*edit.points : nullptr);
+}
+
+void WriteSensorFiles(const Log& log, const std::vector<FrameEdit>& edits, const fs::path& out_dir, const WriteOptions& options) {
+  SensorFileWriter files(log, out_dir, options);
+  for (const FrameEdit& e : edits) files.Frame(log.frames[e.frame_index], e);
+}
+
+}  // namespace sd::datasets_internal

@@ -2,26 +2,41 @@
 // CLIP's byte-level BPE tokenizer (Radford et al. 2021), written from the published algorithm, so that text
 // queries become the exact token ids the "clip_text" model was trained on.
 //
-// Vocabulary file: OpenAI's bpe_simple_vocab_16e6.txt format (what tools/export/export_clip.py writes beside
-// the model, uncompressed): the first line is a header ("#version: ..."), every further non-empty line one
+// Vocabulary file: OpenAI's bpe_simple_vocab_16e6.txt format, gzip-compressed as it ships (.txt.gz) or plain
+// text as tools/export/export_clip.py writes it beside the model (told apart by the gzip magic, not the name;
+// at most 64 MiB decompressed). The first line is a header the reference skips unread; it must contain
+// "#version" (OpenAI's reads '"bpe_simple_vocab_16e6.txt#version: 0.2'). Every further non-empty line is one
 // merge "a b" in rank order. The vocabulary is implied: the 256 byte symbols, the same with "</w>" appended,
 // one symbol per merge, then <|startoftext|> and <|endoftext|>. The reference tokenizer uses only the first
 // 49152 - 256 - 2 = 48894 merges of the published file (vocabulary 49408): `max_merges` says how many to read
 // (the contract's vocab_size - 514), so the same file gives the same ids.
 //
-// Encoding, as the reference:
-//  1. clean-up: curly quotes straightened, full-width forms and Latin ligatures to ASCII (the parts of the
-//     reference's ftfy.fix_text that matter for captions; not its mojibake repair, NFC normalisation or HTML
-//     unescaping), runs of whitespace to one space, ends trimmed, lower-cased (ASCII, Latin-1, Latin
-//     Extended-A, Greek and Cyrillic; other scripts pass unchanged).
-//  2. pre-tokenisation by the reference pattern, hand-written (std::regex has no \p{L}):
+// Encoding, as the reference (openai/CLIP simple_tokenizer.py; checked id for id against its output on the
+// published vocabulary, clip_tokenizer_test.cpp):
+//  1. clean-up, in the reference's order:
+//     a. the parts of ftfy.fix_text that matter for captions: curly quotes straightened, full-width forms and
+//        Latin ligatures to ASCII;
+//     b. html.unescape twice: numeric references by the HTML5 rules, named ones for HTML 4's entities,
+//        &apos; and HTML5's names of ASCII characters (legacy names also without ';');
+//     c. whitespace: the ends stripped (Python's str.isspace), every run of \s (Unicode White_Space, which
+//        unlike str.isspace lacks U+001C..U+001F) to one space, stripped again;
+//     d. Python's str.lower: the full Unicode simple mapping, U+0130 to "i" + U+0307, capital sigma to final
+//        sigma at a word's end (the "cased" / "case-ignorable" context is approximated; clip_tokenizer.cpp).
+//  2. pre-tokenisation by the reference pattern (compiled with re.IGNORECASE), hand-written (std::regex has
+//     no \p{L}):
 //       <|startoftext|> | <|endoftext|> | 's | 't | 're | 've | 'm | 'll | 'd | \p{L}+ | \p{N} | [^\s\p{L}\p{N}]+
-//     tried in that order at each position; whitespace between pieces is dropped. The letter / number classes
-//     are a table of the main Unicode ranges (documented in clip_tokenizer.cpp), not the full database.
+//     tried in that order at each position; whitespace between pieces is dropped. \p{L} and \p{N} are tables
+//     generated from the Unicode database (15.1), so every script is classed as the reference classes it.
+//     IGNORECASE's two effects on lower-cased text are kept: U+017F (long s) matches the pattern's "s", and
+//     U+0345 matches no alternative, so it is dropped.
 //  3. each piece's UTF-8 bytes become printable symbols (the reference byte -> unicode map), the last one gets
 //     "</w>", and adjacent symbol pairs merge lowest rank first until no pair has a rank (cached per piece).
+// Not reproduced: the Unicode normalisation (NFC) that ftfy ends with, so decomposed text ("e" + U+0301)
+// gives other ids than its composed form would (the reference composes it to U+00E9); ftfy's mojibake repair,
+// control-character removal and its own HTML unescaping before quotes are uncurled ("&rsquo;" stays a curly
+// quote); HTML5's other ~1,800 entity names (&NotNestedGreaterGreater;), which stay as written.
 // Tokenize() wraps the ids in <|startoftext|> ... <|endoftext|>, truncates to the context length keeping
-// <|endoftext|> as the last id (what open_clip does), and pads with 0.
+// <|endoftext|> as the last id (what clip.tokenize(truncate=True) and open_clip do), and pads with 0.
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -32,8 +47,8 @@ namespace sd::models {
 
 class ClipTokenizer {
  public:
-  // Reads the merges file; InputError naming it when it is missing, has no header, a malformed merge line,
-  // or fewer merges than `max_merges` (-1: all lines).
+  // Reads the merges file (plain or gzip); InputError naming it when it is missing, corrupt gzip, over 64 MiB
+  // decompressed, has no header, a malformed merge line, or fewer merges than `max_merges` (-1: all lines).
   static ClipTokenizer Load(const std::filesystem::path& merges_file, int max_merges = -1);
 
   // BPE ids of `text` without start / end tokens. Not safe to call concurrently on one tokenizer (the

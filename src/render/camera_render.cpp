@@ -125,7 +125,10 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
         const Eigen::Vector2f jitter = Stratified(s, spp, rng);
         const Eigen::Vector3d d_cam = camera.RayDirection(Eigen::Vector2d(x + jitter.x(), y + jitter.y()));
         const Eigen::Vector3f dir = (R_scene_cam * d_cam).cast<float>().normalized();
-        const RayHit hit = scene.Intersect(origin, dir);
+        // The receiver stands in for the real road, which is in the photo already: it never hides an object (a
+        // patch laid on a kerb's slope rises metres away from its object). Objects first, the receiver where none.
+        RayHit hit = scene.Intersect(origin, dir, 0.0f, inf, receiver);
+        if (!hit.Hit() && receiver >= 0) hit = scene.Intersect(origin, dir);
         if (!hit.Hit()) continue;
         const Frame f = ShadingFrame(scene, hit, dir);
         const float cos_sun = std::max(0.0f, f.n_shade.dot(sun_dir));
@@ -155,11 +158,12 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
         const Lighting& l = own ? options.mesh_lighting[static_cast<size_t>(hit.mesh)] : lighting;
         const Eigen::Vector3f obj_sun_dir = own ? l.sun_direction.normalized() : sun_dir;
         const float obj_cos_sun = own ? std::max(0.0f, f.n_shade.dot(obj_sun_dir)) : cos_sun;
-        const bool sun_visible = obj_cos_sun > 0 && !scene.Occluded(f.p_offset, obj_sun_dir, 0.0f, inf);
+        // Nor does it shade one: the real road below is already counted by the upper-hemisphere test.
+        const bool sun_visible = obj_cos_sun > 0 && !scene.Occluded(f.p_offset, obj_sun_dir, 0.0f, inf, receiver);
         int sky_open = 0;
         for (int k = 0; k < n_ao; ++k) {
           const Eigen::Vector3f d = CosineDirection(f.n_shade, Stratified(k, n_ao, rng));
-          if (d.z() > 0 && !scene.Occluded(f.p_offset, d, 0.0f, inf)) ++sky_open;
+          if (d.z() > 0 && !scene.Occluded(f.p_offset, d, 0.0f, inf, receiver)) ++sky_open;
         }
         const float ao = n_ao > 0 ? static_cast<float>(sky_open) / n_ao : 1.0f;
         const Eigen::Vector3f E = l.sun_irradiance * (sun_visible ? obj_cos_sun : 0.0f) + l.sky_radiance * (kPi * ao);

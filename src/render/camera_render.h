@@ -63,7 +63,9 @@ struct CameraRender {
 // Object samples (any mesh other than receiver_mesh): L = a * E / pi with a = BaseColor().rgb (alpha is
 // ignored), normals flipped to face the camera (double-sided), the sun visibility traced with one shadow
 // ray and AO = fraction of the ao_samples directions that point above the horizon (z > 0) and are
-// unoccluded (by any mesh, the receiver included). Shadow and AO rays start at the hit point offset along
+// unoccluded by any mesh but the receiver. The receiver stands in for the real road: it never hides an object
+// from the camera (primary rays find objects through it) nor shades one (a patch laid on a kerb's slope would
+// otherwise rise over a neighbouring object). Shadow and AO rays start at the hit point offset along
 // the geometric normal by 2e-5 * (1 + max |coordinate|) metres.
 // Receiver samples: ratio = Y(E_with_objects) / Y(E_without_objects), where Y is Rec. 709 luminance of the
 // irradiance formula above and visibility there ignores the receiver itself (the real photo already holds

@@ -221,6 +221,43 @@ TEST(RenderCamera, ShadowAreaMatchesBoxProjection) {
   EXPECT_EQ(r.shadow.at(bx, 80), 1.0f);
 }
 
+// The receiver stands in for the real road and never hides an object: a box under a receiver patch (as a patch
+// laid on a kerb's slope rises above a neighbouring object) is drawn whole, exactly as without the receiver,
+// whether the receiver shades (road light) or not (the environment light shades it elsewhere).
+TEST(RenderCamera, ReceiverNeverHidesAnObject) {
+  for (bool receiver_shadow : {true, false}) {
+    RayScene with, without;
+    const int box = with.AddMesh(Box({-0.5f, -0.5f, 0.0f}, {0.5f, 0.5f, 0.7f}));
+    const int road = with.AddMesh(Quad({0, 0, 1.0f}, {1, 0, 0}, {0, 1, 0}, 3, 3));  // above the box
+    without.AddMesh(Box({-0.5f, -0.5f, 0.0f}, {0.5f, 0.5f, 0.7f}));
+    with.Commit();
+    without.Commit();
+    CameraRenderOptions opt;
+    opt.receiver_mesh = road;
+    opt.receiver_shadow = receiver_shadow;
+    opt.ao_samples = 2;
+    const PinholeCamera cam = Camera(64, 64, 80, 32, 32);
+    const CameraRender a = RenderCamera(with, cam, LookingDown({0, 0, 5}), Lighting{}, opt);
+    CameraRenderOptions plain = opt;
+    plain.receiver_mesh = -1;
+    const CameraRender b = RenderCamera(without, cam, LookingDown({0, 0, 5}), Lighting{}, plain);
+    double covered = 0;
+    for (int y = 0; y < 64; ++y)
+      for (int x = 0; x < 64; ++x) {
+        covered += a.coverage.at(x, y);
+        // A shading receiver draws its AO samples from the pixel's random stream, so edge pixels sample other
+        // sub-pixel positions; inside the box every sample is the box either way.
+        if (receiver_shadow && b.coverage.at(x, y) < 1.0f) continue;
+        ASSERT_EQ(a.object.at(x, y), b.object.at(x, y)) << x << "," << y;
+        ASSERT_EQ(a.coverage.at(x, y), b.coverage.at(x, y));
+        ASSERT_EQ(a.depth.at(x, y), b.depth.at(x, y));
+      }
+    EXPECT_EQ(a.object.at(32, 32), box);
+    // The box's top (1 m x 1 m at 4.3 m from the camera) covers (80 / 4.3)^2 pixels.
+    EXPECT_NEAR(covered, (80 / 4.3) * (80 / 4.3), 0.05 * (80 / 4.3) * (80 / 4.3));
+  }
+}
+
 TEST(ProjectedRect, CoversProjectedPointsWithPad) {
   const PinholeCamera cam = Camera(100, 80, 100, 50, 40);
   const Rigid3d T_cam_scene;  // identity: scene = camera frame

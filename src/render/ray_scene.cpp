@@ -188,13 +188,18 @@ const TriangleMesh& RayScene::Mesh(int id) const {
   return *impl_->meshes[id];
 }
 
-RayHit RayScene::Intersect(const Eigen::Vector3f& origin, const Eigen::Vector3f& dir, float t_near,
-                           float t_far) const {
+RayHit RayScene::Intersect(const Eigen::Vector3f& origin, const Eigen::Vector3f& dir, float t_near, float t_far,
+                           int skip_mesh) const {
   SD_CHECK(impl_->committed, << "query before Commit");
-  RTCIntersectContext context;
-  rtcInitIntersectContext(&context);
+  SkipContext ctx;
+  rtcInitIntersectContext(&ctx.context);
+  ctx.skip_geom = RTC_INVALID_GEOMETRY_ID;
+  if (skip_mesh >= 0) {
+    ctx.context.filter = SkipFilter;
+    ctx.skip_geom = static_cast<unsigned>(skip_mesh);
+  }
   RTCRayHit rh = MakeRayHit(origin, dir, t_near, t_far);
-  rtcIntersect1(impl_->scene, &context, &rh);
+  rtcIntersect1(impl_->scene, &ctx.context, &rh);
   RayHit hit;
   if (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID) {
     hit.t = rh.ray.tfar;

@@ -36,9 +36,10 @@ class RayScene {
   int NumMeshes() const;
   const TriangleMesh& Mesh(int id) const;
 
-  // Nearest hit with t in [t_near, t_far]; `dir` must be unit length. Thread-safe after Commit().
+  // Nearest hit with t in [t_near, t_far]; `dir` must be unit length; `skip_mesh` >= 0 ignores that mesh (as
+  // for Occluded). Thread-safe after Commit().
   RayHit Intersect(const Eigen::Vector3f& origin, const Eigen::Vector3f& dir, float t_near = 0.0f,
-                   float t_far = std::numeric_limits<float>::infinity()) const;
+                   float t_far = std::numeric_limits<float>::infinity(), int skip_mesh = -1) const;
   // Any hit in [t_near, t_far] (shadow rays). `skip_mesh` >= 0 ignores that mesh (e.g. the ground receiver);
   // exact for any number of meshes (a filter on the geometry id, not 32-bit ray masks).
   bool Occluded(const Eigen::Vector3f& origin, const Eigen::Vector3f& dir, float t_near, float t_far,

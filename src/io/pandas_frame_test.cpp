@@ -22,27 +22,10 @@ using pickle::Value;
 
 // --- the Python oracle (tools/testing/pickle_oracle.py; see pickle_test.cpp)
 
-std::string PandasPython() {
-  if (const char* env = std::getenv("SYNTHDRIVE_PANDAS_PYTHON")) return env;
-  return SYNTHDRIVE_PANDAS_PYTHON;
+// The oracle with these arguments; exit status, output in *output.
+int RunOracle(const std::vector<std::string>& args, std::string* output) {
+  return testing::RunPython("tools/testing/pickle_oracle.py", args, output);
 }
-
-int RunOracle(const std::string& args, std::string* output) {
-  std::string cmd = "'";
-  cmd.append(PandasPython()).append("' '" SYNTHDRIVE_PICKLE_ORACLE "' ").append(args).append(" 2>&1");
-  FILE* p = popen(cmd.c_str(), "r");
-  if (!p) return -1;
-  char buf[4096];
-  size_t n;
-  output->clear();
-  while ((n = fread(buf, 1, sizeof(buf), p)) > 0) output->append(buf, n);
-  const int status = pclose(p);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
-
-#define SD_REQUIRE_PANDAS_PYTHON()                                                                       \
-  if (PandasPython().empty())                                                                            \
-  GTEST_SKIP() << "no python3 with numpy and pandas (SYNTHDRIVE_PANDAS_PYTHON): the oracle tests need it"
 
 // The oracle's tags of the values a frame holds: None, bool, int, float, str (object columns and labels).
 json TagFloat(double d) {
@@ -116,14 +99,15 @@ void ExpectFrameEquals(const DataFrame& df, const fs::path& dir) {
 // Writes `df` in both layouts (protocols 2 and 4, the latter gzipped) and appends "original ours" pairs to
 // *pairs, for one `frame_equals` run of the oracle; our own reader must read each back to the same columns.
 void WriteBothLayouts(const DataFrame& df, const fs::path& original, const fs::path& dir, const std::string& stem,
-                      std::string* pairs) {
+                      std::vector<std::string>* pairs) {
   for (const Layout layout : {Layout::kPandas15, Layout::kLegacy}) {
     const Value v = DataFrameToPickle(df, layout);
     for (const int protocol : {2, 4}) {
       const fs::path out = dir / (stem + (layout == Layout::kLegacy ? ".legacy" : ".p15") + ".w" +
                                   std::to_string(protocol) + (protocol == 4 ? ".pkl.gz" : ".pkl"));
       pickle::DumpFile(out, v, protocol, /*gzip=*/protocol == 4);
-      pairs->append(" '").append(original.string()).append("' '").append(out.string()).append("'");
+      pairs->push_back(original.string());
+      pairs->push_back(out.string());
       const DataFrame again = LoadDataFrameFile(out);
       ASSERT_EQ(again.columns.size(), df.columns.size());
       for (size_t c = 0; c < df.columns.size(); ++c) {
@@ -138,19 +122,20 @@ void WriteBothLayouts(const DataFrame& df, const fs::path& original, const fs::p
   }
 }
 
-void ExpectPandasEquals(const std::string& pairs, int count) {
+void ExpectPandasEquals(std::vector<std::string> pairs, int count) {
   std::string output;
-  EXPECT_EQ(RunOracle("frame_equals" + pairs, &output), 0) << output;
+  pairs.insert(pairs.begin(), "frame_equals");
+  EXPECT_EQ(RunOracle(pairs, &output), 0) << output;
   EXPECT_NE(output.find("compared " + std::to_string(count) + " frames, 0 differ"), std::string::npos) << output;
 }
 
 class PandasOracle : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    if (PandasPython().empty()) return;
+    if (testing::PandasPython().empty()) return;
     dir_ = new testing::TempDir();
     std::string output;
-    status_ = RunOracle("frames '" + dir_->path().string() + "'", &output);
+    status_ = RunOracle({"frames", dir_->path().string()}, &output);
     if (status_ != 0) std::cerr << output;
   }
   static void TearDownTestSuite() {
@@ -188,7 +173,7 @@ TEST_F(PandasOracle, ReadsSyntheticFramesAsPandasDoes) {
 }
 
 TEST_F(PandasOracle, PandasReadsTheFramesWeWrite) {
-  std::string pairs;
+  std::vector<std::string> pairs;
   for (const char* name : {"mixed", "fortran_block", "explicit_index", "string_index", "stepped_range", "empty_rows",
                            "no_columns"}) {
     SCOPED_TRACE(name);
@@ -216,7 +201,7 @@ TEST_F(PandasOracle, FramesBuiltHereLoadInPandas) {
   const fs::path ours = dir_->path() / "built.pkl";
   pickle::DumpFile(ours, v, 4, false);
   std::string output;
-  ASSERT_EQ(RunOracle("frame '" + ours.string() + "' '" + (dir_->path() / "built.frame").string() + "'", &output), 0)
+  ASSERT_EQ(RunOracle({"frame", ours.string(), (dir_->path() / "built.frame").string()}, &output), 0)
       << output;
   DataFrame expected = df;
   expected.columns[4].values = Array::Objects({Value::Str("car"), Value::Str(""), Value::Str("p\xc3\xa9")});
@@ -230,13 +215,13 @@ TEST(PandaSet, FramesReadAsPandasReadsThemAndRoundTrip) {
   SD_REQUIRE_SHARED(root, "driving/pandaset-002-f44-55");
   SD_REQUIRE_PANDAS_PYTHON();
   testing::TempDir tmp;
-  std::string pairs;
+  std::vector<std::string> pairs;
   for (const char* rel : {"lidar/44.pkl.gz", "annotations/cuboids/44.pkl.gz", "annotations/semseg/44.pkl.gz"}) {
     SCOPED_TRACE(rel);
     const fs::path file = root / rel;
     const std::string stem = fs::path(rel).parent_path().filename().string();
     std::string output;
-    ASSERT_EQ(RunOracle("frame '" + file.string() + "' '" + (tmp / stem).string() + "'", &output), 0) << output;
+    ASSERT_EQ(RunOracle({"frame", file.string(), (tmp / stem).string()}, &output), 0) << output;
     const DataFrame df = LoadDataFrameFile(file);
     ExpectFrameEquals(df, tmp / stem);
     WriteBothLayouts(df, file, tmp.path(), stem, &pairs);

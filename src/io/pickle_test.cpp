@@ -21,28 +21,10 @@ using namespace std::string_literals;
 
 // --- the Python oracle (tools/testing/pickle_oracle.py under /usr/bin/python3 with numpy and pandas)
 
-std::string PandasPython() {
-  if (const char* env = std::getenv("SYNTHDRIVE_PANDAS_PYTHON")) return env;
-  return SYNTHDRIVE_PANDAS_PYTHON;
+// The oracle with these arguments; exit status, output in *output.
+int RunOracle(const std::vector<std::string>& args, std::string* output) {
+  return testing::RunPython("tools/testing/pickle_oracle.py", args, output);
 }
-
-// Runs the oracle with `args`; its exit status, with stdout and stderr in *output.
-int RunOracle(const std::string& args, std::string* output) {
-  std::string cmd = "'";
-  cmd.append(PandasPython()).append("' '" SYNTHDRIVE_PICKLE_ORACLE "' ").append(args).append(" 2>&1");
-  FILE* p = popen(cmd.c_str(), "r");
-  if (!p) return -1;
-  char buf[4096];
-  size_t n;
-  output->clear();
-  while ((n = fread(buf, 1, sizeof(buf), p)) > 0) output->append(buf, n);
-  const int status = pclose(p);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
-
-#define SD_REQUIRE_PANDAS_PYTHON()                                                                       \
-  if (PandasPython().empty())                                                                            \
-  GTEST_SKIP() << "no python3 with numpy and pandas (SYNTHDRIVE_PANDAS_PYTHON): the oracle tests need it"
 
 // --- the tagged form of pickle_oracle.py (see its docstring): equal tags mean equal Python values and types
 
@@ -182,10 +164,10 @@ std::string ErrorOf(std::string_view bytes, const LoadOptions& options = {}) {
 class PickleOracle : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    if (PandasPython().empty()) return;
+    if (testing::PandasPython().empty()) return;
     dir_ = new testing::TempDir();
     std::string output;
-    status_ = RunOracle("cases '" + dir_->path().string() + "'", &output);
+    status_ = RunOracle({"cases", dir_->path().string()}, &output);
     if (status_ != 0) std::cerr << output;
   }
   static void TearDownTestSuite() {
@@ -347,7 +329,7 @@ TEST_F(PickleOracle, PythonLoadsWhatWeWrite) {
     EXPECT_TRUE(LoadFile(Dir() / ("cpp_values.w" + std::to_string(out) + ".pkl")) == cpp);
   }
   std::string output;
-  EXPECT_EQ(RunOracle("check '" + Dir().string() + "'", &output), 0) << output;
+  EXPECT_EQ(RunOracle({"check", Dir().string()}, &output), 0) << output;
   EXPECT_NE(output.find("checked " + std::to_string(written + 2) + " pickles, 0 bad"), std::string::npos) << output;
 }
 
@@ -359,7 +341,7 @@ TEST_F(PickleOracle, GzipFilesLoadLikePlainOnes) {
   EXPECT_EQ(static_cast<unsigned char>(raw[0]), 0x1f);
   EXPECT_TRUE(LoadFile(Dir() / "cpp.pkl.gz") == cpp);
   std::string output;
-  ASSERT_EQ(RunOracle("tag '" + (Dir() / "cpp.pkl.gz").string() + "' '" + (Dir() / "cpp.gz.json").string() + "'", &output), 0)
+  ASSERT_EQ(RunOracle({"tag", (Dir() / "cpp.pkl.gz").string(), (Dir() / "cpp.gz.json").string()}, &output), 0)
       << output;
   std::string why;
   EXPECT_TRUE(SameJson(Tagged(cpp), ReadJsonFile(Dir() / "cpp.gz.json"), "", &why)) << why;
@@ -408,7 +390,7 @@ TEST(PickleRealFiles, EveryPklReadsAsPythonReadsIt) {
   for (const fs::path& pkl : files) {
     SCOPED_TRACE(pkl.string());
     std::string output;
-    ASSERT_EQ(RunOracle("tag '" + pkl.string() + "' '" + (tmp / "tag.json").string() + "'", &output), 0) << output;
+    ASSERT_EQ(RunOracle({"tag", pkl.string(), (tmp / "tag.json").string()}, &output), 0) << output;
     std::string why;
     EXPECT_TRUE(SameJson(Tagged(LoadFile(pkl)), ReadJsonFile(tmp / "tag.json"), "", &why)) << why;
     // Protocol 2 like the original, and 4: both read back equal.

@@ -1,6 +1,9 @@
 #include "testing/testing.h"
 
+#include <sys/wait.h>
 #include <unistd.h>
+
+#include <cstdio>
 
 #include <cstdlib>
 #include <fstream>
@@ -22,6 +25,30 @@ fs::path RepoData(const std::string& rel) { return RepoRoot() / "data" / rel; }
 fs::path SharedData(const std::string& rel) {
   const fs::path p = RepoRoot().parent_path() / "shared" / "data" / rel;
   return fs::exists(p) ? p : fs::path();
+}
+
+std::string PandasPython() {
+  if (const char* env = std::getenv("SYNTHDRIVE_PANDAS_PYTHON")) return env;
+  return SYNTHDRIVE_PANDAS_PYTHON_DEFAULT;
+}
+
+int RunPython(const std::string& script, const std::vector<std::string>& args, std::string* output) {
+  auto quote = [](const std::string& s) {
+    std::string q = "'";
+    for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+    return q + "'";
+  };
+  std::string cmd = quote(PandasPython()) + " " + quote((RepoRoot() / script).string());
+  for (const std::string& a : args) cmd += " " + quote(a);
+  cmd += " 2>&1";
+  FILE* p = popen(cmd.c_str(), "r");
+  if (!p) return -1;
+  char buf[4096];
+  size_t n;
+  output->clear();
+  while ((n = fread(buf, 1, sizeof(buf), p)) > 0) output->append(buf, n);
+  const int status = pclose(p);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
 fs::path TestModel(const std::string& rel) {

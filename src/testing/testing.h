@@ -20,6 +20,13 @@ std::filesystem::path TestModel(const std::string& rel);
 std::vector<float> ReadRawFloats(const std::filesystem::path& file, std::vector<int64_t>* shape);
 std::vector<uint8_t> ReadRawBytes(const std::filesystem::path& file, std::vector<int64_t>* shape);
 
+// Debian's python3 with numpy and pandas, the real consumers the format tests check our files against
+// ($SYNTHDRIVE_PANDAS_PYTHON, else what CMake found); empty when there is none (tests then GTEST_SKIP).
+std::string PandasPython();
+// Runs `script` (a path under the repo, e.g. "tools/testing/pandaset_check.py") with PandasPython() and `args`
+// (each shell-quoted here); returns the exit status and puts stdout + stderr in `output`.
+int RunPython(const std::string& script, const std::vector<std::string>& args, std::string* output);
+
 // Sets an environment variable for the life of the object, then restores it.
 class ScopedEnv {
  public:
@@ -51,6 +58,11 @@ class TempDir {
 #define SD_REQUIRE_SHARED(var, rel)                                                            \
   const std::filesystem::path var = ::sd::testing::SharedData(rel);                             \
   if (var.empty()) GTEST_SKIP() << "../shared/data/" << (rel) << " not present (needs the shared data beside the repo)"
+
+// Skips the current test with a clear message when there is no python3 with numpy and pandas.
+#define SD_REQUIRE_PANDAS_PYTHON()                                                                     \
+  if (::sd::testing::PandasPython().empty())                                                           \
+  GTEST_SKIP() << "no python3 with numpy and pandas (SYNTHDRIVE_PANDAS_PYTHON): the consumer checks need it"
 
 // Skips the current test with a clear message when the tiny test models were not built.
 #define SD_REQUIRE_TEST_MODEL(var, rel)                                                        \

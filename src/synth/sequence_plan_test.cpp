@@ -28,7 +28,7 @@ Log StraightLog(int frames, double speed) {
   log.format = LogFormat::kNuScenesTables;
   for (int k = 0; k < frames; ++k) {
     Frame f;
-    f.token = "f" + std::to_string(k);
+    f.token = Msg() << "f" << k;  // (not "f" + to_string: GCC 12 warns -Wrestrict on it here, falsely)
     f.timestamp = 0.5 * k;
     f.T_world_ego = Rigid3d::FromYaw(0, Eigen::Vector3d(speed * f.timestamp, 0, 0));
     f.has_annotations = true;

@@ -38,9 +38,10 @@ int RunPython(const std::string& script, const std::vector<std::string>& args, s
     for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
     return q + "'";
   };
-  std::string cmd = quote(PandasPython()) + " " + quote((RepoRoot() / script).string());
-  for (const std::string& a : args) cmd += " " + quote(a);
-  cmd += " 2>&1";
+  std::string cmd = quote(PandasPython());
+  cmd.append(" ").append(quote((RepoRoot() / script).string()));
+  for (const std::string& a : args) cmd.append(" ").append(quote(a));  // (not " " + ...: GCC 12 -Wrestrict, falsely)
+  cmd.append(" 2>&1");
   FILE* p = popen(cmd.c_str(), "r");
   if (!p) return -1;
   char buf[4096];

@@ -62,10 +62,10 @@ Runner AddAssetCommand(CLI::App& app) {
 
 Runner AddCategoriesCommand(CLI::App& app) {
   return []() {
-    std::printf("%-24s %-28s %-16s %s\n", "category", "nuScenes", "KITTI", "default size l x w x h (m)");
+    std::printf("%-24s %-38s %-22s %-38s %s\n", "category", "nuScenes", "KITTI", "PandaSet", "default size l x w x h (m)");
     for (const auto& c : Categories())
-      std::printf("%-24s %-28s %-16s %.2f x %.2f x %.2f\n", c.name.c_str(), c.nuscenes_name.c_str(), c.kitti_name.c_str(),
-                  c.default_size.x(), c.default_size.y(), c.default_size.z());
+      std::printf("%-24s %-38s %-22s %-38s %.2f x %.2f x %.2f\n", c.name.c_str(), c.nuscenes_name.c_str(), c.kitti_name.c_str(),
+                  c.pandaset_name.c_str(), c.default_size.x(), c.default_size.y(), c.default_size.z());
     return 0;
   };
 }

@@ -22,7 +22,7 @@ Runner AddSynthCommand(CLI::App& app) {
   auto no_lidar_realism = std::make_shared<bool>(false);
   auto light = std::make_shared<std::string>("environment");
   auto occlusion = std::make_shared<std::string>("dense");
-  app.add_option("--log", req->log, "Driving log: a dataset root (nuScenes tables, KITTI) or an info file (mmdet3d .json)")
+  app.add_option("--log", req->log, "Driving log: a dataset root (nuScenes tables, KITTI, a PandaSet sequence) or an info file (mmdet3d .pkl or .json)")
       ->required();
   app.add_option("--asset", req->assets,
                  "Asset folder(s) to insert (asset.json + mesh.glb); see `synthdrive asset import`. Optional when the "

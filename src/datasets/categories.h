@@ -16,6 +16,7 @@ struct CategoryInfo {
   Eigen::Vector3d default_size;  // length, width, height in metres (typical real object)
   std::string nuscenes_name;     // "movable_object.trafficcone"
   std::string kitti_name;        // "Car", or a CamelCase name for classes KITTI lacks ("TrafficCone")
+  std::string pandaset_name;     // PandaSet's cuboid label ("Cones"), or a name in its style for classes it lacks
   double lidar_reflectivity;     // typical return intensity relative to asphalt (~1), for LiDAR simulation
 };
 

@@ -8,8 +8,9 @@ namespace sd {
 const std::vector<LogFormatInfo>& LogFormats() {
   // Probe order: info files first (a file, cheapest), then the directory layouts.
   static const std::vector<LogFormatInfo> kFormats = {
-      datasets_internal::Mmdet3dV1Format(), datasets_internal::Mmdet3dV0Format(), datasets_internal::NuScenesTablesFormat(),
-      datasets_internal::KittiFormat(),     datasets_internal::Argoverse2Format(),
+      datasets_internal::Mmdet3dV1Format(), datasets_internal::Mmdet3dV0Format(), datasets_internal::Mmdet3dKittiFormat(),
+      datasets_internal::NuScenesTablesFormat(),
+      datasets_internal::KittiFormat(),     datasets_internal::Argoverse2Format(), datasets_internal::PandaSetFormat(),
   };
   return kFormats;
 }

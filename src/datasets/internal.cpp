@@ -167,6 +167,44 @@ std::string ClassName(const AddedObject& obj, LogFormat format) {
   return c ? DatasetCategoryName(*c, format) : obj.category;
 }
 
+Box3 BoxFromKittiLabel(const Eigen::Vector3d& bottom_rect0, double l, double h, double w, double ry, const Rigid3d& T_velo_rect0) {
+  const double c = std::cos(ry), s = std::sin(ry);
+  Eigen::Matrix3d R_rect0_box;
+  // Box axes in rectified cam0 (y down): length along (cos ry, 0, -sin ry), up = -y.
+  R_rect0_box.col(0) = Eigen::Vector3d(c, 0, -s);
+  R_rect0_box.col(1) = Eigen::Vector3d(s, 0, c);
+  R_rect0_box.col(2) = Eigen::Vector3d(0, -1, 0);
+  Box3 box;
+  box.T_frame_box = T_velo_rect0 * Rigid3d(R_rect0_box, Eigen::Vector3d(bottom_rect0 - Eigen::Vector3d(0, h / 2, 0)));
+  box.size = Eigen::Vector3d(l, w, h);
+  return box;
+}
+
+KittiLabelBox KittiLabelFromBox(const Box3& box_velo, const Rigid3d& T_rect0_velo) {
+  const Box3 b = box_velo.Transformed(T_rect0_velo);
+  const Eigen::Vector3d x_axis = b.T_frame_box.Rotation().col(0);
+  KittiLabelBox k;
+  k.ry = std::atan2(-x_axis.z(), x_axis.x());
+  k.l = b.size.x();
+  k.w = b.size.y();
+  k.h = b.size.z();
+  k.bottom = b.center() + Eigen::Vector3d(0, k.h / 2, 0);  // rect cam0: y down
+  return k;
+}
+
+int KittiDifficulty(double box2d_height_px, int occluded, double truncated) {
+  constexpr double kMinHeight[] = {40, 25, 25}, kMaxTruncation[] = {0.15, 0.3, 0.5};
+  constexpr int kMaxOcclusion[] = {0, 1, 2};
+  for (int level = 0; level < 3; ++level)
+    if (box2d_height_px > kMinHeight[level] && occluded <= kMaxOcclusion[level] && truncated <= kMaxTruncation[level])
+      return level;
+  return -1;
+}
+
+int KittiOccluded(double visible_fraction) {
+  return visible_fraction < 0 ? 3 : visible_fraction > 0.8 ? 0 : visible_fraction > 0.4 ? 1 : 2;
+}
+
 void SensorFileWriter::Image(const CameraSensor& cam, const ImageU8* replacement) {
   const fs::path dst = out_ / RelativePath(cam.image_path, log_.data_root);
   if (replacement) {

@@ -4,6 +4,7 @@
 #include <array>
 #include <filesystem>
 #include <initializer_list>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -11,8 +12,11 @@
 #include <nlohmann/json.hpp>
 
 #include "core/rigid3.h"
+#include "core/box3.h"
 #include "datasets/format.h"
 #include "io/json.h"
+#include "io/pickle.h"
+#include "io/raw_json.h"
 
 namespace sd::datasets_internal {
 
@@ -22,6 +26,8 @@ LogFormatInfo Mmdet3dV1Format();
 LogFormatInfo Mmdet3dV0Format();
 LogFormatInfo KittiFormat();
 LogFormatInfo Argoverse2Format();
+LogFormatInfo Mmdet3dKittiFormat();
+LogFormatInfo PandaSetFormat();
 
 // `path` relative to `root` when it lies under it, else its file name.
 std::string RelativePath(const std::filesystem::path& path, const std::filesystem::path& root);
@@ -79,5 +85,73 @@ class SensorFileWriter {
 // SensorFileWriter::Frame for every edited frame.
 void WriteSensorFiles(const Log& log, const std::vector<FrameEdit>& edits, const std::filesystem::path& out_dir,
                       const WriteOptions& options);
+
+// --- KITTI's label convention (rectified cam0: x right, y down, z forward; boxes by their bottom centre)
+
+// A KITTI label box -> a geometric-centre Box3 in the Velodyne frame, size (l, w, h): the length axis is
+// (cos ry, 0, -sin ry) in rect0, up is -y, centre = bottom - (0, h/2, 0). T_velo_rect0 = inv(R0_rect Tr_velo_to_cam).
+Box3 BoxFromKittiLabel(const Eigen::Vector3d& bottom_rect0, double l, double h, double w, double ry, const Rigid3d& T_velo_rect0);
+struct KittiLabelBox {
+  Eigen::Vector3d bottom;  // rect0, m
+  double l = 0, h = 0, w = 0, ry = 0;
+};
+// The inverse: only rotation_y (about rect0's y) is kept, any tilt of the box relative to that axis is dropped.
+KittiLabelBox KittiLabelFromBox(const Box3& box_velo, const Rigid3d& T_rect0_velo);
+// mmdet3d's KITTI difficulty (kitti_data_utils.add_difficulty_to_annos): 0 easy (2D box taller than 40 px,
+// occluded 0, truncated <= 0.15), 1 moderate (> 25 px, <= 1, <= 0.3), 2 hard (> 25 px, <= 2, <= 0.5), else -1.
+int KittiDifficulty(double box2d_height_px, int occluded, double truncated);
+// KITTI occlusion level of a visible fraction: 0 fully visible (> 0.8), 1 partly (> 0.4), 2 largely; 3 unknown (< 0).
+int KittiOccluded(double visible_fraction);
+
+// --- mmdetection3d info files (mmdet3d.cpp; the KITTI-flavoured layouts in mmdet3d_kitti.cpp)
+
+// An info file's content: a .json as Python wrote it (ReadPythonJson), a .pkl (gzipped or not) through
+// pickle::LoadFile + pickle::ToJson, which is exact for infos (numpy scalars and arrays become numbers and
+// nested lists, NaN null, as in the .json conversions). Nothing is ever executed: a pickle naming a global
+// outside pickle.h's allow-list is an InputError. InputError naming the file.
+nlohmann::json ReadInfoJson(const std::filesystem::path& info);
+bool IsPickleInfo(const std::filesystem::path& info);  // by extension: .pkl, .pkl.gz
+// OpenLogOptions::data_root, else the nearest ancestor of the info holding samples/ or training/, else its directory.
+std::filesystem::path InfoDataRoot(const std::filesystem::path& info, const OpenLogOptions& options);
+// A metainfo's class list: `categories` {name: index} (negative indices, KITTI's "DontCare": -1, are not classes),
+// else `classes` / `CLASSES`; empty when it has none.
+std::vector<std::string> InfoClasses(const JsonReader& metainfo);
+
+// KITTI-flavoured infos (mmdet3d_kitti.cpp): a list of dicts (v0.x: image, point_cloud, calib, annos), or a
+// data_list whose metainfo names KITTI or whose records carry images.R0_rect (v1.x: camera-frame boxes).
+bool IsKittiInfo(const nlohmann::json& info);
+Log ReadMmdet3dKittiInfo(const nlohmann::json& info, const std::filesystem::path& file, const OpenLogOptions& options);
+
+// What a derivative adds to an info, built once per layout from the edits and applied by WriteInfoEdit to the
+// input's own kind of file: the JSON text (spliced, io/raw_json.h) or the pickle (its value tree, io/pickle.h).
+struct InfoListEdit {
+  explicit InfoListEdit(std::vector<std::string> list_path, std::optional<size_t> insert_before = std::nullopt,
+                        std::optional<pickle::DType> dtype = std::nullopt)
+      : path(std::move(list_path)), insert_at(insert_before), column_dtype(dtype) {}
+  // The list from the record: {"instances"}, {"cam_instances", "CAM_FRONT"}, {"gt_boxes"}, {"annos", "name"}.
+  std::vector<std::string> path;
+  std::vector<ojson> items;           // the added elements (rows, for numpy columns)
+  std::optional<size_t> insert_at;    // where the first added element goes; nullopt or past the end: appended
+  // Pickles: a numpy column created with this dtype where the record lacks it (else a list).
+  std::optional<pickle::DType> column_dtype;
+};
+struct InfoRecordEdit {
+  size_t record = 0;                  // index in the info's record list (= the frame index)
+  std::vector<InfoListEdit> lists;    // lists sharing path[0] go under one parent, in order of first use
+};
+struct InfoEdit {
+  const char* list_key = "data_list";  // the root's record list: "data_list", "infos"; "" = the root is the list
+  std::vector<InfoRecordEdit> records;  // in output order; only these records are written
+  // Appended to metainfo's class list (categories {name: index}, classes or CLASSES; categories created when
+  // there is none), indices from first_class_index.
+  std::vector<std::string> new_classes;
+  size_t first_class_index = 0;
+};
+// Writes the edited info at its data_root-relative path under out_dir: a .json as the input's text with the
+// additions spliced in (every untouched byte kept), a .pkl as the input's value tree with the additions, each
+// added element typed like its neighbours (InfoListEdit), in the input's pickle protocol (2 for inputs of 0-2,
+// else 4) and gzipped when the input was. Returns the written file. InputError unless the info holds one
+// record per frame of the log.
+std::filesystem::path WriteInfoEdit(const Log& log, const InfoEdit& edit, const std::filesystem::path& out_dir);
 
 }  // namespace sd::datasets_internal

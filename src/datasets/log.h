@@ -38,14 +38,29 @@ struct CameraSensor {
   Rigid3d T_world_egocam;     // ego pose at the camera timestamp
 };
 
+// How a sweep file stores its points (ReadLidar reads both into the sensor frame).
+enum class SweepFile {
+  kFloat32Records,  // N x layout.num_features little-endian float32, sensor frame (nuScenes, KITTI, AV2)
+  kPandaSetPickle,  // a pandas DataFrame pickle (.pkl.gz): x y z (world frame) i t (absolute s) d, float64
+};
+
 struct LidarSensor {
   std::string channel;        // "LIDAR_TOP", "velodyne"
   std::string token;
   std::filesystem::path path;  // absolute path of the sweep file
   std::string relpath;         // as written in the dataset's record
-  PointLayout layout;          // record layout of the file
+  PointLayout layout;          // record layout of the points ReadLidar returns (of the file for kFloat32Records)
   double timestamp = 0;        // seconds
   Rigid3d T_ego_lidar;
+  SweepFile file = SweepFile::kFloat32Records;
+  // kPandaSetPickle: the file's points are in the world frame; ReadLidar moves them by T_lidar_world into this
+  // sensor's frame and stores per-point times relative to `timestamp` (float32 cannot hold Unix seconds).
+  Rigid3d T_lidar_world;
+  // Several LiDARs in one sweep (PandaSet: d = 0 the Pandar64, d = 1 the PandarGT): the feature holding each
+  // point's sensor index, and each sensor's pose in this (the first) sensor's frame; a point's beam starts at
+  // its own sensor. Empty: one sensor at this one's origin.
+  std::string sensor_feature;
+  std::vector<Rigid3d> T_lidar_sensors;
   // Facts about the sweep its reader knows, so synthesis need not know the dataset (docs/lidar.md):
   int spin_direction = 0;            // record order: +1 counter-clockwise seen from above, -1 clockwise, 0: inferred
   double start_azimuth = std::numeric_limits<double>::quiet_NaN();  // azimuth of the first record; NaN: inferred
@@ -86,7 +101,7 @@ struct GeoLocation {
 
 // Each has one row in datasets/format.h (reader, writer, names). kArgoverse2 is read (for sequences: poses,
 // tracks, sweeps) but not written: its tables are Arrow files.
-enum class LogFormat { kNuScenesTables, kMmdet3dV1, kMmdet3dV0, kKitti, kArgoverse2 };
+enum class LogFormat { kNuScenesTables, kMmdet3dV1, kMmdet3dV0, kKitti, kArgoverse2, kPandaSet, kMmdet3dKitti };
 const char* ToString(LogFormat f);
 
 struct Log {

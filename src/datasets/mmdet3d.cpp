@@ -1,18 +1,25 @@
-// mmdetection3d info files: v1.x (`data_list`) and v0.x (`infos`), their reader and writer. The writer edits
-// the info as text (io/raw_json.h), so every record it does not extend keeps its bytes. Conventions:
-// docs/datasets.md.
+// mmdetection3d info files of nuScenes-like datasets (LiDAR-frame boxes): v1.x (`data_list`) and v0.x (`infos`),
+// as the .pkl mmdet3d writes or its .json conversion; their reader and writer. Also the file handling every
+// info layout shares (the KITTI-flavoured ones live in mmdet3d_kitti.cpp): ReadInfoJson (a pickle is read as
+// data and becomes its JSON twin) and WriteInfoEdit (the additions, built once per layout, spliced into the
+// input's JSON text, so every record it does not extend keeps its bytes, or added to the input's pickle value
+// tree, typed like their neighbours). Conventions: docs/datasets.md.
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <map>
 #include <numbers>
 #include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
 #include "core/error.h"
 #include "datasets/internal.h"
 #include "io/files.h"
+#include "io/gzip.h"
 #include "io/json.h"
+#include "io/pickle.h"
 #include "io/raw_json.h"
 
 namespace fs = std::filesystem;
@@ -26,12 +33,6 @@ namespace {
 
 constexpr double kPi = std::numbers::pi;
 
-fs::path ProbeInfoDataRoot(const fs::path& info_json, const OpenLogOptions& options) {
-  if (!options.data_root.empty()) return options.data_root;
-  fs::path root = AncestorHolding(info_json.parent_path(), {"samples", "training"});
-  return root.empty() ? fs::absolute(info_json).parent_path() : root;
-}
-
 // v1 paths: a bare file name lives in samples/<CHANNEL>/; otherwise strip to samples/ or sweeps/.
 std::string V1RelPath(const std::string& p, const std::string& channel) {
   if (p.find('/') == std::string::npos) return "samples/" + channel + "/" + p;
@@ -43,28 +44,12 @@ Log ReadMmdet3dV1(const json& j, const fs::path& file, const OpenLogOptions& opt
   log.format = LogFormat::kMmdet3dV1;
   log.source = file;
   log.annotation_path = file;
-  log.data_root = ProbeInfoDataRoot(file, options);
+  log.data_root = InfoDataRoot(file, options);
   JsonReader root(j, file);
   if (root.Has("metainfo")) {
     const JsonReader meta = root["metainfo"];
-    const std::string dataset = meta.StringOr("dataset", meta.StringOr("DATASET", ""));
-    std::string lower = dataset;
-    std::transform(lower.begin(), lower.end(), lower.begin(), [](unsigned char c) { return std::tolower(c); });
-    if (lower.find("kitti") != std::string::npos)
-      throw InputError(file, "mmdet3d KITTI infos (camera-frame boxes) are not supported; open the KITTI directory instead");
     log.version = meta.StringOr("version", "");
-    if (meta.Has("categories") && meta["categories"].raw().is_object()) {
-      for (const auto& [name, idx] : meta["categories"].raw().items()) {
-        if (!idx.is_number_integer() || idx.get<int64_t>() < 0) meta["categories"][name].Fail("expected a class index");
-        const size_t k = static_cast<size_t>(idx.get<int64_t>());
-        if (log.categories.size() <= k) log.categories.resize(k + 1);
-        log.categories[k] = name;
-      }
-    } else {
-      for (const char* key : {"classes", "CLASSES"})
-        if (meta.Has(key))
-          for (size_t i = 0; i < meta[key].Size(); ++i) log.categories.push_back(meta[key][i].String());
-    }
+    log.categories = InfoClasses(meta);
   }
   const JsonReader list = root["data_list"];
   for (size_t i = 0; i < list.Size(); ++i) {
@@ -171,7 +156,7 @@ Log ReadMmdet3dV0(const json& j, const fs::path& file, const OpenLogOptions& opt
   log.format = LogFormat::kMmdet3dV0;
   log.source = file;
   log.annotation_path = file;
-  log.data_root = ProbeInfoDataRoot(file, options);
+  log.data_root = InfoDataRoot(file, options);
   JsonReader root(j, file);
   if (root.Has("metadata")) log.version = root["metadata"].StringOr("version", "");
   const JsonReader infos = root["infos"];
@@ -236,17 +221,62 @@ Log ReadMmdet3dV0(const json& j, const fs::path& file, const OpenLogOptions& opt
 
 }  // namespace
 
-Log ReadMmdet3dInfo(const fs::path& info_json, const OpenLogOptions& options) {
-  if (!fs::exists(info_json)) throw InputError(info_json, "missing mmdet3d info file");
-  const json j = ReadPythonJson(info_json);
-  if (!j.is_object()) throw InputError(info_json, "expected a JSON object with data_list (v1.x) or infos (v0.x)");
-  if (j.contains("data_list")) return ReadMmdet3dV1(j, info_json, options);
-  if (j.contains("infos")) return ReadMmdet3dV0(j, info_json, options);
-  throw InputError(info_json, "not an mmdet3d info: neither data_list (v1.x) nor infos (v0.x) present");
+Log ReadMmdet3dInfo(const fs::path& info, const OpenLogOptions& options) {
+  if (!fs::exists(info)) throw InputError(info, "missing mmdet3d info file");
+  const json j = ReadInfoJson(info);
+  if (IsKittiInfo(j)) return ReadMmdet3dKittiInfo(j, info, options);
+  if (!j.is_object())
+    throw InputError(info, "expected an object with data_list (v1.x) or infos (v0.x), or a list of KITTI info dicts");
+  if (j.contains("data_list")) return ReadMmdet3dV1(j, info, options);
+  if (j.contains("infos")) return ReadMmdet3dV0(j, info, options);
+  throw InputError(info, "not an mmdet3d info: neither data_list (v1.x) nor infos (v0.x) present");
 }
 
+namespace datasets_internal {
+
+bool IsPickleInfo(const fs::path& info) {
+  const std::string name = info.filename().string();
+  return info.extension() == ".pkl" || (name.size() > 7 && name.ends_with(".pkl.gz"));
+}
+
+json ReadInfoJson(const fs::path& info) {
+  if (!IsPickleInfo(info)) return ReadPythonJson(info);
+  const pickle::Value v = pickle::LoadFile(info);
+  try {
+    return pickle::ToJson(v);
+  } catch (const InputError& e) {
+    throw InputError(info, e.what());  // ToJson names the value's JSON pointer, not the file
+  }
+}
+
+fs::path InfoDataRoot(const fs::path& info, const OpenLogOptions& options) {
+  if (!options.data_root.empty()) return options.data_root;
+  fs::path root = AncestorHolding(info.parent_path(), {"samples", "training"});
+  return root.empty() ? fs::absolute(info).parent_path() : root;
+}
+
+std::vector<std::string> InfoClasses(const JsonReader& meta) {
+  std::vector<std::string> names;
+  if (meta.Has("categories") && meta["categories"].raw().is_object()) {
+    for (const auto& [name, idx] : meta["categories"].raw().items()) {
+      if (!idx.is_number_integer()) meta["categories"][name].Fail("expected a class index");
+      if (idx.get<int64_t>() < 0) continue;  // KITTI's "DontCare": -1, the label of ignored regions
+      const size_t k = static_cast<size_t>(idx.get<int64_t>());
+      if (names.size() <= k) names.resize(k + 1);
+      names[k] = name;
+    }
+    return names;
+  }
+  for (const char* key : {"classes", "CLASSES"})
+    if (meta.Has(key))
+      for (size_t i = 0; i < meta[key].Size(); ++i) names.push_back(meta[key][i].String());
+  return names;
+}
+
+}  // namespace datasets_internal
+
 // ---------------------------------------------------------------------------------------------------------
-// Writers
+// WriteInfoEdit: the additions applied to the input's JSON text or to its pickle
 
 namespace {
 
@@ -254,28 +284,103 @@ fs::path InfoOutPath(const Log& log, const fs::path& out_dir) {
   return out_dir / RelativePath(fs::absolute(log.annotation_path), fs::absolute(log.data_root));
 }
 
-// mmdet3d's nuScenes attribute index for an object without motion state ('None' = 8); parked vehicles and
-// standing pedestrians otherwise.
-int AttrLabel(const std::string& canonical) {
-  if (canonical == "car" || canonical == "truck" || canonical == "bus" || canonical == "trailer" || canonical == "construction_vehicle")
-    return 6;  // vehicle.parked
-  if (canonical == "pedestrian") return 3;  // pedestrian.standing
-  if (canonical == "bicycle" || canonical == "motorcycle") return 1;  // cycle.without_rider
-  return 8;
+Items AsItems(const std::vector<ojson>& values) {
+  Items items;
+  for (const ojson& v : values) items.push_back({"", v});
+  return items;
 }
 
-// The info file's records; InputError unless there is one per frame of the log (the readers keep them 1:1).
-std::vector<Span> InfoRecords(const Log& log, const RawJson& raw, const char* key, Span* list) {
-  const std::optional<RawMember> m = raw.IsObject(raw.Root()) ? raw.Member(raw.Root(), key) : std::nullopt;
-  if (!m || !raw.IsArray(m->value)) throw InputError(log.annotation_path, Msg() << key << " is not an array");
-  *list = m->value;
-  std::vector<Span> records = raw.Elements(m->value);
+// The lists of a record edit, grouped: each entry is one list of the record (path size 1) or all lists under
+// one parent (path size 2), in order of first use; empty lists dropped (nothing to add, nothing created).
+std::vector<std::vector<const InfoListEdit*>> Groups(const InfoRecordEdit& re) {
+  std::vector<std::vector<const InfoListEdit*>> groups;
+  std::map<std::string, size_t> parent_group;
+  for (const InfoListEdit& le : re.lists) {
+    SD_CHECK(le.path.size() == 1 || le.path.size() == 2, << "InfoListEdit paths are 1 or 2 keys long");
+    if (le.items.empty()) continue;
+    if (le.path.size() == 1) {
+      groups.push_back({&le});
+      continue;
+    }
+    auto [it, added] = parent_group.emplace(le.path[0], groups.size());
+    if (added) groups.emplace_back();
+    groups[it->second].push_back(&le);
+  }
+  return groups;
+}
+
+// --- JSON text
+
+// The record list's elements; InputError unless there is one per frame of the log (the readers keep them 1:1).
+std::vector<Span> TextRecords(const Log& log, const RawJson& raw, const char* key, Span* list) {
+  if (*key == '\0') {
+    if (!raw.IsArray(raw.Root())) throw InputError(log.annotation_path, "the info is not a list of records");
+    *list = raw.Root();
+  } else {
+    const std::optional<RawMember> m = raw.IsObject(raw.Root()) ? raw.Member(raw.Root(), key) : std::nullopt;
+    if (!m || !raw.IsArray(m->value)) throw InputError(log.annotation_path, Msg() << key << " is not an array");
+    *list = m->value;
+  }
+  std::vector<Span> records = raw.Elements(*list);
+  const char* what = *key ? key : "the info";
   if (records.size() != log.frames.size())
     throw InputError(log.annotation_path,
-                     Msg() << key << " has " << records.size() << " records, the log " << log.frames.size() << " frames");
+                     Msg() << what << " has " << records.size() << " records, the log " << log.frames.size() << " frames");
   for (const Span& r : records)
-    if (!raw.IsObject(r)) throw InputError(log.annotation_path, Msg() << key << " holds a record that is not an object");
+    if (!raw.IsObject(r)) throw InputError(log.annotation_path, Msg() << what << " holds a record that is not an object");
   return records;
+}
+
+// `items` inserted before element `at` (< its size) of the array `arr`, separated and indented like the
+// elements already there.
+Splice InsertItems(const RawJson& raw, Span arr, size_t at, const Items& items, const JsonStyle& s) {
+  const std::vector<Span> have = raw.Elements(arr);
+  const std::string lead(raw.Text({arr.begin + 1, have[0].begin}));
+  const std::string sep = have.size() >= 2 ? std::string(raw.Text({have[0].end, have[1].begin}))
+                          : lead.find('\n') != std::string::npos ? "," + lead
+                          : s.unit.empty() ? s.item_sep : ",";
+  const size_t nl = sep.rfind('\n');
+  const std::string indent = nl == std::string::npos ? raw.LineIndent(have[at].begin) : sep.substr(nl + 1);
+  std::string text;
+  for (const auto& kv : items) text += Serialize(kv.second, s, indent) + sep;
+  return {have[at].begin, have[at].begin, text};
+}
+
+// ExtendMember for one list edit, or an insertion where it asks for one inside the existing list.
+void ExtendList(const RawJson& raw, Span obj, const std::string& key, const InfoListEdit& le, const JsonStyle& s,
+                std::vector<Splice>* splices, Items* new_members) {
+  if (le.insert_at) {
+    const std::optional<RawMember> m = raw.Member(obj, key);
+    if (m && raw.IsArray(m->value) && *le.insert_at < raw.Elements(m->value).size()) {
+      splices->push_back(InsertItems(raw, m->value, *le.insert_at, AsItems(le.items), s));
+      return;
+    }
+  }
+  ExtendMember(raw, obj, key, AsItems(le.items), false, s, splices, new_members);
+}
+
+std::string EditedRecordText(const RawJson& raw, Span rec, const InfoRecordEdit& re, const JsonStyle& style) {
+  std::vector<Splice> splices;
+  Items new_members;
+  for (const std::vector<const InfoListEdit*>& group : Groups(re)) {
+    const InfoListEdit& first = *group[0];
+    if (first.path.size() == 1) {
+      ExtendList(raw, rec, first.path[0], first, style, &splices, &new_members);
+      continue;
+    }
+    const std::optional<RawMember> m = raw.Member(rec, first.path[0]);
+    if (m && raw.IsObject(m->value)) {
+      Items new_children;
+      for (const InfoListEdit* le : group) ExtendList(raw, m->value, le->path[1], *le, style, &splices, &new_children);
+      if (!new_children.empty()) splices.push_back(AppendItems(raw, m->value, new_children, style));
+    } else {
+      Items by_child;
+      for (const InfoListEdit* le : group) by_child.push_back({le->path[1], ArrayOf(AsItems(le->items))});
+      ExtendMember(raw, rec, first.path[0], by_child, true, style, &splices, &new_members);
+    }
+  }
+  if (!new_members.empty()) splices.push_back(AppendItems(raw, rec, new_members, style));
+  return ApplySplices(raw, rec, splices);
 }
 
 // New class names go where the metainfo keeps its class list (categories {name: index}, classes, CLASSES).
@@ -304,29 +409,389 @@ void AddV1Classes(const RawJson& raw, const std::vector<std::string>& new_names,
   if (!added.empty()) splices->push_back(AppendItems(raw, meta->value, added, s));
 }
 
-std::vector<fs::path> WriteMmdet3dV1(const Log& log, const std::vector<FrameEdit>& edits, const fs::path& out_dir,
-                                     const WriteOptions& options) {
-  WriteSensorFiles(log, edits, out_dir, options);
+void WriteInfoText(const Log& log, const InfoEdit& edit, const fs::path& dst) {
   const RawJson raw(ReadFileToString(log.annotation_path), log.annotation_path);
   const JsonStyle style = raw.Style();
   Span list;
-  const std::vector<Span> records = InfoRecords(log, raw, "data_list", &list);
-  std::vector<std::string> names = log.categories, new_names;
+  const std::vector<Span> records = TextRecords(log, raw, edit.list_key, &list);
+  std::vector<std::string> kept;
+  for (const InfoRecordEdit& re : edit.records) kept.push_back(EditedRecordText(raw, records.at(re.record), re, style));
+  std::vector<Splice> splices;
+  if (raw.IsObject(raw.Root())) AddV1Classes(raw, edit.new_classes, edit.first_class_index, style, &splices);
+  splices.push_back({list.begin, list.end, ArrayWith(raw, list, records, kept, style)});
+  WriteFileAtomic(dst, ApplySplices(raw, {0, raw.text().size()}, splices));
+}
+
+// --- pickle
+
+using pickle::Array;
+using pickle::DType;
+using pickle::Kind;
+using pickle::Value;
+
+Value PlainValue(const ojson& v) {
+  switch (v.type()) {
+    case ojson::value_t::null: return Value::None();
+    case ojson::value_t::boolean: return Value::Bool(v.get<bool>());
+    case ojson::value_t::number_integer:
+    case ojson::value_t::number_unsigned: return Value::Int(v.get<int64_t>());
+    case ojson::value_t::number_float: return Value::Float(v.get<double>());
+    case ojson::value_t::string: return Value::Str(v.get<std::string>());
+    case ojson::value_t::array: {
+      std::vector<Value> elements;
+      for (const ojson& e : v) elements.push_back(PlainValue(e));
+      return Value::List(std::move(elements));
+    }
+    case ojson::value_t::object: {
+      Value d = Value::Dict();
+      for (auto it = v.begin(); it != v.end(); ++it) d.Set(it.key(), PlainValue(it.value()));
+      return d;
+    }
+    default: break;
+  }
+  SD_CHECK(false, << "an added value has no pickle form: " << v.dump());
+  return {};
+}
+
+// Number of code points of a UTF-8 string (what a numpy unicode element holds).
+int64_t CodePoints(const std::string& utf8) {
+  int64_t n = 0;
+  for (unsigned char c : utf8) n += (c & 0xC0) != 0x80;
+  return n;
+}
+
+// Writes `v` as element i of the C-order array `a`, in a's dtype (unicode: a is wide enough).
+void PutElement(Array* a, int64_t i, const ojson& v, const fs::path& file) {
+  const auto put = [&](auto x) { std::memcpy(a->data.data() + i * a->itemsize, &x, sizeof(x)); };
+  const auto integer = [&]() -> int64_t {
+    if (v.is_boolean()) return v.get<bool>() ? 1 : 0;
+    if (v.is_number_integer()) return v.get<int64_t>();
+    if (v.is_number_float()) return std::llround(v.get<double>());
+    throw InputError(file, Msg() << "a " << pickle::DTypeName(a->dtype) << " numpy value cannot hold " << v.dump());
+  };
+  const auto real = [&]() -> double {
+    if (v.is_number()) return v.get<double>();
+    if (v.is_boolean()) return v.get<bool>() ? 1 : 0;
+    throw InputError(file, Msg() << "a " << pickle::DTypeName(a->dtype) << " numpy value cannot hold " << v.dump());
+  };
+  switch (a->dtype) {
+    case DType::kBool: a->data[static_cast<size_t>(i)] = integer() != 0; return;
+    case DType::kInt8: put(static_cast<int8_t>(integer())); return;
+    case DType::kInt16: put(static_cast<int16_t>(integer())); return;
+    case DType::kInt32: put(static_cast<int32_t>(integer())); return;
+    case DType::kInt64: put(static_cast<int64_t>(integer())); return;
+    case DType::kUInt8: put(static_cast<uint8_t>(integer())); return;
+    case DType::kUInt16: put(static_cast<uint16_t>(integer())); return;
+    case DType::kUInt32: put(static_cast<uint32_t>(integer())); return;
+    case DType::kUInt64: put(static_cast<uint64_t>(integer())); return;
+    case DType::kFloat32: put(static_cast<float>(real())); return;
+    case DType::kFloat64: put(real()); return;
+    case DType::kObject: a->objects[static_cast<size_t>(i)] = PlainValue(v); return;
+    case DType::kUnicode: {
+      if (!v.is_string()) throw InputError(file, Msg() << "a unicode numpy value cannot hold " << v.dump());
+      const Array u = Array::Unicode({v.get<std::string>()});
+      SD_CHECK(u.itemsize <= a->itemsize, << "unicode element wider than its array");
+      std::memcpy(a->data.data() + i * a->itemsize, u.data.data(), static_cast<size_t>(u.itemsize));
+      return;
+    }
+    case DType::kFloat16: break;
+  }
+  throw InputError(file, "adding to float16 numpy values is not supported");
+}
+
+// The leaves of a JSON value in C order and the shape of its nesting (a number: shape {}); false when ragged.
+bool Flatten(const ojson& v, std::vector<const ojson*>* leaves, std::vector<int64_t>* shape, size_t depth = 0) {
+  if (!v.is_array()) {
+    if (depth == 0) shape->clear();
+    leaves->push_back(&v);
+    return depth == shape->size();
+  }
+  if (depth == shape->size()) shape->push_back(static_cast<int64_t>(v.size()));
+  else if ((*shape)[depth] != static_cast<int64_t>(v.size())) return false;
+  for (const ojson& e : v)
+    if (!Flatten(e, leaves, shape, depth + 1)) return false;
+  return !v.empty() || depth + 1 == shape->size();
+}
+
+int64_t LongestString(const std::vector<const ojson*>& leaves) {
+  int64_t n = 0;
+  for (const ojson* l : leaves)
+    if (l->is_string()) n = std::max(n, CodePoints(l->get<std::string>()));
+  return n;
+}
+
+// An added value typed like `like`, an existing value in the same place of a neighbouring element: a numpy
+// scalar or array of its dtype, a list / tuple / dict whose elements are typed like its elements, a float where
+// it is a float; anything else (no neighbour, another kind) as plain Python values.
+Value ValueLike(const ojson& v, const Value* like, const fs::path& file) {
+  if (!like) return PlainValue(v);
+  switch (like->kind()) {
+    case Kind::kArray: {
+      const Array& l = like->array();
+      std::vector<const ojson*> leaves;
+      std::vector<int64_t> shape;
+      const bool nested = v.is_array();
+      if ((l.scalar || l.ndim() == 0) == nested || !Flatten(v, &leaves, &shape)) return PlainValue(v);
+      if (l.dtype == DType::kObject) {
+        std::vector<Value> objects;
+        for (const ojson* x : leaves) objects.push_back(PlainValue(*x));
+        Array a = Array::Objects(std::move(objects), shape.empty() ? std::vector<int64_t>{1} : shape);
+        if (!nested) a.shape.clear(), a.scalar = l.scalar;
+        return Value::FromArray(std::move(a));
+      }
+      const int chars = static_cast<int>(std::max<int64_t>(l.itemsize / 4, LongestString(leaves)));
+      Array a = Array::Zeros(l.dtype, shape, l.dtype == DType::kUnicode ? chars : 0);
+      a.scalar = l.scalar;
+      for (size_t i = 0; i < leaves.size(); ++i) PutElement(&a, static_cast<int64_t>(i), *leaves[i], file);
+      return Value::FromArray(std::move(a));
+    }
+    case Kind::kList:
+    case Kind::kTuple: {
+      if (!v.is_array()) return PlainValue(v);
+      const std::vector<Value>& le = like->elements();
+      std::vector<Value> elements;
+      for (size_t i = 0; i < v.size(); ++i)
+        elements.push_back(ValueLike(v[i], le.empty() ? nullptr : &le[std::min(i, le.size() - 1)], file));
+      return like->kind() == Kind::kList ? Value::List(std::move(elements)) : Value::Tuple(std::move(elements));
+    }
+    case Kind::kDict: {
+      if (!v.is_object()) return PlainValue(v);
+      Value d = Value::Dict();
+      for (auto it = v.begin(); it != v.end(); ++it) d.Set(it.key(), ValueLike(it.value(), like->Find(it.key()), file));
+      return d;
+    }
+    case Kind::kFloat:
+      if (v.is_number()) return Value::Float(v.get<double>());
+      break;
+    default: break;
+  }
+  return PlainValue(v);
+}
+
+// The numpy column `column` with `rows` inserted before row `at` (appended past the end), as np.insert along
+// axis 0: dtype kept, unicode widened to the longest string. An empty 1-d column (np.array([])) takes the rows'
+// shape.
+Array InsertRows(const Array& column, size_t at, const std::vector<ojson>& rows, const fs::path& file, const std::string& what) {
+  const Array col = column.ToCOrder();
+  if (col.scalar || col.ndim() == 0) throw InputError(file, what + ": a numpy scalar, not a column");
+  std::vector<int64_t> row_shape(col.shape.begin() + 1, col.shape.end());
+  const int64_t n = col.shape[0];
+  std::vector<const ojson*> leaves;
+  for (size_t r = 0; r < rows.size(); ++r) {
+    std::vector<const ojson*> row_leaves;
+    std::vector<int64_t> shape;
+    if (!Flatten(rows[r], &row_leaves, &shape)) throw InputError(file, what + ": an added row is ragged");
+    if (r == 0 && n == 0 && col.ndim() == 1) row_shape = shape;
+    if (shape != row_shape)
+      throw InputError(file, Msg() << what << ": an added row's shape differs from the column's rows (" << shape.size()
+                                   << " dimensions)");
+    leaves.insert(leaves.end(), row_leaves.begin(), row_leaves.end());
+  }
+  int64_t row_size = 1;
+  for (int64_t d : row_shape) row_size *= d;
+  const int64_t k = static_cast<int64_t>(rows.size()), pos = static_cast<int64_t>(std::min(at, static_cast<size_t>(n)));
+  std::vector<int64_t> shape = {n + k};
+  shape.insert(shape.end(), row_shape.begin(), row_shape.end());
+  const int chars = static_cast<int>(std::max<int64_t>(col.itemsize / 4, LongestString(leaves)));
+  Array out = Array::Zeros(col.dtype, shape, col.dtype == DType::kUnicode ? chars : 0);
+  // Old element e goes to e (before the insertion) or e + k rows (after); unicode elements keep their code
+  // points in the (maybe) wider slot, the rest NUL as numpy pads.
+  for (int64_t e = 0; e < n * row_size; ++e) {
+    const int64_t to = e < pos * row_size ? e : e + k * row_size;
+    if (col.dtype == DType::kObject) out.objects[static_cast<size_t>(to)] = col.objects[static_cast<size_t>(e)];
+    else std::memcpy(out.data.data() + to * out.itemsize, col.data.data() + e * col.itemsize, static_cast<size_t>(col.itemsize));
+  }
+  for (size_t i = 0; i < leaves.size(); ++i) PutElement(&out, pos * row_size + static_cast<int64_t>(i), *leaves[i], file);
+  return out;
+}
+
+const Value* At(const Value& v, const std::string& key) { return v.kind() == Kind::kDict ? v.Find(key) : nullptr; }
+
+// The first element of the list at `path` of a record, nullptr when there is none.
+const Value* FirstElement(const Value& rec, const std::vector<std::string>& path) {
+  const Value* v = &rec;
+  for (const std::string& key : path)
+    if (!(v = At(*v, key))) return nullptr;
+  if ((v->kind() == Kind::kList || v->kind() == Kind::kTuple) && v->size() > 0) return &(*v)[0];
+  return nullptr;
+}
+
+// What an added element is typed like: the first element of the same list in this record, else in another
+// record, else (cam_instances.<CAM>) of a sibling list under the same parent.
+const Value* Neighbour(const Value& rec, const std::vector<Value>& records, const std::vector<std::string>& path) {
+  if (const Value* n = FirstElement(rec, path)) return n;
+  for (const Value& r : records)
+    if (const Value* n = FirstElement(r, path)) return n;
+  if (path.size() != 2) return nullptr;
+  const auto sibling = [&](const Value& r) -> const Value* {
+    const Value* parent = At(r, path[0]);
+    if (!parent || parent->kind() != Kind::kDict) return nullptr;
+    for (const auto& [key, child] : parent->items())
+      if ((child.kind() == Kind::kList || child.kind() == Kind::kTuple) && child.size() > 0) return &child[0];
+    return nullptr;
+  };
+  if (const Value* n = sibling(rec)) return n;
+  for (const Value& r : records)
+    if (const Value* n = sibling(r)) return n;
+  return nullptr;
+}
+
+// `container` (a list, tuple or numpy column; nullptr or None when the record lacks it) with the edit's items.
+Value ExtendedList(const Value* container, const InfoListEdit& le, const Value* neighbour, const fs::path& file) {
+  std::string what;
+  for (const std::string& p : le.path) what += (what.empty() ? "" : ".") + p;
+  if (!container || container->is_none()) {
+    if (le.column_dtype)
+      return Value::FromArray(InsertRows(Array::Zeros(*le.column_dtype, {0}, 0), 0, le.items, file, what));
+    std::vector<Value> elements;
+    for (const ojson& v : le.items) elements.push_back(ValueLike(v, neighbour, file));
+    return Value::List(std::move(elements));
+  }
+  if (container->kind() == Kind::kArray)
+    return Value::FromArray(InsertRows(container->array(), le.insert_at.value_or(SIZE_MAX), le.items, file, what));
+  if (container->kind() != Kind::kList && container->kind() != Kind::kTuple)
+    throw InputError(file, Msg() << what << " is a " << pickle::KindName(container->kind()) << ", not a list or numpy column");
+  std::vector<Value> elements = container->elements();
+  std::vector<Value> added;
+  for (const ojson& v : le.items) added.push_back(ValueLike(v, neighbour, file));
+  const size_t pos = std::min(le.insert_at.value_or(SIZE_MAX), elements.size());
+  elements.insert(elements.begin() + static_cast<std::ptrdiff_t>(pos), added.begin(), added.end());
+  return container->kind() == Kind::kList ? Value::List(std::move(elements)) : Value::Tuple(std::move(elements));
+}
+
+Value EditedRecordValue(const Value& in, const std::vector<Value>& records, const InfoRecordEdit& re, const fs::path& file) {
+  Value rec = in;
+  for (const std::vector<const InfoListEdit*>& group : Groups(re)) {
+    const InfoListEdit& first = *group[0];
+    if (first.path.size() == 1) {
+      rec.Set(first.path[0], ExtendedList(At(in, first.path[0]), first, Neighbour(in, records, first.path), file));
+      continue;
+    }
+    const Value* parent_in = At(in, first.path[0]);
+    const bool have = parent_in && parent_in->kind() == Kind::kDict;
+    Value parent = have ? *parent_in : Value::Dict();
+    for (const InfoListEdit* le : group)
+      parent.Set(le->path[1], ExtendedList(have ? parent_in->Find(le->path[1]) : nullptr, *le, Neighbour(in, records, le->path), file));
+    rec.Set(first.path[0], std::move(parent));
+  }
+  return rec;
+}
+
+Value StrList(const Value* existing, const std::vector<std::string>& names) {
+  std::vector<Value> elements;
+  if (existing && (existing->kind() == Kind::kList || existing->kind() == Kind::kTuple)) elements = existing->elements();
+  for (const std::string& n : names) elements.push_back(Value::Str(n));
+  return existing && existing->kind() == Kind::kTuple ? Value::Tuple(std::move(elements)) : Value::List(std::move(elements));
+}
+
+// AddV1Classes on the value tree, with the same choices.
+void AddPickleClasses(Value* root, const std::vector<std::string>& names, size_t first_index) {
+  if (names.empty()) return;
+  Value by_index = Value::Dict();
+  for (size_t k = 0; k < names.size(); ++k) by_index.Set(names[k], Value::Int(static_cast<int64_t>(first_index + k)));
+  const Value* meta_in = At(*root, "metainfo");
+  if (!meta_in || meta_in->kind() != Kind::kDict) {
+    root->Set("metainfo", Value::Dict({{Value::Str("categories"), by_index}}));
+    return;
+  }
+  Value meta = *meta_in;
+  const Value* cats = meta_in->Find("categories");
+  if (cats && cats->kind() == Kind::kDict) {
+    Value c = *cats;
+    for (const auto& [name, index] : by_index.items()) c.Set(name, index);
+    meta.Set("categories", std::move(c));
+  } else if (const Value* classes = meta_in->Find("classes")) {
+    meta.Set("classes", StrList(classes, names));
+  } else if (const Value* upper = meta_in->Find("CLASSES")) {
+    meta.Set("CLASSES", StrList(upper, names));
+  } else {
+    meta.Set("categories", by_index);
+  }
+  root->Set("metainfo", std::move(meta));
+}
+
+void WriteInfoPickle(const Log& log, const InfoEdit& edit, const fs::path& dst) {
+  const fs::path& file = log.annotation_path;
+  const std::string stored = ReadFileToString(file);
+  const bool gzip = IsGzip(stored);
+  const pickle::LoadOptions load;
+  const std::string bytes = gzip ? Gunzip(stored, file, load.max_bytes_decompressed) : stored;
+  const Value root = pickle::Load(bytes, file, load);
+  // Dump writes protocols 2 and 4: 2 keeps files of protocols 0-2 readable where they were (Python 2 too).
+  const int protocol = pickle::ProtocolOf(bytes) <= 2 ? 2 : 4;
+  try {
+    const Value* list = *edit.list_key ? At(root, edit.list_key) : &root;
+    const char* what = *edit.list_key ? edit.list_key : "the info";
+    if (!list || (list->kind() != Kind::kList && list->kind() != Kind::kTuple))
+      throw InputError(file, Msg() << what << " is not a list");
+    const std::vector<Value>& records = list->elements();
+    if (records.size() != log.frames.size())
+      throw InputError(file, Msg() << what << " has " << records.size() << " records, the log " << log.frames.size() << " frames");
+    std::vector<Value> kept;
+    for (const InfoRecordEdit& re : edit.records) {
+      if (records.at(re.record).kind() != Kind::kDict) throw InputError(file, Msg() << what << " holds a record that is not a dict");
+      kept.push_back(EditedRecordValue(records[re.record], records, re, file));
+    }
+    Value kept_list = list->kind() == Kind::kList ? Value::List(std::move(kept)) : Value::Tuple(std::move(kept));
+    Value out = *edit.list_key ? root : kept_list;
+    if (*edit.list_key) {
+      out.Set(edit.list_key, std::move(kept_list));
+      AddPickleClasses(&out, edit.new_classes, edit.first_class_index);
+    }
+    pickle::DumpFile(dst, out, protocol, gzip);
+  } catch (const InputError& e) {
+    if (!e.where().empty()) throw;
+    throw InputError(file, e.what());  // a Value accessor's error: the file is ours to name
+  }
+}
+
+}  // namespace
+
+namespace datasets_internal {
+
+fs::path WriteInfoEdit(const Log& log, const InfoEdit& edit, const fs::path& out_dir) {
+  const fs::path dst = InfoOutPath(log, out_dir);
+  if (IsPickleInfo(log.annotation_path)) WriteInfoPickle(log, edit, dst);
+  else WriteInfoText(log, edit, dst);
+  return dst;
+}
+
+}  // namespace datasets_internal
+
+// ---------------------------------------------------------------------------------------------------------
+// Writers of the nuScenes-like layouts
+
+namespace {
+
+// mmdet3d's nuScenes attribute index for an object without motion state ('None' = 8); parked vehicles and
+// standing pedestrians otherwise.
+int AttrLabel(const std::string& canonical) {
+  if (canonical == "car" || canonical == "truck" || canonical == "bus" || canonical == "trailer" || canonical == "construction_vehicle")
+    return 6;  // vehicle.parked
+  if (canonical == "pedestrian") return 3;  // pedestrian.standing
+  if (canonical == "bicycle" || canonical == "motorcycle") return 1;  // cycle.without_rider
+  return 8;
+}
+
+// v1 `instances` (LiDAR-frame boxes) and `cam_instances.<CAM>` of the added objects.
+InfoEdit V1Edit(const Log& log, const std::vector<FrameEdit>& edits) {
+  InfoEdit edit;
+  edit.list_key = "data_list";
+  std::vector<std::string> names = log.categories;
   auto label_of = [&](const std::string& cls) {
     auto it = std::find(names.begin(), names.end(), cls);
     if (it != names.end()) return static_cast<int>(it - names.begin());
     names.push_back(cls);
-    new_names.push_back(cls);
+    edit.new_classes.push_back(cls);
     return static_cast<int>(names.size() - 1);
   };
-  std::vector<std::string> kept;
+  edit.first_class_index = log.categories.size();
   for (const FrameEdit& e : edits) {
     const Frame& frame = log.frames[e.frame_index];
-    const Span rec = records[e.frame_index];
     const Rigid3d T_lidar_ego = frame.lidar ? frame.lidar->T_ego_lidar.Inverse() : Rigid3d();
-    Items instances;
+    InfoListEdit instances({"instances"});
     std::vector<std::string> channels;  // in order of first use
-    std::map<std::string, Items> cam_instances;
+    std::map<std::string, std::vector<ojson>> cam_instances;
     for (const AddedObject& obj : e.added) {
       const int label = label_of(ClassName(obj, LogFormat::kMmdet3dV1));
       const Box3 b = obj.annotation.box.Transformed(T_lidar_ego);
@@ -339,7 +804,7 @@ std::vector<fs::path> WriteMmdet3dV1(const Log& log, const std::vector<FrameEdit
                     {"num_radar_pts", 0},
                     {"velocity", {0.0, 0.0}}};
       if (!obj.asset_id.empty()) inst["synthdrive_asset_id"] = obj.asset_id;
-      instances.push_back({"", inst});
+      instances.items.push_back(inst);
       for (const CameraBox& cb : obj.camera_boxes) {
         const CameraSensor* cam = frame.FindCamera(cb.channel);
         if (!cam) throw InputError(log.source, "camera box for unknown camera " + cb.channel);
@@ -358,79 +823,68 @@ std::vector<fs::path> WriteMmdet3dV1(const Log& log, const std::vector<FrameEdit
                     {"depth", p.z()},
                     {"attr_label", AttrLabel(FindCategory(obj.category) ? FindCategory(obj.category)->name : "")}};
         if (!cam_instances.count(cb.channel)) channels.push_back(cb.channel);
-        cam_instances[cb.channel].push_back({"", ci});
+        cam_instances[cb.channel].push_back(ci);
       }
     }
-    std::vector<Splice> splices;
-    Items new_members;
-    ExtendMember(raw, rec, "instances", instances, false, style, &splices, &new_members);
-    if (!channels.empty()) {
-      const std::optional<RawMember> m = raw.Member(rec, "cam_instances");
-      if (m && raw.IsObject(m->value)) {
-        Items new_channels;
-        for (const std::string& ch : channels)
-          ExtendMember(raw, m->value, ch, cam_instances[ch], false, style, &splices, &new_channels);
-        if (!new_channels.empty()) splices.push_back(AppendItems(raw, m->value, new_channels, style));
-      } else {
-        Items by_channel;
-        for (const std::string& ch : channels) by_channel.push_back({ch, ArrayOf(cam_instances[ch])});
-        ExtendMember(raw, rec, "cam_instances", by_channel, true, style, &splices, &new_members);
-      }
+    InfoRecordEdit re;
+    re.record = e.frame_index;
+    re.lists.push_back(std::move(instances));
+    for (const std::string& ch : channels) {
+      re.lists.emplace_back(std::vector<std::string>{"cam_instances", ch});
+      re.lists.back().items = cam_instances[ch];
     }
-    if (!new_members.empty()) splices.push_back(AppendItems(raw, rec, new_members, style));
-    kept.push_back(ApplySplices(raw, rec, splices));
+    edit.records.push_back(std::move(re));
   }
-  std::vector<Splice> splices;
-  AddV1Classes(raw, new_names, log.categories.size(), style, &splices);
-  splices.push_back({list.begin, list.end, ArrayWith(raw, list, records, kept, style)});
-  const fs::path dst = InfoOutPath(log, out_dir);
-  WriteFileAtomic(dst, ApplySplices(raw, {0, raw.text().size()}, splices));
-  return {dst};
+  return edit;
 }
 
-// ---------------------------------------------------------------------------------------------------------
-// mmdet3d v0
-
-std::vector<fs::path> WriteMmdet3dV0(const Log& log, const std::vector<FrameEdit>& edits, const fs::path& out_dir,
-                                     const WriteOptions& options) {
-  WriteSensorFiles(log, edits, out_dir, options);
-  const RawJson raw(ReadFileToString(log.annotation_path), log.annotation_path);
-  const JsonStyle style = raw.Style();
-  Span list;
-  const std::vector<Span> records = InfoRecords(log, raw, "infos", &list);
-  std::vector<std::string> kept;
+// v0 columns: gt_boxes [x y z w l h yaw_old] and the per-box columns beside it.
+InfoEdit V0Edit(const Log& log, const std::vector<FrameEdit>& edits) {
+  InfoEdit edit;
+  edit.list_key = "infos";
   for (const FrameEdit& e : edits) {
     const Frame& frame = log.frames[e.frame_index];
-    const Span rec = records[e.frame_index];
     const Rigid3d T_lidar_ego = frame.lidar ? frame.lidar->T_ego_lidar.Inverse() : Rigid3d();
-    Items boxes, names, velocities, lidar_pts, radar_pts, valid;
+    // Where a pickle lacks a column, it gets the dtype mmdet3d's converter gives it.
+    InfoRecordEdit re;
+    re.record = e.frame_index;
+    const std::pair<const char*, DType> columns[] = {{"gt_boxes", DType::kFloat64},    {"gt_names", DType::kUnicode},
+                                                     {"gt_velocity", DType::kFloat64}, {"num_lidar_pts", DType::kInt64},
+                                                     {"num_radar_pts", DType::kInt64}, {"valid_flag", DType::kBool}};
+    for (const auto& [key, dtype] : columns) re.lists.emplace_back(std::vector<std::string>{key}, std::nullopt, dtype);
     for (const AddedObject& obj : e.added) {
       const Box3 b = obj.annotation.box.Transformed(T_lidar_ego);
       const Eigen::Vector3d c = b.center(), s = b.size;
       double yaw_old = -b.Yaw() - kPi / 2;
       yaw_old = std::atan2(std::sin(yaw_old), std::cos(yaw_old));
-      boxes.push_back({"", {c.x(), c.y(), c.z(), s.y(), s.x(), s.z(), yaw_old}});  // w before l
-      names.push_back({"", ClassName(obj, LogFormat::kMmdet3dV0)});
-      velocities.push_back({"", {0.0, 0.0}});
-      lidar_pts.push_back({"", std::max(0, obj.annotation.num_lidar_pts)});
-      radar_pts.push_back({"", 0});
-      valid.push_back({"", obj.annotation.num_lidar_pts != 0});
+      re.lists[0].items.push_back({c.x(), c.y(), c.z(), s.y(), s.x(), s.z(), yaw_old});  // w before l
+      re.lists[1].items.push_back(ClassName(obj, LogFormat::kMmdet3dV0));
+      re.lists[2].items.push_back({0.0, 0.0});
+      re.lists[3].items.push_back(std::max(0, obj.annotation.num_lidar_pts));
+      re.lists[4].items.push_back(0);
+      re.lists[5].items.push_back(obj.annotation.num_lidar_pts != 0);
     }
-    std::vector<Splice> splices;
-    Items new_members;
-    const std::pair<const char*, const Items*> columns[] = {{"gt_boxes", &boxes},         {"gt_names", &names},
-                                                            {"gt_velocity", &velocities}, {"num_lidar_pts", &lidar_pts},
-                                                            {"num_radar_pts", &radar_pts}, {"valid_flag", &valid}};
-    for (const auto& [key, items] : columns) ExtendMember(raw, rec, key, *items, false, style, &splices, &new_members);
-    if (!new_members.empty()) splices.push_back(AppendItems(raw, rec, new_members, style));
-    kept.push_back(ApplySplices(raw, rec, splices));
+    edit.records.push_back(std::move(re));
   }
-  const fs::path dst = InfoOutPath(log, out_dir);
-  WriteFileAtomic(dst, ApplySplices(raw, {0, raw.text().size()}, {{list.begin, list.end, ArrayWith(raw, list, records, kept, style)}}));
-  return {dst};
+  return edit;
 }
 
-bool IsInfoFile(const fs::path& p) { return fs::is_regular_file(p) && p.extension() == ".json"; }
+std::vector<fs::path> WriteMmdet3dV1(const Log& log, const std::vector<FrameEdit>& edits, const fs::path& out_dir,
+                                     const WriteOptions& options) {
+  WriteSensorFiles(log, edits, out_dir, options);
+  return {WriteInfoEdit(log, V1Edit(log, edits), out_dir)};
+}
+
+std::vector<fs::path> WriteMmdet3dV0(const Log& log, const std::vector<FrameEdit>& edits, const fs::path& out_dir,
+                                     const WriteOptions& options) {
+  WriteSensorFiles(log, edits, out_dir, options);
+  return {WriteInfoEdit(log, V0Edit(log, edits), out_dir)};
+}
+
+// mmdet3d's converters write .pkl (some pipelines gzip them); the .json conversions of them read the same.
+bool IsInfoFile(const fs::path& p) {
+  return fs::is_regular_file(p) && (p.extension() == ".json" || datasets_internal::IsPickleInfo(p));
+}
 
 std::string CanonicalName(const CategoryInfo& c) { return c.name; }
 
@@ -438,7 +892,7 @@ std::string CanonicalName(const CategoryInfo& c) { return c.name; }
 
 namespace datasets_internal {
 
-// Both versions share one reader, which tells them apart by content: the v1 row probes for both.
+// All mmdet3d layouts share one reader, which tells them apart by content: the v1 row probes for every one.
 LogFormatInfo Mmdet3dV1Format() {
   return {LogFormat::kMmdet3dV1, "mmdet3d-v1", "mmdet3d", &IsInfoFile, &ReadMmdet3dInfo, &WriteMmdet3dV1, nullptr, &CanonicalName};
 }

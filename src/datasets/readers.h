@@ -15,11 +15,11 @@ struct OpenLogOptions {
   std::filesystem::path data_root;      // where dataset-relative paths resolve; default: probed
 };
 
-// `path`: a dataset root directory (nuScenes tables, KITTI object layout) or an info file (mmdet3d .json).
-// Probes the format unless forced: *.json -> ReadMmdet3dInfo; a directory holding sample.json, or a
+// `path`: a dataset root directory (nuScenes tables, KITTI object layout, a PandaSet sequence) or an info file
+// (mmdet3d .pkl, .pkl.gz or .json). Probes the format unless forced: *.json, *.pkl, *.pkl.gz -> ReadMmdet3dInfo; a directory holding sample.json, or a
 // version directory (or, Lyft, version/version) that does -> ReadNuScenesTables; calib/ + label_2/ (or
 // training/) -> ReadKitti; a directory holding city_SE3_egovehicle.json and annotations.json ->
-// ReadArgoverse2. InputError (naming the path) when no reader recognises it. docs/datasets.md
+// ReadArgoverse2; camera/, lidar/ and annotations/cuboids/ -> ReadPandaSet. InputError (naming the path) when no reader recognises it. docs/datasets.md
 // tabulates every format's conventions.
 Log OpenLog(const std::filesystem::path& path, const OpenLogOptions& options = {});
 
@@ -31,12 +31,15 @@ Log OpenLog(const std::filesystem::path& path, const OpenLogOptions& options = {
 // LIDAR_TOP where there are several. Log::location only for the four nuScenes maps (approximate
 // map-origin coordinates); velocities are NaN (not derived from prev/next).
 Log ReadNuScenesTables(const std::filesystem::path& path, const OpenLogOptions& options = {});
-// mmdetection3d info JSON, v1.x (`data_list`, `instances`, boxes [x y z l w h yaw] in the LiDAR frame) or
+// mmdetection3d info file, the converters' pickle (read as data: io/pickle.h, never executed) or its JSON
+// conversion, v1.x (`data_list`, `instances`, boxes [x y z l w h yaw] in the LiDAR frame) or
 // v0.x (`infos`, `gt_boxes` [x y z w l h yaw_old] with yaw_old = -yaw - pi/2). Image and LiDAR paths are
 // resolved against data_root (probed: the nearest ancestor of the info file holding samples/ or training/);
 // v1 bare file names live in samples/<CHANNEL>/, other paths are cut to their first samples/ or sweeps/
 // component. Python NaN/Infinity literals read as null. v1 boxes with label -1 are kept with an empty
-// category. Sweeps are read as 5 float32 per point. KITTI-flavoured v1 infos are refused (InputError).
+// category. Sweeps are read as 5 float32 per point. KITTI-flavoured infos (v0.x list of
+// image/point_cloud/calib/annos dicts; v1.x with camera-frame boxes and images.R0_rect) read through the KITTI
+// calibration they carry, as ReadKitti does; their cam_instances (2D-only labels) are not read.
 Log ReadMmdet3dInfo(const std::filesystem::path& info_json, const OpenLogOptions& options = {});
 // KITTI 3D object layout: <root>/{image_2,velodyne,calib,label_2}/NNNNNN.* (or <root>/training/...).
 // ego = Velodyne frame; one camera "image_2" with T_ego_cam = inv(T_cam2_rect0 * R0_rect * Tr_velo_to_cam);
@@ -53,6 +56,16 @@ Log ReadKitti(const std::filesystem::path& root, const OpenLogOptions& options =
 // ego <- object; category = the AV2 name (REGULAR_VEHICLE, ...; datasets/categories.h maps them),
 // instance_token = track_uuid, num_lidar_pts = num_interior_pts. No cameras (no images are converted).
 Log ReadArgoverse2(const std::filesystem::path& log_dir, const OpenLogOptions& options = {});
+
+// PandaSet sequence folder (<seq>/camera, lidar, annotations, meta; docs/datasets.md "PandaSet"): ego = the
+// lidar/poses.json pose turned to x forward, y left, z up (origin 0.30 m above the road); the Pandar64 and the
+// PandarGT, at the rig's calibration, in one sweep (LidarSensor::sensor_feature, T_lidar_sensors); the six
+// cameras with their per-frame poses; cuboids (heading = yaw + pi/2, dimensions width, length, height) with
+// tracks (instance_token = uuid), per-LiDAR duplicates folded, velocities from the track.
+Log ReadPandaSet(const std::filesystem::path& sequence_dir, const OpenLogOptions& options = {});
+// A PandaSet sweep (lidar/NN.pkl.gz): x y z in the Pandar64 frame, intensity, time relative to the sweep's
+// stamp (s), sensor (0 Pandar64, 1 PandarGT).
+PointCloud ReadPandaSetSweep(const LidarSensor& lidar);
 
 // Reads the frame's sweep in its own layout (sensor frame). InputError naming the file when it is missing or
 // not a whole number of records.

@@ -5,6 +5,7 @@
 #include <map>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/box3.h"
@@ -33,6 +34,9 @@ struct FrameEdit {
   std::map<std::string, ImageU8> images;  // channel -> replacement image (same size as the original)
   std::optional<PointCloud> points;       // replacement sweep (same layout as the original)
   std::vector<AddedObject> added;
+  // (point index in `points`, index into `added`) of every return that lies on an added object, for formats
+  // that label points (PandaSet's semantic classes).
+  std::vector<std::pair<int, int>> point_objects;
 };
 
 enum class UnchangedFiles { kCopy, kSymlink };

@@ -29,14 +29,16 @@ struct AngularBounds {
   }
 };
 
-AngularBounds BoundsOf(const TriangleMesh& mesh_lidar) {
+// Azimuth / elevation bounds of the mesh seen from `origin` (the sensor's position in the mesh's frame).
+AngularBounds BoundsOf(const TriangleMesh& mesh_lidar, const Eigen::Vector3f& origin = Eigen::Vector3f::Zero()) {
   AngularBounds b;
   const AlignedBox3f box = mesh_lidar.Bounds();
-  const Eigen::Vector3f c = box.Center();
+  const Eigen::Vector3f c = box.Center() - origin;
   b.az_center = std::atan2(c.y(), c.x());
   b.el_min = 1e9;
   b.el_max = -1e9;
-  for (const auto& p : mesh_lidar.positions) {
+  for (const auto& v : mesh_lidar.positions) {
+    const Eigen::Vector3f p = v - origin;
     const double az = std::atan2(p.y(), p.x());
     b.az_half = std::max(b.az_half, std::abs(std::remainder(az - b.az_center, 2 * M_PI)));
     const double el = std::atan2(p.z(), std::hypot(p.x(), p.y()));
@@ -169,19 +171,34 @@ LidarSimResult SimulateLidar(const LidarSimInput& input) {
   result.points_on_object.assign(input.objects.size(), 0);
   if (input.objects.empty()) return result;
 
-  // Objects in the LiDAR frame.
+  // Objects in the LiDAR frame; their angular bounds as each sensor sees them.
   const Rigid3d T_lidar_ego = input.T_ego_lidar.Inverse();
+  const bool several_sensors = input.sensor_feature >= 0 && !input.T_lidar_sensors.empty();
+  SD_CHECK(!several_sensors || input.sensor_feature < sweep.num_features, << "sensor feature " << input.sensor_feature);
+  SD_CHECK(!several_sensors || !re.ego_motion, << "ego motion is modelled for one spinning sensor only");
+  std::vector<Eigen::Vector3f> sensor_origins = {Eigen::Vector3f::Zero()};
+  if (several_sensors) {
+    sensor_origins.clear();
+    for (const Rigid3d& T : input.T_lidar_sensors) sensor_origins.push_back(T.translation.cast<float>());
+  }
   RayScene scene;
-  std::vector<AngularBounds> bounds;
+  std::vector<std::vector<AngularBounds>> bounds_by_sensor(sensor_origins.size());
   double nearest_vertex = 1e9;
   for (const PlacedObject* o : input.objects) {
     auto mesh = std::make_shared<TriangleMesh>(o->asset->mesh);
     mesh->Transform(T_lidar_ego * o->T_ego_asset);
-    bounds.push_back(BoundsOf(*mesh));
+    for (size_t s = 0; s < sensor_origins.size(); ++s) bounds_by_sensor[s].push_back(BoundsOf(*mesh, sensor_origins[s]));
     for (const auto& p : mesh->positions) nearest_vertex = std::min(nearest_vertex, static_cast<double>(p.norm()));
     scene.AddMesh(mesh);
   }
   scene.Commit();
+  const std::vector<AngularBounds>& bounds = bounds_by_sensor[0];
+  // The sensor a real return came from (0 with one sensor); out-of-range indices are the file's problem, read as 0.
+  auto sensor_of = [&](size_t i) -> size_t {
+    if (!several_sensors) return 0;
+    const float f = sweep.feature(i, input.sensor_feature);
+    return f >= 0 && f < static_cast<float>(sensor_origins.size()) ? static_cast<size_t>(f) : 0;
+  };
 
   // Sensor pose at a beam's firing time, in the reference LiDAR frame.
   const bool moving = re.ego_motion && !(IsIdentity(re.T_ref_ego_start) && IsIdentity(re.T_ref_ego_end));
@@ -215,7 +232,7 @@ LidarSimResult SimulateLidar(const LidarSimInput& input) {
     if (!re.noise && ray.static_pose) return rr.ret.point;
     float range = rr.ret.range;
     if (re.noise) range = std::max(0.0f, range + static_cast<float>(re.model->RangeSigma(range) * gauss(rng)));
-    if (re.motion_compensated_output) return rr.origin + range * rr.dir;
+    if (re.motion_compensated_output || several_sensors) return rr.origin + range * rr.dir;
     return range * ray.dir_sensor;
   };
 
@@ -226,8 +243,8 @@ LidarSimResult SimulateLidar(const LidarSimInput& input) {
                                  re.T_ref_ego_end.rotation.angularDistance(Eigen::Quaterniond::Identity()));
     pad += shift / std::max(0.5, nearest_vertex) + turn;
   }
-  auto near_any_object = [&](double az, double el) {
-    for (const auto& b : bounds)
+  auto near_any_object = [&](double az, double el, size_t sensor) {
+    for (const auto& b : bounds_by_sensor[sensor])
       if (b.Contains(az, el, pad)) return true;
     return false;
   };
@@ -236,11 +253,24 @@ LidarSimResult SimulateLidar(const LidarSimInput& input) {
   std::vector<int> candidates;
   std::vector<Ray> rays;
   for (size_t i = 0; i < sweep.size(); ++i) {
-    const Eigen::Vector3f p = sweep.xyz(i);
-    const double r = p.norm();
+    const size_t sensor = sensor_of(i);
+    const Eigen::Vector3f p = sweep.xyz(i), q = p - sensor_origins[sensor];  // q: from the point's own sensor
+    const double r = q.norm();
     if (r < 0.5) continue;
-    if (!near_any_object(std::atan2(p.y(), p.x()), std::atan2(p.z(), std::hypot(p.x(), p.y())))) continue;
+    if (!near_any_object(std::atan2(q.y(), q.x()), std::atan2(q.z(), std::hypot(q.x(), q.y())), sensor)) continue;
     candidates.push_back(static_cast<int>(i));
+    if (several_sensors) {
+      // Static sensors away from the sweep's origin: the ray runs from the point's sensor through the point, and
+      // the moved point is stored where the ray meets the object, in the sweep's frame.
+      Ray ray;
+      ray.T_ref_sensor = input.T_lidar_sensors[sensor];
+      ray.static_pose = false;
+      ray.has_dir_ref = true;
+      ray.dir_ref = q / static_cast<float>(r);
+      ray.dir_sensor = (ray.T_ref_sensor.rotation.inverse().cast<float>() * ray.dir_ref).normalized();
+      rays.push_back(ray);
+      continue;
+    }
     Ray ray = make_ray(p / static_cast<float>(r));
     if (!ray.static_pose && re.motion_compensated_output) {
       // The recorded point is in the reference frame; the beam came from the sensor at its firing time.
@@ -272,7 +302,7 @@ LidarSimResult SimulateLidar(const LidarSimInput& input) {
 
   // 2. Beams with no return, recovered from the ring pattern.
   const int ring_f = sweep.FeatureIndex("ring");
-  if (ring_f >= 0) {
+  if (ring_f >= 0 && !several_sensors) {
     std::map<int, std::vector<std::pair<double, double>>> rings;  // ring -> (azimuth, elevation)
     for (size_t i = 0; i < sweep.size(); ++i) {
       const Eigen::Vector3f p = sweep.xyz(i);

@@ -68,6 +68,13 @@ struct LidarSimInput {
   std::vector<float> reference_intensity;
   float max_range = 120.0f;
   LidarRealism realism;  // default: all off
+  // Several LiDARs in one sweep (PandaSet's Pandar64 and PandarGT): the feature holding each point's sensor
+  // index and each sensor's pose in the sweep's frame (T_lidar_sensor; index 0 is normally the identity). A real
+  // return is recast from its own sensor through its recorded point; the point moved onto an object is stored in
+  // the sweep's frame. Empty / -1: one sensor at the sweep's origin. Not combined with realism.ego_motion (a
+  // contract check): the rolling shutter is fitted to one spinning sensor.
+  int sensor_feature = -1;
+  std::vector<Rigid3d> T_lidar_sensors;
 };
 
 struct LidarSimResult {

@@ -324,7 +324,12 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
   for (size_t k = 0; k < placed.size(); ++k) {
     auto& oc = out.objects[k];
     oc.placement = placed[k];
-    if (plan) oc.plan_object = plan_index[k];
+    if (plan) {
+      oc.plan_object = plan_index[k];
+      // One track per planned object, the same in every frame that shows it (formats with track ids use it).
+      oc.label.annotation.instance_token = Msg() << "synthdrive-plan:" << log.frames[plan->frame_begin].token << ":"
+                                                 << plan_index[k] << ":" << placed[k].asset->info.id;
+    }
     const auto cat = FindCategory(placed[k].asset->info.category);
     if (!cat) throw InputError(placed[k].asset->dir, "unknown category '" + placed[k].asset->info.category + "'");
     oc.label.category = cat->name;
@@ -571,6 +576,10 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
   LidarSimInput lin;
   lin.sweep = &sweep;
   lin.T_ego_lidar = frame.lidar->T_ego_lidar;
+  if (!frame.lidar->sensor_feature.empty()) {
+    lin.sensor_feature = sweep.FeatureIndex(frame.lidar->sensor_feature);
+    lin.T_lidar_sensors = frame.lidar->T_lidar_sensors;
+  }
   lin.objects = ptrs;
   lin.reference_intensity = ReferenceIntensities(sweep, points_ego, ground.ground_indices(), annotated, ptrs);
   if (options.lidar_realism) out.lidar_model_fit = FitFrameLidarModel(frame, sweep);
@@ -1080,7 +1089,10 @@ SynthSummary WriteSynthOutput(const SynthInputs& in, const SynthRequest& request
   const Log& log = in.log;
   StagingDirectory staging(request.out, request.options.overwrite);
   std::vector<FrameEdit> edits;
-  for (const auto& o : outcomes) edits.push_back(o.edit);
+  for (const auto& o : outcomes) {
+    edits.push_back(o.edit);
+    edits.back().point_objects = o.lidar_object_points;
+  }
   WriteDerivative(log, edits, staging.path(), request.options.write);
   if (request.options.coco) WriteCoco2D(log, edits, staging.path() / "coco_2d.json");
 

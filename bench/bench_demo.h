@@ -5,9 +5,16 @@
 #include <cstdlib>
 #include <filesystem>
 #include <optional>
+#include <stdexcept>
+#include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
+#include "assetgen/asset.h"
 #include "assetgen/canonical.h"
+#include "datasets/categories.h"
+#include "io/mesh_io.h"
 
 namespace sd::bench {
 
@@ -46,6 +53,32 @@ inline std::vector<DemoMesh> DemoMeshes() {
   return {{"assets/metadrive_traffic_cone/scene.gltf", "metadrive_traffic_cone", "traffic_cone", "+x", 0, 0.70},
           {"assets/metadrive_road_barrier/scene.gltf", "metadrive_road_barrier", "barrier", "+z", 1.0, 0},
           {"assets/torcs_p406/obj/torcs_p406.obj", "torcs_p406", "car", "+x", 1.0, 0}};
+}
+
+// The few lines of cli::ImportAsset the benchmarks need: load data/<m.mesh>, canonicalise, save the asset folder
+// `out`, load it back (as RunSynth sees an asset: through its folder).
+inline Asset ImportDemoAsset(const std::filesystem::path& data_dir, const DemoMesh& m, const std::filesystem::path& out) {
+  const auto cat = FindCategory(m.category);
+  if (!cat) throw std::runtime_error(std::string("unknown category ") + m.category);
+  const CanonicalizeOptions opt = m.Options();
+  CanonicalizeResult c = Canonicalize(LoadMesh(data_dir / m.mesh), opt);
+  Asset a;
+  a.mesh = std::move(c.mesh);
+  if (a.mesh.normals.empty()) a.mesh.ComputeVertexNormals();
+  a.info.id = m.id;
+  a.info.name = m.id;
+  a.info.category = cat->name;
+  a.info.extent = c.extent;
+  a.info.licence = "see data/README.md";
+  a.info.source = std::string("data/") + m.mesh;
+  a.info.stages = nlohmann::json::array({{{"stage", "import"},
+                                          {"version", "synthdrive 0.1.0"},
+                                          {"source_mesh", std::filesystem::path(m.mesh).filename().string()},
+                                          {"up", opt.up},
+                                          {"front", opt.front},
+                                          {"scale_to_metres", c.scale}}});
+  SaveAsset(a, out, /*overwrite=*/false);
+  return LoadAsset(out);
 }
 
 }  // namespace sd::bench

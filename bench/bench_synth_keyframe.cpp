@@ -57,32 +57,6 @@ struct TempDir {
   }
 };
 
-// The few lines of cli::ImportAsset the demo needs: load, canonicalise, save the asset folder, load it back.
-sd::Asset ImportAsset(const fs::path& mesh_path, const fs::path& out, const std::string& id,
-                      const std::string& category, const sd::CanonicalizeOptions& opt) {
-  const auto cat = sd::FindCategory(category);
-  if (!cat) throw std::runtime_error("unknown category " + category);
-  const sd::TriangleMesh mesh = sd::LoadMesh(mesh_path);
-  sd::CanonicalizeResult c = sd::Canonicalize(mesh, opt);
-  sd::Asset a;
-  a.mesh = std::move(c.mesh);
-  if (a.mesh.normals.empty()) a.mesh.ComputeVertexNormals();
-  a.info.id = id;
-  a.info.name = id;
-  a.info.category = cat->name;
-  a.info.extent = c.extent;
-  a.info.licence = "see data/README.md";
-  a.info.source = "data/" + fs::relative(mesh_path, g_root / "data").string();
-  a.info.stages = nlohmann::json::array({{{"stage", "import"},
-                                          {"version", "synthdrive 0.1.0"},
-                                          {"source_mesh", mesh_path.filename().string()},
-                                          {"up", opt.up},
-                                          {"front", opt.front},
-                                          {"scale_to_metres", c.scale}}});
-  sd::SaveAsset(a, out, /*overwrite=*/false);
-  return sd::LoadAsset(out);  // as RunSynth sees it: through the asset folder
-}
-
 struct Inputs {
   TempDir tmp;
   std::vector<sd::Asset> assets;
@@ -95,7 +69,7 @@ const Inputs& GetInputs() {
     auto in = std::make_unique<Inputs>();
     const fs::path data = g_root / "data";
     for (const sd::bench::DemoMesh& m : sd::bench::DemoMeshes())
-      in->assets.push_back(ImportAsset(data / m.mesh, in->tmp.path / "assets" / m.id, m.id, m.category, m.Options()));
+      in->assets.push_back(sd::bench::ImportDemoAsset(data, m, in->tmp.path / "assets" / m.id));
     in->log = sd::OpenLog(data / "driving/nuscenes-scene0061-kf0/mmdet3d_info/n015-2018-07-24-11-22-45+0800.json");
     in->scenario = sd::ReadScenario(data / "scenarios/demo.json");
     if (in->log.frames.empty()) throw std::runtime_error("the nuScenes log has no frames");

@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <fstream>
+#include <map>
 #include <sstream>
 
 #include <Eigen/Geometry>
@@ -114,6 +115,40 @@ std::string Escape(const std::string& s) {
   return out;
 }
 
+// The sequence player: per camera (and the LiDAR bird's-eye view) one image with a slider over the frames, a
+// before/after switch and a play button, so a person sees the inserted objects stay put in the world while the
+// ego drives past them. `images[channel][k]` = {before, after} file names of frame k (empty: not seen).
+std::string SequencePlayer(const std::vector<std::string>& tokens,
+                           const std::map<std::string, std::vector<std::pair<std::string, std::string>>>& images) {
+  std::ostringstream html;
+  html << "<h2>Sequence (" << tokens.size() << " frames)</h2><p>Slider: frame; the checkbox shows the input instead "
+          "of the output; play steps at 5 frames per second.</p><script>const sdTokens=[";
+  for (size_t k = 0; k < tokens.size(); ++k) html << (k ? "," : "") << "'" << Escape(tokens[k]) << "'";
+  html << "];function sdShow(id){const p=document.getElementById(id),k=+p.querySelector('input[type=range]').value,"
+          "b=p.querySelector('input[type=checkbox]').checked,f=JSON.parse(p.dataset.frames)[k];"
+          "p.querySelector('img').src=f?'report/'+(b?f[0]:f[1]):'';p.querySelector('span').textContent="
+          "'frame '+sdTokens[k]+(f?'':' (not written)')+(b?' before':' after');}"
+          "function sdPlay(id){const p=document.getElementById(id),r=p.querySelector('input[type=range]');"
+          "if(p.timer){clearInterval(p.timer);p.timer=null;return;}p.timer=setInterval(()=>{r.value=(+r.value+1)%"
+          "(+r.max+1);sdShow(id);},200);}</script>";
+  int id = 0;
+  for (const auto& [channel, frames] : images) {
+    const std::string pid = "player" + std::to_string(id++);
+    std::string list = "[";
+    for (size_t k = 0; k < frames.size(); ++k) {
+      list += k ? "," : "";
+      list += frames[k].first.empty() ? "null" : "[\"" + frames[k].first + "\",\"" + frames[k].second + "\"]";
+    }
+    list += "]";
+    html << "<div class='player' id='" << pid << "' data-frames='" << list << "'><h3>" << Escape(channel)
+         << "</h3><input type='range' min='0' max='" << frames.size() - 1 << "' value='0' oninput=\"sdShow('" << pid
+         << "')\" style='width:60%'> <label><input type='checkbox' onchange=\"sdShow('" << pid
+         << "')\"> before</label> <button onclick=\"sdPlay('" << pid << "')\">play / stop</button> <span></span><br><img></div>"
+         << "<script>sdShow('" << pid << "')</script>";
+  }
+  return html.str();
+}
+
 }  // namespace
 
 void WriteSynthReport(const Log& log, const std::vector<FrameOutcome>& frames, const fs::path& html_path) {
@@ -131,12 +166,23 @@ void WriteSynthReport(const Log& log, const std::vector<FrameOutcome>& frames, c
   if (fs::exists(html_path.parent_path() / "plan.html"))
     html << "<p>Placement plan of the sequence(s): <a href='plan.html'>plan.html</a></p>";
   int img_id = 0;
-  for (const auto& o : frames) {
+  // Per camera and frame, the images written (for the sequence player).
+  std::map<std::string, std::vector<std::pair<std::string, std::string>>> player;
+  std::vector<std::string> tokens;
+  for (const auto& o : frames) tokens.push_back(log.frames[o.frame_index].token);
+  auto note = [&](const std::string& channel, size_t k, const std::string& before, const std::string& after) {
+    auto& row = player[channel];
+    row.resize(frames.size());
+    row[k] = {before, after};
+  };
+  std::ostringstream body;
+  for (size_t fk = 0; fk < frames.size(); ++fk) {
+    const FrameOutcome& o = frames[fk];
     const Frame& frame = log.frames[o.frame_index];
-    html << "<h2>Frame " << Escape(frame.token) << "</h2><p>Sun: " << Escape(o.sun_source) << "<br>Light: " << Escape(o.light)
+    body << "<h2>Frame " << Escape(frame.token) << "</h2><p>Sun: " << Escape(o.sun_source) << "<br>Light: " << Escape(o.light)
          << "<br>LiDAR model: " << Escape(o.lidar_model) << (o.lidar_ego_motion ? " (ego motion during the sweep)" : "")
          << "</p>";
-    html << "<table><tr><th>#</th><th>asset</th><th>category</th><th>centre (ego, m)</th><th>size (m)</th>"
+    body << "<table><tr><th>#</th><th>asset</th><th>category</th><th>centre (ego, m)</th><th>size (m)</th>"
             "<th>yaw (deg)</th><th>LiDAR points</th><th>visible</th><th>cameras</th></tr>";
     for (size_t k = 0; k < o.objects.size(); ++k) {
       const auto& ob = o.objects[k];
@@ -146,12 +192,12 @@ void WriteSynthReport(const Log& log, const std::vector<FrameOutcome>& frames, c
                     b.center().z(), b.size.x(), b.size.y(), b.size.z(), b.Yaw() * 180 / M_PI);
       std::string cams;
       for (const auto& cb : ob.label.camera_boxes) cams += cb.channel + " ";
-      html << "<tr><td>" << k << "</td><td>" << Escape(ob.label.asset_id) << "</td><td>" << ob.label.category << "</td><td>" << buf
+      body << "<tr><td>" << k << "</td><td>" << Escape(ob.label.asset_id) << "</td><td>" << ob.label.category << "</td><td>" << buf
            << "</td><td>" << ob.lidar_points << "</td><td>"
            << static_cast<int>(100 * (ob.rendered_pixels > 0 ? ob.visible_pixels / ob.rendered_pixels : 0)) << "%</td><td>" << cams
            << "</td></tr>";
     }
-    html << "</table>";
+    body << "</table>";
     for (const auto& co : o.cameras) {
       const CameraSensor* cam = frame.FindCamera(co.channel);
       ImageU8 before = co.before, after = co.after;
@@ -168,17 +214,36 @@ void WriteSynthReport(const Log& log, const std::vector<FrameOutcome>& frames, c
       const int factor = before.width() > 1000 ? 2 : 1;
       WriteImage(dir / b_name, factor > 1 ? Downscale(before, factor) : before, 88);
       WriteImage(dir / a_name, factor > 1 ? Downscale(after, factor) : after, 88);
-      html << "<h3>" << co.channel << "</h3><p>" << Escape(co.light) << "</p><div class='pair'><figure><img src='report/" << b_name
+      note(co.channel, fk, b_name, a_name);
+      body << "<h3>" << co.channel << "</h3><p>" << Escape(co.light) << "</p><div class='pair'><figure><img src='report/" << b_name
            << "'><figcaption>before (real annotations)</figcaption></figure><figure><img src='report/" << a_name
            << "'><figcaption>after</figcaption></figure></div>";
     }
     if (frame.lidar && o.edit.points) {
       const std::string name = "bev" + std::to_string(img_id++) + ".png";
       WriteImage(dir / name, BirdsEye(frame, o));
-      html << "<h3>LiDAR, bird's-eye view (80 m x 80 m, ego at the centre facing up)</h3><img src='report/" << name
+      note("LiDAR, bird's-eye view", fk, name, name);
+      body << "<h3>LiDAR, bird's-eye view (80 m x 80 m, ego at the centre facing up)</h3><img src='report/" << name
            << "' style='max-width:800px'>";
     }
   }
+  // A sequence: the cameras the objects never touch in a frame still play, from the input's own image.
+  if (frames.size() >= 2) {
+    for (auto& [channel, row] : player) {
+      row.resize(frames.size());
+      for (size_t k = 0; k < row.size(); ++k) {
+        if (!row[k].first.empty()) continue;
+        const CameraSensor* cam = log.frames[frames[k].frame_index].FindCamera(channel);
+        if (!cam || !fs::exists(cam->image_path)) continue;
+        const ImageU8 img = ReadImage(cam->image_path, 3);
+        const std::string name = "img" + std::to_string(img_id++) + "_input.jpg";
+        WriteImage(dir / name, img.width() > 1000 ? Downscale(img, 2) : img, 88);
+        row[k] = {name, name};
+      }
+    }
+    html << SequencePlayer(tokens, player);
+  }
+  html << body.str();
   html << "</body></html>\n";
   WriteFileAtomic(html_path, html.str());
 }

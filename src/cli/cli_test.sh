@@ -312,5 +312,49 @@ ln -s "$T/dl/parent/log" "$T/dl_link"
 expect_data_safe "data loss: synth --out a symlink to the log" "is the input folder" synth --log "$DLINFO" "${DLS[@]}" --out "$T/dl_link"
 rm "$T/dl_link"
 
+# Pickled infos in, pickles out: the repo's nuScenes keyframe and KITTI frame 000008 (mmdet3d v1.x), each written
+# back as a .pkl whose untouched keys equal the input's and which holds the added boxes (checked with Python's own
+# loader, SD_PANDAS_PYTHON, where CMake found one with numpy; the unit tests compare every value).
+PKL=$DATA/driving/nuscenes-scene0061-kf0/mmdet3d_info/n015-2018-07-24-11-22-45+0800.pkl
+KPKL=$DATA/driving/kitti-mmdet3d-pkl-000008/v1x_format/000008.pkl
+cat > "$T/kitti_cone.json" <<'J'
+{"seed": 5, "objects": [{"category": "traffic_cone", "count": 2, "distance_m": [6, 14], "lateral_m": [-3, 3]}]}
+J
+for case in "nus:$PKL:$T/one_cone.json" "kitti:$KPKL:$T/kitti_cone.json"; do
+  IFS=: read -r tag src scen <<< "$case"
+  out=$T/pkl_$tag
+  if ! synth --log "$src" --asset "$T/cone" --scenario "$scen" --out "$out" --spp 1 --ao-samples 2 >/dev/null 2>"$T/stderr"; then
+    bad "synth --log $tag .pkl: $(cat "$T/stderr")"; continue
+  fi
+  written=$(cd "$out" && find . -name '*.pkl' | head -1)
+  if [ -z "$written" ]; then bad "synth --log $tag .pkl: no .pkl in the output"; continue; fi
+  ok
+  if [ -n "${SD_PANDAS_PYTHON:-}" ]; then
+    if "$SD_PANDAS_PYTHON" - "$src" "$out/$written" > "$T/py.txt" 2>&1 <<'PY'
+import pickle, sys
+# Our own test output and the repo's files: trusted here, so Python's loader is the reference consumer.
+a = pickle.load(open(sys.argv[1], "rb")); b = pickle.load(open(sys.argv[2], "rb"))
+ma, mb = a["metainfo"], b["metainfo"]
+for k in ma:  # the input's metainfo is kept; new classes are appended to its categories (or a list is added)
+    if k != "categories": assert repr(ma[k]) == repr(mb[k]), "metainfo %s differs" % k
+for name, i in ma.get("categories", {}).items(): assert mb["categories"][name] == i, "class %s renumbered" % name
+ra, rb = a["data_list"][0], b["data_list"][0]
+for k in ra:
+    if k not in ("instances", "images", "lidar_points", "cam_instances"):
+        assert repr(ra[k]) == repr(rb[k]), "key %s differs" % k
+na, nb = len(ra["instances"]), len(rb["instances"])
+assert nb > na, "no instance added (%d -> %d)" % (na, nb)
+assert repr(ra["instances"]) == repr(rb["instances"][:na]), "the input's instances changed"
+labels = set(mb["categories"].values())
+assert all(x["bbox_label_3d"] in labels for x in rb["instances"][na:]), "an added box's label is not a class"
+print(na, nb)
+PY
+    then ok; else bad "python reads synth's $tag .pkl: $(tail -2 "$T/py.txt")"; fi
+  fi
+done
+# A pickle that would run code if loaded by Python is refused as data, and nothing is written.
+printf '\x80\x02cos\nsystem\nq\x00X\x02\x00\x00\x00idq\x01\x85q\x02Rq\x03.' > "$T/evil.pkl"
+expect_error "synth: pickle naming a disallowed global" "evil.pkl: byte 2: refusing to load global 'os.system'" "$T/evil_out" -- synth --log "$T/evil.pkl" --asset "$T/cone" --scenario "$T/one_cone.json" --out "$T/evil_out"
+
 echo "$pass passed, $fail failed"
 [ $fail -eq 0 ]

@@ -8,6 +8,7 @@
 #include <memory>
 
 #include "assetgen/texture.h"
+#include "assetgen/texture_eval.h"
 #include "assetgen/uv_atlas.h"
 #include "core/error.h"
 #include "core/log.h"
@@ -53,7 +54,11 @@ TriangleMesh GeneratedMesh::ToAssetFrame(TriangleMesh m) const {
   return m;
 }
 
-GeneratedMesh GenerateFromViews(const MultiViewSet& views, const GenerateOptions& options) {
+namespace {
+
+// `coarse`: a given coarse mesh (a shape prior's) instead of the views' visual hull; `coarse_method` says what it is.
+GeneratedMesh Generate(const MultiViewSet& views, const GenerateOptions& options, const TriangleMesh* given_coarse,
+                       const std::string& coarse_method) {
   if (views.empty()) throw InputError({}, "no views to generate from");
   if (options.texture != "bake" && options.texture != "vertex")
     throw InputError({}, Msg() << "unknown texture mode '" << options.texture << "' (bake or vertex)");
@@ -63,19 +68,28 @@ GeneratedMesh GenerateFromViews(const MultiViewSet& views, const GenerateOptions
 
   TriangleMesh coarse;
   timer.Run("coarse_mesh", [&] {
+    if (given_coarse) {
+      coarse = PrepareForRefinement(*given_coarse, "the prior's coarse mesh");
+      return std::string(Msg() << coarse_method << ", " << coarse.NumFaces() << " triangles");
+    }
     coarse = CoarseMeshFromViews(views, options.hull_resolution);
     return std::string(Msg() << "visual hull of " << views.size() << " masks, " << options.hull_resolution << "^3, "
                              << coarse.NumFaces() << " triangles");
   });
 
   TriangleMesh mesh;
-  timer.Run("refine", [&] {
-    RefineResult r = RefineMesh(coarse, views, options.refine);
-    mesh = std::move(r.mesh);
-    out.last_refine_step = r.log.back();
-    return std::string(Msg() << "normal + silhouette, " << options.refine.steps << " steps x "
-                             << options.refine.iterations_per_step << " iterations, " << mesh.NumFaces() << " triangles");
-  });
+  if (options.refine.steps == 0) {
+    mesh = coarse;
+  } else {
+    timer.Run("refine", [&] {
+      RefineResult r = RefineMesh(coarse, views, options.refine);
+      mesh = std::move(r.mesh);
+      out.last_refine_step = r.log.back();
+      return std::string(Msg() << (options.refine.lambda_normal > 0 ? "normal + silhouette, " : "silhouette only, ")
+                               << options.refine.steps << " steps x " << options.refine.iterations_per_step
+                               << " iterations, " << mesh.NumFaces() << " triangles");
+    });
+  }
 
   if (options.upscale != "none") {
     timer.Run("super_resolution", [&] {
@@ -121,6 +135,40 @@ GeneratedMesh GenerateFromViews(const MultiViewSet& views, const GenerateOptions
     return method.str();
   });
   return out;
+}
+
+}  // namespace
+
+GeneratedMesh GenerateFromViews(const MultiViewSet& views, const GenerateOptions& options) {
+  return Generate(views, options, nullptr, "");
+}
+
+ViewAgreement AgreementAtView(const GeneratedMesh& g, const MultiView& view, const ImageF& truth) {
+  TriangleMesh back = g.mesh;
+  const Eigen::Matrix3f Rt = g.rotation.transpose().cast<float>();
+  for (auto& p : back.positions) p = Rt * ((p - g.translation.cast<float>()) / float(g.scale));
+  back.normals.clear();
+  const AlbedoRender drawn = RenderAlbedo(back, view.view, 2);
+  double inter = 0, uni = 0;
+  for (size_t i = 0; i < truth.vector().size(); ++i) {
+    const bool p = drawn.mask.vector()[i] > 0.5f, t = truth.vector()[i] > 0.5f;
+    inter += p && t, uni += p || t;
+  }
+  ImageF drawn_srgb = drawn.color, seen_srgb = view.color;
+  for (float& v : drawn_srgb.vector()) v = LinearToSrgb(std::clamp(v, 0.0f, 1.0f));
+  for (float& v : seen_srgb.vector()) v = LinearToSrgb(std::clamp(v, 0.0f, 1.0f));
+  return {uni > 0 ? inter / uni : 0.0, MaskedPsnr(drawn_srgb, seen_srgb, truth)};
+}
+
+GeneratedMesh GenerateFromPhotoShape(const PhotoShape& shape, GenerateOptions options) {
+  // The prior's views carry masks only: refinement moves the outline, never towards normals nobody estimated.
+  options.refine.lambda_normal = 0;
+  options.canonical.up = "+z", options.canonical.front = "+x";
+  // Metric already: the prior built the shape at the object's size (a revolve's width is the photo's, not the
+  // category's), so refitting a target size would only distort it.
+  options.canonical.scale = 1.0;
+  options.canonical.front_direction.reset();
+  return Generate(shape.views, options, &shape.coarse, std::string(ToString(shape.prior)) + " prior");
 }
 
 namespace {

@@ -20,6 +20,7 @@
 
 #include "assetgen/canonical.h"
 #include "assetgen/refine.h"
+#include "assetgen/shape_prior.h"
 #include "assetgen/views.h"
 #include "core/box3.h"
 #include "core/image.h"
@@ -57,7 +58,21 @@ struct GeneratedMesh {
 };
 
 // InputError when a view has no colour image, or from any stage (refine.h, texture.h, canonical.h list them).
+// options.refine.steps == 0 skips refinement (the coarse mesh is textured as it is).
 GeneratedMesh GenerateFromViews(const MultiViewSet& views, const GenerateOptions& options);
+// The no-model path from one photo (shape_prior.h): the prior's coarse mesh instead of the visual hull,
+// refinement on the mask terms alone (its views carry no normals), then the same back end; the prior's frame
+// is already canonical and metric (+z up, +x front, metres): the canonical stage only re-grounds and centres it.
+GeneratedMesh GenerateFromPhotoShape(const PhotoShape& shape, GenerateOptions options);
+
+// The finished asset moved back into its views' frame and drawn (unlit base colour) at `view`: its silhouette
+// IoU with `truth` (a mask of the view's size) and the PSNR of its colour against the view's, in sRGB, inside
+// `truth`. At a view the asset was made from this is a self-consistency figure, at a held-out one a test.
+struct ViewAgreement {
+  double silhouette_iou = 0;
+  double masked_psnr_db = 0;
+};
+ViewAgreement AgreementAtView(const GeneratedMesh& generated, const MultiView& view, const ImageF& truth);
 
 // The learned front of the pipeline, one object image → the views GenerateFromViews takes:
 //   segment the object in its box (skipped when the image has an alpha channel: it is the mask) → RGBA cut-out

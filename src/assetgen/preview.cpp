@@ -4,6 +4,8 @@
 #include <cmath>
 #include <memory>
 
+#include "assetgen/texture_eval.h"
+#include "assetgen/views.h"
 #include "render/camera_render.h"
 #include "render/ray_scene.h"
 
@@ -64,6 +66,28 @@ ImageU8 RenderPreview(const TriangleMesh& mesh, int width, int height) {
       for (int c = 0; c < 3; ++c) out.at(u, v, c) = r.color.at(u, v, c) + (1 - a) * background * shade;
     }
   return ToSrgb8(out);
+}
+
+ImageU8 RenderTurntable(const TriangleMesh& mesh, int views, int size) {
+  views = std::max(1, views);
+  ImageU8 strip(views * size, size, 3, 0);
+  const BoundingSphere sphere = BoundingSphereOf(mesh.positions);
+  TriangleMesh centred = mesh;
+  for (auto& p : centred.positions) p -= sphere.centre;
+  const double fov = 30, distance = 1.1 * std::max(sphere.radius, 1e-3f) / std::sin(0.5 * fov * M_PI / 180.0);
+  for (int i = 0; i < views; ++i) {
+    const ViewCamera cam = OrbitCamera("turntable", 360.0 * i / views, 15, distance, fov, size, size);
+    const AlbedoRender r = RenderAlbedo(centred, cam, 2);
+    for (int y = 0; y < size; ++y)
+      for (int x = 0; x < size; ++x) {
+        const float m = r.mask.at(x, y);
+        for (int c = 0; c < 3; ++c) {
+          const float v = m * LinearToSrgb(std::clamp(r.color.at(x, y, c), 0.0f, 1.0f)) + (1 - m) * 0.85f;
+          strip.at(i * size + x, y, c) = static_cast<uint8_t>(std::lround(255 * std::clamp(v, 0.0f, 1.0f)));
+        }
+      }
+  }
+  return strip;
 }
 
 }  // namespace sd

@@ -150,9 +150,14 @@ BoundingSphere BoundingSphereOf(const std::vector<Eigen::Vector3f>& positions) {
 }
 
 Eigen::Matrix4f ClipFromWorldAround(const PinholeCamera& camera, const Rigid3d& T_world_cam, const BoundingSphere& sphere) {
+  // Near and far about the sphere's depth along the optical axis, not its distance: the two differ for an
+  // object far off the axis (a photo's crop keeps the full camera's principal point, outside the crop).
+  const Rigid3d T_cam_world = T_world_cam.Inverse();
   const float dist = (T_world_cam.translation.cast<float>() - sphere.centre).norm();
-  const float near = std::max(1e-4f * dist, dist - 1.5f * sphere.radius), far = dist + 1.5f * sphere.radius;
-  return raster::ClipFromWorld(camera, T_world_cam.Inverse(), near, far);
+  const float depth = static_cast<float>((T_cam_world * sphere.centre.cast<double>()).z());
+  const float near = std::max(1e-4f * dist, depth - 1.5f * sphere.radius);
+  const float far = std::max(near * 1.001f, depth + 1.5f * sphere.radius);
+  return raster::ClipFromWorld(camera, T_cam_world, near, far);
 }
 
 PinholeCamera Supersampled(const PinholeCamera& camera, int factor) {

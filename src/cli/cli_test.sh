@@ -147,8 +147,29 @@ fi
   && ok || bad "generate from views"
 printf 'not an image' > "$T/object.png"
 expect_error "generate: unreadable image" "object.png" "$T/g1" -- "$BIN" -q generate --image "$T/object.png" --category traffic_cone --out "$T/g1"
-"$BIN" -q views --mesh "$CONE" --size 32 --out "$T/views_for_image" >/dev/null
-expect_error "generate: single image without models" "needs the multi-view diffusion" "$T/g2" -- env SYNTHDRIVE_MODELS="$T/no_models" "$BIN" -q generate --image "$T/views_for_image/image_00.png" --category traffic_cone --out "$T/g2"
+# One photo, no learned model: the shape prior path (docs/shape_prior.md) builds a metric asset and records
+# the prior; what cannot make a shape is refused in one line with no asset folder.
+"$BIN" -q views --mesh "$CONE" --size 160 --out "$T/views_for_image" >/dev/null
+PHOTO=$T/views_for_image/image_00.png
+env SYNTHDRIVE_MODELS="$T/no_models" "$BIN" -q generate --image "$PHOTO" --mask "$T/views_for_image/mask_00.png" \
+  --category traffic_cone --steps 2 --hull-resolution 32 --texture-size 256 --upscale bicubic --out "$T/g_photo" \
+  && grep -q '"prior": "revolve"' "$T/g_photo/asset.json" && grep -q '"photo_silhouette_iou"' "$T/g_photo/asset.json" \
+  && "$BIN" -q asset show "$T/g_photo" | grep -q "traffic_cone" && ok || bad "generate: one photo by the revolve prior"
+"$BIN" -q generate --image "$PHOTO" --box 20,10,140,150 --shape hull --category traffic_cone --steps 2 \
+  --hull-resolution 32 --texture-size 256 --upscale bicubic --out "$T/g_photo_box" \
+  && grep -q '"prior": "hull"' "$T/g_photo_box/asset.json" && ok || bad "generate: one photo, GrabCut in --box, forced hull"
+# Masks as binary PGMs: empty, full, and an L that no surface of revolution makes.
+pgm() {  # pgm <file> <python expression of (x, y) -> 0/1>
+  python3 -c "import sys; w=h=160; sys.stdout.buffer.write(b'P5 160 160 255\n' + bytes(255 if ($2) else 0 for y in range(h) for x in range(w)))" > "$1"
+}
+pgm "$T/empty_mask.pgm" "False"
+pgm "$T/full_mask.pgm" "True"
+pgm "$T/ell_mask.pgm" "40 <= x < 120 and 20 <= y < 140 and (x < 60 or y >= 120)"
+expect_error "generate: empty mask" "empty_mask.pgm: the mask holds no object" "$T/g2" -- "$BIN" -q generate --image "$PHOTO" --mask "$T/empty_mask.pgm" --category traffic_cone --out "$T/g2"
+expect_error "generate: mask of the whole photo" "full_mask.pgm: the mask covers the whole photo" "$T/g2" -- "$BIN" -q generate --image "$PHOTO" --mask "$T/full_mask.pgm" --category traffic_cone --out "$T/g2"
+expect_error "generate: revolve on an asymmetric silhouette" "ell_mask.pgm: revolve cannot fit" "$T/g2" -- "$BIN" -q generate --image "$PHOTO" --mask "$T/ell_mask.pgm" --shape revolve --category traffic_cone --out "$T/g2"
+expect_error "generate: box outside the photo" "lies outside the 160x160 photo" "$T/g2" -- "$BIN" -q generate --image "$PHOTO" --box 400,400,500,500 --category traffic_cone --out "$T/g2"
+expect_error "generate: mask of another size" "mask_00.png: the mask is 32x32" "$T/g2" -- "$BIN" -q generate --image "$PHOTO" --mask "$T/views_small/mask_00.png" --category traffic_cone --out "$T/g2"
 expect_error "generate: unknown category" "unknown category 'ufo'" "$T/g3" -- "$BIN" -q generate --views "$T/views" --category ufo --out "$T/g3"
 expect_error "generate: existing output" "gen_cone: already exists" "" -- "$BIN" -q generate --views "$T/views" --category traffic_cone --out "$T/gen_cone"
 sed 's/"image": "image_0[0-9].png", *//; s/, *"image": "image_0[0-9].png"//' "$T/views/cameras.json" > "$T/noimg.json"

@@ -1,4 +1,5 @@
-// `synthdrive generate`: object views (or, with the learned models, one object image) → a finished asset folder.
+// `synthdrive generate`: object views, or one object photo (learned models, else a shape prior) → a finished
+// asset folder.
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -12,6 +13,7 @@
 #include "assetgen/asset.h"
 #include "assetgen/generate.h"
 #include "assetgen/mined.h"
+#include "assetgen/shape_prior.h"
 #include "assetgen/views.h"
 #include "cli/commands.h"
 #include "cli/mesh_files.h"
@@ -37,6 +39,12 @@ namespace fs = std::filesystem;
 // missing file in one line instead of one per run.
 const std::vector<std::string> kSingleImageModels = {models::kMvImageEncoderFile, models::kMvUnetFile,
                                                      models::kMvVaeDecoderFile, models::kNormalEstimatorFile};
+
+bool SingleImageModelsInstalled(const fs::path& model_dir) {
+  for (const std::string& f : kSingleImageModels)
+    if (!fs::exists(model_dir / f)) return false;
+  return true;
+}
 
 void RequireSingleImageModels(const fs::path& image, const fs::path& model_dir) {
   std::string missing;
@@ -104,6 +112,9 @@ struct Args {
   int limit = 0;
   std::string segmenter = "classical";
   std::vector<double> size, box;
+  std::string mask, shape = "auto";
+  std::optional<double> elevation, yaw;
+  double fov = 50;
   int diffusion_steps = models::kZero123PlusDefaultSteps;
   float guidance = models::kZero123PlusDefaultGuidance;
   uint64_t seed = 0;
@@ -112,11 +123,11 @@ struct Args {
   GenerateOptions options;
 };
 
-// Views -> refined, textured, canonical mesh -> the asset folder (atomic). `info` carries id, name, category
-// and provenance; extent, stages and quality are filled here.
-void BuildAndSave(const MultiViewSet& views, const std::vector<StageReport>& front, const GenerateOptions& options,
-                  AssetInfo info, const std::string& source, const fs::path& out, bool overwrite) {
-  GeneratedMesh g = GenerateFromViews(views, options);
+// A generated mesh -> the asset folder (atomic). `info` carries id, name, category and provenance; extent,
+// stages and quality are filled here, `quality` adding to the refinement's figures.
+void SaveGenerated(GeneratedMesh g, const MultiViewSet& views, const std::vector<StageReport>& front,
+                   AssetInfo info, const std::string& source, const fs::path& out, bool overwrite,
+                   const nlohmann::json& quality = nlohmann::json::object()) {
   Asset asset;
   asset.mesh = std::move(g.mesh);
   if (asset.mesh.normals.empty()) asset.mesh.ComputeVertexNormals();
@@ -126,6 +137,7 @@ void BuildAndSave(const MultiViewSet& views, const std::vector<StageReport>& fro
   asset.info.quality = {{"refine_final_loss_normal", g.last_refine_step.loss_normal},
                         {"refine_final_loss_mask", g.last_refine_step.loss_mask},
                         {"views", views.size()}};
+  for (const auto& [key, value] : quality.items()) asset.info.quality[key] = value;
   SaveAsset(asset, out, overwrite, &views);
   double total = 0;
   for (const StageReport& s : front) total += s.seconds;
@@ -133,6 +145,123 @@ void BuildAndSave(const MultiViewSet& views, const std::vector<StageReport>& fro
   SD_LOG(Info, "asset " << asset.info.id << " (" << asset.info.category << "), " << g.extent.x() << " x "
                         << g.extent.y() << " x " << g.extent.z() << " m, " << asset.mesh.NumFaces() << " triangles, "
                         << total << " s -> " << out.string());
+}
+
+// Views -> refined, textured, canonical mesh -> the asset folder.
+void BuildAndSave(const MultiViewSet& views, const std::vector<StageReport>& front, const GenerateOptions& options,
+                  AssetInfo info, const std::string& source, const fs::path& out, bool overwrite) {
+  SaveGenerated(GenerateFromViews(views, options), views, front, std::move(info), source, out, overwrite);
+}
+
+// The object's metric size: --size, else the category's proportions at --height, else the category's size.
+Eigen::Vector3d ObjectSize(const Args& a, const CategoryInfo& category) {
+  if (!a.size.empty()) {
+    const Eigen::Vector3d s(a.size[0], a.size[1], a.size[2]);
+    if (!(s.minCoeff() > 0)) throw InputError({}, "--size: length, width and height must all be > 0 metres");
+    return s;
+  }
+  if (a.height > 0) return category.default_size * (a.height / category.default_size.z());
+  return category.default_size;
+}
+
+// The object's mask in the photo: --mask, else the photo's alpha channel, else GrabCut (or --segmenter's
+// model) inside --box (or the whole photo less a 2% border: a photo of the object alone).
+ImageF PhotoMask(const Args& a, const ImageU8& raw, const ImageU8& image, std::vector<StageReport>* front) {
+  const auto start = std::chrono::steady_clock::now();
+  ImageF mask(image.width(), image.height(), 1, 0.0f);
+  std::string method;
+  if (!a.mask.empty()) {
+    const ImageU8 m = ReadImage(a.mask, 1);
+    if (m.width() != image.width() || m.height() != image.height())
+      throw InputError(a.mask, Msg() << "the mask is " << m.width() << "x" << m.height() << ", the photo "
+                                     << image.width() << "x" << image.height());
+    for (int y = 0; y < m.height(); ++y)
+      for (int x = 0; x < m.width(); ++x) mask.at(x, y) = m.at(x, y) > 127 ? 1.0f : 0.0f;
+    method = "given mask " + a.mask;
+  } else if (raw.channels() == 4 && a.box.empty()) {
+    for (int y = 0; y < raw.height(); ++y)
+      for (int x = 0; x < raw.width(); ++x) mask.at(x, y) = raw.at(x, y, 3) > 127 ? 1.0f : 0.0f;
+    method = "the photo's alpha channel";
+  } else {
+    Box2 box{0.02 * image.width(), 0.02 * image.height(), 0.98 * image.width(), 0.98 * image.height()};
+    if (!a.box.empty()) {
+      box = Box2{a.box[0], a.box[1], a.box[2], a.box[3]};
+      if (!(box.x2 > box.x1 && box.y2 > box.y1))
+        throw InputError(a.image, Msg() << "--box " << box.x1 << "," << box.y1 << "," << box.x2 << "," << box.y2
+                                        << " is empty (x2 must exceed x1, y2 y1)");
+      if (box.x2 <= 0 || box.y2 <= 0 || box.x1 >= image.width() || box.y1 >= image.height())
+        throw InputError(a.image, Msg() << "--box " << box.x1 << "," << box.y1 << "," << box.x2 << "," << box.y2
+                                        << " lies outside the " << image.width() << "x" << image.height() << " photo");
+    }
+    const models::Segmenter segmenter = models::Segmenter::Resolve(a.segmenter);
+    mask = segmenter.Segment(image, box).mask;
+    method = segmenter.Describe() + (a.box.empty() ? " in the whole photo" : " in --box");
+  }
+  front->push_back({"segment", method, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()});
+  return mask;
+}
+
+// `generate --image` with no learned model (or --shape naming a prior): shape_prior.h makes the views and the
+// coarse mesh from the photo, then the common back end. The asset records the prior, what was assumed, and how
+// well the asset reproduces the photo it came from.
+void RunPhotoShape(const Args& a, const CategoryInfo& category, GenerateOptions options, const AssetInfo& info) {
+  const ImageU8 raw = ReadImage(a.image);
+  const ImageU8 image = raw.channels() == 3 ? raw : ReadImage(a.image, 3);
+  std::vector<StageReport> front;
+  PhotoObservation photo;
+  photo.mask = PhotoMask(a, raw, image, &front);
+  photo.image = image;
+  photo.elevation_deg = a.elevation;
+  ShapePriorOptions prior;
+  if (a.shape != "auto") prior.prior = ParseShapePrior(a.shape);
+  prior.category = category.name;
+  prior.size = ObjectSize(a, category);
+  prior.yaw_deg = a.yaw;
+  prior.assumed_vertical_fov_deg = a.fov;
+  prior.hull_resolution = options.hull_resolution;
+  const auto start = std::chrono::steady_clock::now();
+  PhotoShape shape;
+  try {
+    shape = ShapeFromPhoto(photo, prior);
+  } catch (const InputError& e) {
+    throw InputError(a.mask.empty() ? a.image : a.mask, e.what());
+  }
+  front.push_back({"shape_prior",
+                   Msg() << ToString(shape.prior) << " (" << shape.prior_reason << "), " << shape.views.size()
+                         << " views, elevation " << shape.elevation_deg << " deg (" << shape.elevation_method << ")",
+                   std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()});
+  options.canonical.target_size = prior.size;
+  options.canonical.target_height.reset();
+  GeneratedMesh g;
+  try {
+    g = GenerateFromPhotoShape(shape, options);
+  } catch (const InputError& e) {
+    throw InputError(a.image, e.what());
+  }
+  // How well the asset reproduces the photo (a self-consistency figure: the photo supervised the shape;
+  // held-out views are for benchmarks).
+  const MultiView& seen = shape.views.front();
+  const ViewAgreement agreement = AgreementAtView(g, seen, seen.mask);
+  const nlohmann::json quality = {
+      {"shape_prior",
+       {{"prior", ToString(shape.prior)},
+        {"reason", shape.prior_reason},
+        {"silhouette_symmetry_iou", shape.symmetry_iou},
+        {"axis_tilt_deg", shape.axis_tilt_deg},
+        {"intrinsics_assumed", shape.intrinsics_assumed},
+        {"vertical_fov_deg", 2 * std::atan(0.5 * shape.camera.height / shape.camera.fy) * 180 / 3.14159265358979323846},
+        {"elevation_deg", shape.elevation_deg},
+        {"elevation_method", shape.elevation_method},
+        {"yaw_deg", shape.yaw_deg},
+        {"yaw_method", shape.yaw_method},
+        {"camera_distance_m", shape.distance_m},
+        {"real_views", shape.real_views},
+        {"virtual_views", int(shape.views.size()) - shape.real_views}}},
+      {"photo_silhouette_iou", agreement.silhouette_iou},
+      {"photo_masked_psnr_db", agreement.masked_psnr_db}};
+  SD_LOG(Info, a.image << ": " << ToString(shape.prior) << " prior, photo silhouette IoU "
+                       << quality["photo_silhouette_iou"].get<double>());
+  SaveGenerated(std::move(g), shape.views, front, info, a.image, a.out, a.overwrite, quality);
 }
 
 // `generate --manifest`: one asset per mining hit, as a batch (DESIGN.md): the shard's share of the hits, each
@@ -224,7 +353,9 @@ Runner AddGenerateCommand(CLI::App& app) {
   auto* input = app.add_option_group("input", "what to build the asset from");
   input->add_option("--views", a->views,
                     "Views folder (cameras.json + colour images + normal maps + masks; docs/refine.md)");
-  input->add_option("--image", a->image, "One object image (needs the multi-view and normal models installed)");
+  input->add_option("--image", a->image,
+                    "One object photo: the learned multi-view path when its models are installed, else (or with "
+                    "--shape) a shape prior");
   input->add_option("--manifest", a->manifest,
                     "A mining run's manifest.jsonl (mine query): one asset per hit, into <out>/<hit id>/ (needs the "
                     "multi-view and normal models installed)");
@@ -237,7 +368,7 @@ Runner AddGenerateCommand(CLI::App& app) {
       ->default_val(0)->check(CLI::NonNegativeNumber);
   app.add_option("--shard", a->shard, "--manifest: build only hits K, K+N, ... (K/N, 0-based)")->default_val("0/1");
   app.add_option("--height", a->height, "Real height in metres (default: the category's)")->check(CLI::PositiveNumber);
-  app.add_option("--size", a->size, "Real length width height in metres (best uniform fit)")->expected(3);
+  app.add_option("--size", a->size, "Real length width height in metres (l w h or l,w,h)")->expected(3)->delimiter(',');
   app.add_option("--front", a->options.canonical.front,
                  "The views' axis that is the object's front (+x, -y, ...), or auto (from mirror symmetry)")
       ->default_val("+x");
@@ -256,8 +387,21 @@ Runner AddGenerateCommand(CLI::App& app) {
       ->check(CLI::Range(1, 1000));
   app.add_option("--hull-resolution", a->options.hull_resolution, "Voxels along the visual hull's cube")
       ->default_val(96)->check(CLI::Range(16, 512));
-  app.add_option("--box", a->box, "The object's box in --image: x1 y1 x2 y2 pixels (default: the whole image)")
-      ->expected(4);
+  app.add_option("--box", a->box, "The object's box in --image: x1 y1 x2 y2 (or x1,y1,x2,y2) pixels (default: the whole image)")
+      ->expected(4)->delimiter(',');
+  app.add_option("--mask", a->mask, "--image: the object's mask (white = object), the photo's size");
+  app.add_option("--shape", a->shape,
+                 "--image: auto (learned models if installed, else the category's prior), revolve, mirror, extrude "
+                 "or hull (docs/shape_prior.md)")
+      ->default_val("auto")->check(CLI::IsMember({"auto", "revolve", "mirror", "extrude", "hull"}));
+  app.add_option("--elevation", a->elevation, "--image: the camera's elevation above the object, degrees "
+                                              "(default: from a revolve's base ellipse, else 8)")
+      ->check(CLI::Range(-30.0, 89.0));
+  app.add_option("--yaw", a->yaw, "--image: the camera's azimuth about the object, degrees, 0 = in front of it "
+                                  "(default: from the silhouette's aspect)")
+      ->check(CLI::Range(-360.0, 360.0));
+  app.add_option("--fov", a->fov, "--image: the photo's vertical field of view when unknown, degrees")
+      ->default_val(50)->check(CLI::Range(5.0, 150.0));
   app.add_option("--segmenter", a->segmenter, "classical (GrabCut from the box), auto (installed ISNet if any) or a .pt")
       ->default_val("classical");
   app.add_option("--diffusion-steps", a->diffusion_steps, "Denoising steps of the multi-view generator")
@@ -278,11 +422,11 @@ Runner AddGenerateCommand(CLI::App& app) {
     if (!category) throw InputError({}, "unknown category '" + a->category + "' (see `synthdrive categories`)");
     std::vector<StageReport> front;
     MultiViewSet views;
+    const bool photo_prior = !a->image.empty() && (a->shape != "auto" || !SingleImageModelsInstalled(model_dir));
     if (a->image.empty()) {
       views = LoadViews(a->views);
-    } else {
+    } else if (!photo_prior) {
       const ImageU8 image = ReadImage(a->image);
-      RequireSingleImageModels(a->image, model_dir);
       const Box2 box = a->box.empty() ? Box2{0, 0, double(image.width()), double(image.height())}
                                       : Box2{a->box[0], a->box[1], a->box[2], a->box[3]};
       const ImageFrontEnd front_end(model_dir, a->segmenter, a->diffusion_steps, a->guidance, a->seed);
@@ -298,6 +442,7 @@ Runner AddGenerateCommand(CLI::App& app) {
     options.canonical.up = "+z";
     if (!a->size.empty()) options.canonical.target_size = Eigen::Vector3d(a->size[0], a->size[1], a->size[2]);
     else options.canonical.target_height = a->height > 0 ? a->height : category->default_size.z();
+    if (!a->size.empty()) ObjectSize(*a, *category);  // refuses sizes that are not positive
     AssetInfo info;
     info.id = a->id.empty() ? fs::absolute(a->out).lexically_normal().filename().string() : a->id;
     info.name = a->name.empty() ? info.id : a->name;
@@ -305,6 +450,10 @@ Runner AddGenerateCommand(CLI::App& app) {
     info.licence = a->licence;
     info.source = a->source.empty() ? source : a->source;
     info.attribution = a->attribution;
+    if (photo_prior) {
+      RunPhotoShape(*a, *category, options, info);
+      return 0;
+    }
     try {
       BuildAndSave(views, front, options, info, source, a->out, a->overwrite);
     } catch (const InputError& e) {

@@ -1,0 +1,456 @@
+#include "assetgen/shape_prior.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+#include "core/error.h"
+#include "geometry/visual_hull.h"
+#include "models/grabcut.h"
+
+namespace sd {
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+double Rad(double deg) { return deg * kPi / 180.0; }
+double Deg(double rad) { return rad * 180.0 / kPi; }
+
+// The silhouette's extent, pixel rows and columns [x0, x1) x [y0, y1).
+struct PixelBounds {
+  int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+  int Width() const { return x1 - x0; }
+  int Height() const { return y1 - y0; }
+};
+
+std::optional<PixelBounds> BoundsOf(const ImageF& mask) {
+  PixelBounds b{mask.width(), mask.height(), 0, 0};
+  for (int y = 0; y < mask.height(); ++y)
+    for (int x = 0; x < mask.width(); ++x)
+      if (mask.at(x, y) > 0.5f) b.x0 = std::min(b.x0, x), b.y0 = std::min(b.y0, y), b.x1 = std::max(b.x1, x + 1), b.y1 = std::max(b.y1, y + 1);
+  if (b.x1 <= b.x0) return std::nullopt;
+  return b;
+}
+
+// Coverage of a row left and right of `u` (pixels of mask value summed: sub-pixel outline positions for rows
+// that are one run, which silhouettes of convex cross-sections are).
+std::pair<double, double> HalfWidths(const ImageF& mask, int y, double u) {
+  double left = 0, right = 0;
+  for (int x = 0; x < mask.width(); ++x) {
+    const double m = std::clamp(mask.at(x, y), 0.0f, 1.0f);
+    const double c = x + 0.5;
+    if (c + 0.5 <= u) left += m;
+    else if (c - 0.5 >= u) right += m;
+    else left += m * (u - (c - 0.5)), right += m * ((c + 0.5) - u);
+  }
+  return {left, right};
+}
+
+double MirrorIou(const ImageF& mask, double a, double b) {
+  double inter = 0, uni = 0;
+  for (int y = 0; y < mask.height(); ++y) {
+    const double axis = a + b * (y + 0.5);
+    for (int x = 0; x < mask.width(); ++x) {
+      const bool in = mask.at(x, y) > 0.5f;
+      const int xm = static_cast<int>(std::floor(2 * axis - (x + 0.5)));
+      const bool mirrored = xm >= 0 && xm < mask.width() && mask.at(xm, y) > 0.5f;
+      inter += in && mirrored;
+      uni += in || mirrored;
+    }
+  }
+  return uni > 0 ? inter / uni : 0;
+}
+
+// Camera pose in the object frame: its ray through `pixel` reaches `target` from `elevation` above the
+// horizontal, coming from azimuth `azimuth` about the object (0 = from +x), `distance` away, with zero roll.
+Rigid3d PlaceCamera(const PinholeCamera& cam, const Eigen::Vector2d& pixel, const Eigen::Vector3d& target,
+                    double elevation, double azimuth, double distance) {
+  const Eigen::Vector3d d = cam.RayDirection(pixel);
+  // Pitch (down) of a level camera so that the ray descends at `elevation`: dy cos(phi) + dz sin(phi) = sin(el).
+  const double rho = std::hypot(d.y(), d.z()), omega = std::atan2(d.y(), d.z());
+  const double phi = std::asin(std::clamp(std::sin(elevation) / rho, -1.0, 1.0)) - omega;
+  // Level camera looking along +x (x right = -y, y down = -z), pitched down by phi about its x axis.
+  Eigen::Matrix3d R0;
+  R0.col(0) = Eigen::Vector3d(0, -1, 0);
+  R0.col(2) = Eigen::Vector3d(std::cos(phi), 0, -std::sin(phi));
+  R0.col(1) = R0.col(2).cross(R0.col(0));
+  const Eigen::Vector3d w0 = R0 * d;
+  const double turn = azimuth + kPi - std::atan2(w0.y(), w0.x());
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(turn, Eigen::Vector3d::UnitZ()).toRotationMatrix() * R0;
+  const Eigen::Vector3d w = R * d;
+  return Rigid3d(R, target - distance * w);
+}
+
+// 2D bounds of the points seen by the camera (nullopt when one is behind it).
+std::optional<std::array<double, 4>> ProjectedBounds(const PinholeCamera& cam, const Rigid3d& T_world_cam,
+                                                     const std::vector<Eigen::Vector3d>& points) {
+  const Rigid3d T_cam_world = T_world_cam.Inverse();
+  std::array<double, 4> b{1e18, 1e18, -1e18, -1e18};
+  for (const auto& p : points) {
+    const auto uv = cam.Project(T_cam_world * p);
+    if (!uv) return std::nullopt;
+    b[0] = std::min(b[0], uv->x()), b[1] = std::min(b[1], uv->y()), b[2] = std::max(b[2], uv->x()), b[3] = std::max(b[3], uv->y());
+  }
+  return b;
+}
+
+std::vector<Eigen::Vector3d> BoxCorners(const Eigen::Vector3d& size) {
+  std::vector<Eigen::Vector3d> c;
+  for (int i = 0; i < 8; ++i)
+    c.emplace_back((i & 1 ? 0.5 : -0.5) * size.x(), (i & 2 ? 0.5 : -0.5) * size.y(), i & 4 ? size.z() : 0.0);
+  return c;
+}
+
+// The camera distance and aim at which the metric box's projection covers the silhouette's bounds.
+struct BoxFit {
+  Rigid3d T_world_cam;
+  double distance = 0;
+  double aspect_error = 0;  // |log(projected aspect / silhouette aspect)|
+};
+BoxFit FitBoxToSilhouette(const PinholeCamera& cam, const PixelBounds& sil, const Eigen::Vector3d& size,
+                          double elevation, double azimuth) {
+  const std::vector<Eigen::Vector3d> corners = BoxCorners(size);
+  const Eigen::Vector3d centre(0, 0, size.z() / 2);
+  Eigen::Vector2d aim(0.5 * (sil.x0 + sil.x1), 0.5 * (sil.y0 + sil.y1));
+  double distance = cam.fy * size.z() / std::max(1, sil.Height());
+  BoxFit fit;
+  for (int it = 0; it < 8; ++it) {
+    fit.T_world_cam = PlaceCamera(cam, aim, centre, elevation, azimuth, distance);
+    const auto b = ProjectedBounds(cam, fit.T_world_cam, corners);
+    if (!b) { distance *= 2; continue; }
+    aim += Eigen::Vector2d(0.5 * (sil.x0 + sil.x1) - 0.5 * ((*b)[0] + (*b)[2]), 0.5 * (sil.y0 + sil.y1) - 0.5 * ((*b)[1] + (*b)[3]));
+    distance *= ((*b)[3] - (*b)[1]) / sil.Height();
+    fit.aspect_error = std::abs(std::log(((*b)[2] - (*b)[0]) / ((*b)[3] - (*b)[1]) / (double(sil.Width()) / sil.Height())));
+  }
+  fit.T_world_cam = PlaceCamera(cam, aim, centre, elevation, azimuth, distance);
+  fit.distance = distance;
+  return fit;
+}
+
+MultiView MakeView(const std::string& name, const PinholeCamera& cam, const Rigid3d& T_world_cam, const ImageF& color,
+                   const ImageF& mask) {
+  MultiView v;
+  v.view = {name, cam, T_world_cam};
+  v.color = color;
+  v.mask = mask;
+  v.normals = ImageF(cam.width, cam.height, 3, 0.0f);
+  return v;
+}
+
+template <typename T>
+Image<T> FlipHorizontal(const Image<T>& img) {
+  Image<T> out(img.width(), img.height(), img.channels());
+  for (int y = 0; y < img.height(); ++y)
+    for (int x = 0; x < img.width(); ++x)
+      for (int c = 0; c < img.channels(); ++c) out.at(img.width() - 1 - x, y, c) = img.at(x, y, c);
+  return out;
+}
+
+// A closed surface of revolution about +z: rings (z ascending, radius), `segments` around, capped at both ends.
+TriangleMesh Revolve(const std::vector<std::pair<double, double>>& rings, int segments) {
+  TriangleMesh m;
+  const int n = static_cast<int>(rings.size());
+  for (const auto& [z, r] : rings)
+    for (int j = 0; j < segments; ++j) {
+      const double a = 2 * kPi * j / segments;
+      m.positions.emplace_back(float(r * std::cos(a)), float(r * std::sin(a)), float(z));
+    }
+  const int bottom = static_cast<int>(m.positions.size());
+  m.positions.emplace_back(0.f, 0.f, float(rings.front().first));
+  const int top = bottom + 1;
+  m.positions.emplace_back(0.f, 0.f, float(rings.back().first));
+  auto at = [&](int i, int j) { return i * segments + (j % segments); };
+  for (int i = 0; i + 1 < n; ++i)
+    for (int j = 0; j < segments; ++j) {
+      m.faces.emplace_back(at(i, j), at(i, j + 1), at(i + 1, j + 1));
+      m.faces.emplace_back(at(i, j), at(i + 1, j + 1), at(i + 1, j));
+    }
+  for (int j = 0; j < segments; ++j) {
+    m.faces.emplace_back(bottom, at(0, j + 1), at(0, j));
+    m.faces.emplace_back(top, at(n - 1, j), at(n - 1, j + 1));
+  }
+  return m;
+}
+
+}  // namespace
+
+const char* ToString(ShapePrior prior) {
+  switch (prior) {
+    case ShapePrior::kRevolve: return "revolve";
+    case ShapePrior::kMirror: return "mirror";
+    case ShapePrior::kExtrude: return "extrude";
+    case ShapePrior::kHull: return "hull";
+  }
+  return "hull";
+}
+
+std::optional<ShapePrior> ParseShapePrior(const std::string& name) {
+  for (ShapePrior p : {ShapePrior::kRevolve, ShapePrior::kMirror, ShapePrior::kExtrude, ShapePrior::kHull})
+    if (name == ToString(p)) return p;
+  return std::nullopt;
+}
+
+ShapePrior DefaultShapePrior(const std::string& category) {
+  static const char* kRevolve[] = {"traffic_cone", "barrel", "bollard", "delineator", "pole", "bottle"};
+  static const char* kMirror[] = {"car", "truck", "trailer", "bus", "construction_vehicle", "bicycle", "motorcycle",
+                                  "barrier", "warning_tripod", "a_frame_sign", "emergency_vehicle", "crate"};
+  static const char* kExtrude[] = {"road_sign", "sign", "board", "panel"};
+  for (const char* c : kRevolve) if (category == c) return ShapePrior::kRevolve;
+  for (const char* c : kMirror) if (category == c) return ShapePrior::kMirror;
+  for (const char* c : kExtrude) if (category == c) return ShapePrior::kExtrude;
+  return ShapePrior::kHull;
+}
+
+SilhouetteAxis FitSymmetryAxis(const ImageF& mask) {
+  // Row midpoints, fitted by least squares weighted by the row's width, once more without the rows farthest
+  // from the first fit (handles, a sign's post, ragged mask rows).
+  struct Row { double v, mid, w; };
+  std::vector<Row> rows;
+  for (int y = 0; y < mask.height(); ++y) {
+    int x0 = -1, x1 = -1;
+    for (int x = 0; x < mask.width(); ++x)
+      if (mask.at(x, y) > 0.5f) { if (x0 < 0) x0 = x; x1 = x + 1; }
+    if (x0 >= 0) rows.push_back({y + 0.5, 0.5 * (x0 + x1), double(x1 - x0)});
+  }
+  SilhouetteAxis best;
+  if (rows.empty()) return best;
+  auto fit = [&](const std::vector<Row>& r) {
+    double sw = 0, sv = 0, su = 0, svv = 0, svu = 0;
+    for (const Row& q : r) sw += q.w, sv += q.w * q.v, su += q.w * q.mid, svv += q.w * q.v * q.v, svu += q.w * q.v * q.mid;
+    const double det = sw * svv - sv * sv;
+    SilhouetteAxis s;
+    s.b = std::abs(det) > 1e-9 ? (sw * svu - sv * su) / det : 0.0;
+    s.a = (su - s.b * sv) / sw;
+    return s;
+  };
+  std::vector<SilhouetteAxis> candidates = {fit(rows)};
+  std::vector<double> residual;
+  for (const Row& q : rows) residual.push_back(std::abs(q.mid - (candidates[0].a + candidates[0].b * q.v)));
+  std::vector<double> sorted = residual;
+  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() * 3 / 4, sorted.end());
+  const double cut = sorted[sorted.size() * 3 / 4];
+  std::vector<Row> kept;
+  for (size_t i = 0; i < rows.size(); ++i) if (residual[i] <= cut) kept.push_back(rows[i]);
+  if (kept.size() >= 3) candidates.push_back(fit(kept));
+  // A vertical axis through the median midpoint: what an upright object on level ground shows.
+  std::vector<double> mids;
+  for (const Row& q : rows) mids.push_back(q.mid);
+  std::nth_element(mids.begin(), mids.begin() + mids.size() / 2, mids.end());
+  candidates.push_back({mids[mids.size() / 2], 0.0, 0});
+  for (SilhouetteAxis c : candidates) {
+    if (std::abs(c.b) > 0.35) continue;  // more than ~20 degrees from vertical: not an upright object's axis
+    c.symmetry_iou = MirrorIou(mask, c.a, c.b);
+    if (c.symmetry_iou > best.symmetry_iou) best = c;
+  }
+  return best;
+}
+
+PhotoShape ShapeFromPhoto(const PhotoObservation& photo, const ShapePriorOptions& options) {
+  const ImageU8& image = photo.image;
+  if (image.empty() || image.channels() < 3) throw InputError({}, "the photo is empty or not a colour image");
+  if (photo.mask.width() != image.width() || photo.mask.height() != image.height() || photo.mask.channels() != 1)
+    throw InputError({}, Msg() << "the mask is " << photo.mask.width() << "x" << photo.mask.height() << "x"
+                               << photo.mask.channels() << ", the photo " << image.width() << "x" << image.height());
+  if (!(options.size.minCoeff() > 0) || !std::isfinite(options.size.maxCoeff()))
+    throw InputError({}, Msg() << "impossible object size " << options.size.transpose() << " m (all three must be > 0)");
+  const ImageF mask_full = models::LargestComponentFilled(photo.mask);
+  const auto sil_full = BoundsOf(mask_full);
+  double area = 0;
+  for (float m : mask_full.vector()) area += m > 0.5f;
+  if (!sil_full || area < 64)
+    throw InputError({}, Msg() << "the mask holds no object (" << area << " pixels; at least 64 are needed)");
+  if (area > 0.9 * image.width() * image.height())
+    throw InputError({}, "the mask covers the whole photo: there is no outline to build a shape from");
+  const int touching = (sil_full->x0 == 0) + (sil_full->y0 == 0) + (sil_full->x1 == image.width()) + (sil_full->y1 == image.height());
+  if (touching >= 3) throw InputError({}, "the object is cut off by the photo's border on three or more sides");
+
+  PhotoShape out;
+  // Intrinsics: known, or a pinhole of the assumed field of view centred on the photo.
+  PinholeCamera full;
+  if (photo.camera) {
+    full = *photo.camera;
+    if (full.width != image.width() || full.height != image.height() || !(full.fx > 0) || !(full.fy > 0))
+      throw InputError({}, Msg() << "the camera is " << full.width << "x" << full.height << " with fx " << full.fx
+                                 << ", the photo " << image.width() << "x" << image.height());
+  } else {
+    full.width = image.width(), full.height = image.height();
+    full.fy = full.fx = 0.5 * image.height() / std::tan(Rad(options.assumed_vertical_fov_deg) / 2);
+    full.cx = 0.5 * image.width(), full.cy = 0.5 * image.height();
+    out.intrinsics_assumed = true;
+  }
+  out.camera = full;
+
+  // The views are the photo's crop around the object (a margin for the outline's blur), as the same camera.
+  const int margin = std::max(4, static_cast<int>(0.15 * std::max(sil_full->Width(), sil_full->Height())));
+  const int cx0 = std::max(0, sil_full->x0 - margin), cy0 = std::max(0, sil_full->y0 - margin);
+  const int cx1 = std::min(image.width(), sil_full->x1 + margin), cy1 = std::min(image.height(), sil_full->y1 + margin);
+  PinholeCamera cam = full;
+  cam.width = cx1 - cx0, cam.height = cy1 - cy0, cam.cx -= cx0, cam.cy -= cy0;
+  ImageF mask(cam.width, cam.height, 1), color(cam.width, cam.height, 3);
+  const ImageF linear = ToLinear(image);
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) {
+      mask.at(x, y) = mask_full.at(x + cx0, y + cy0);
+      for (int c = 0; c < 3; ++c) color.at(x, y, c) = linear.at(x + cx0, y + cy0, c);
+    }
+  const PixelBounds sil = *BoundsOf(mask);
+
+  const SilhouetteAxis axis = FitSymmetryAxis(mask);
+  out.symmetry_iou = axis.symmetry_iou;
+  out.axis_tilt_deg = Deg(std::atan(axis.b));
+
+  // The prior: forced, or the category's, with revolve demoted where the silhouette is not symmetric.
+  if (options.prior) {
+    out.prior = *options.prior, out.prior_reason = "forced";
+    if (out.prior == ShapePrior::kRevolve && axis.symmetry_iou < options.min_revolve_symmetry)
+      throw InputError({}, Msg() << "revolve cannot fit: the silhouette's mirror symmetry is " << axis.symmetry_iou
+                                 << " (IoU with its mirror image; at least " << options.min_revolve_symmetry
+                                 << " for a surface of revolution)");
+  } else {
+    out.prior = DefaultShapePrior(options.category);
+    out.prior_reason = "category " + options.category;
+    if (out.prior == ShapePrior::kRevolve && axis.symmetry_iou < options.min_revolve_symmetry) {
+      out.prior = ShapePrior::kHull;
+      out.prior_reason = Msg() << "category " << options.category << ", but silhouette symmetry " << axis.symmetry_iou
+                               << " < " << options.min_revolve_symmetry;
+    }
+  }
+  const Eigen::Vector3d size = options.size;
+  auto half_width = [&](int y) {
+    const auto [l, r] = HalfWidths(mask, y, axis.a + axis.b * (y + 0.5));
+    return 0.5 * (l + r);
+  };
+
+  // Elevation: given; for a revolve, from the base's ellipse; else assumed. Below the base's widest row the
+  // outline is the lower half of an ellipse of half-axes a (the widest half-width) and b = a sin(e_base), e_base
+  // the angle the base is seen at: a row d above the lowest point with half-width w lies on it when
+  // (b - d)^2 = b^2 (1 - (w / a)^2), so each row gives b = d / (1 - sqrt(1 - (w / a)^2)); the median is kept.
+  // The base is seen more steeply than the object's centre (it is half the height lower):
+  // e_centre = e_base - asin(h cos(e_base) / 2 distance), with h / distance from the silhouette's pixel height.
+  out.elevation_deg = options.assumed_elevation_deg, out.elevation_method = "assumed";
+  if (photo.elevation_deg) {
+    out.elevation_deg = *photo.elevation_deg, out.elevation_method = "given";
+  } else if (out.prior == ShapePrior::kRevolve) {
+    const int band0 = sil.y1 - std::max(3, sil.Height() / 4);
+    double widest = 0;
+    int widest_row = sil.y1 - 1;
+    for (int y = band0; y < sil.y1; ++y)
+      if (half_width(y) > widest) widest = half_width(y), widest_row = y;
+    std::vector<double> minors;
+    for (int y = widest_row + 1; y < sil.y1 && widest > 0; ++y) {
+      const double w = half_width(y) / widest;
+      if (w < 0.3 || w > 0.95) continue;
+      minors.push_back((sil.y1 - (y + 0.5)) / (1 - std::sqrt(1 - w * w)));
+    }
+    double ratio = 0;
+    if (minors.size() >= 2) {
+      std::nth_element(minors.begin(), minors.begin() + minors.size() / 2, minors.end());
+      ratio = minors[minors.size() / 2] / widest;
+    }
+    if (ratio >= 0.05 && ratio <= 0.7) {
+      const double e_base = std::asin(ratio);
+      const double h_over_d = sil.Height() / cam.fy;
+      out.elevation_deg = Deg(e_base - std::asin(std::clamp(0.5 * h_over_d * std::cos(e_base), 0.0, 0.9)));
+      out.elevation_method = "base ellipse";
+    }
+  }
+  const double elevation = Rad(out.elevation_deg);
+
+  if (out.prior == ShapePrior::kRevolve) {
+    // Rows between the top rim's and the base's widest rows: above and below them the outline is the ellipse of a
+    // cap, not the side.
+    const double s = std::sin(elevation);
+    int top = sil.y0, bottom = sil.y1 - 1;
+    for (int y = sil.y0; y < sil.y1; ++y) if (y - sil.y0 + 1 >= half_width(y) * s) { top = y; break; }
+    for (int y = sil.y1 - 1; y >= sil.y0; --y) if (sil.y1 - y >= half_width(y) * s) { bottom = y; break; }
+    if (bottom - top < 2) throw InputError({}, "revolve cannot fit: the silhouette is too flat for a side to be seen");
+    const double radius_guess = size.head<2>().maxCoeff() / 2;
+    const int mid = (top + bottom) / 2;
+    const Eigen::Vector2d aim(axis.a + axis.b * (mid + 0.5), mid + 0.5);
+    double distance = cam.fy * size.z() / std::max(1, bottom - top + 1);
+    std::vector<std::pair<double, double>> rings;
+    Rigid3d T;
+    for (int it = 0; it < 4; ++it) {
+      T = PlaceCamera(cam, aim, Eigen::Vector3d(0, 0, size.z() / 2), elevation, 0.0, distance);
+      const Eigen::Vector3d C = T.translation;
+      const Eigen::Matrix3d R = T.Rotation();
+      rings.clear();
+      for (int y = bottom; y >= top; --y) {
+        const double u = axis.a + axis.b * (y + 0.5);
+        const auto [l, r] = HalfWidths(mask, y, u);
+        const Eigen::Vector3d wa = R * cam.RayDirection({u, y + 0.5});
+        const double horiz = wa.head<2>().squaredNorm();
+        if (horiz < 1e-12) continue;
+        const double z = C.z() + (-C.head<2>().dot(wa.head<2>()) / horiz) * wa.z();
+        double radius = 0;
+        for (const double edge : {u - l, u + r}) {
+          const Eigen::Vector3d we = R * cam.RayDirection({edge, y + 0.5});
+          radius += 0.5 * std::abs(C.x() * we.y() - C.y() * we.x()) / we.head<2>().norm();
+        }
+        if (!rings.empty() && z <= rings.back().first) continue;  // the profile's heights must rise
+        rings.emplace_back(z, std::max(radius, 1e-3 * radius_guess));
+      }
+      if (rings.size() < 3) throw InputError({}, "revolve cannot fit: fewer than 3 rows of the silhouette give a profile");
+      distance *= size.z() / (rings.back().first - rings.front().first);
+    }
+    // On the ground, at the metric height (scaling the scene and the camera together keeps every projection).
+    const double z0 = rings.front().first, scale = size.z() / (rings.back().first - z0);
+    for (auto& [z, r] : rings) z = (z - z0) * scale, r *= scale;
+    T.translation = (T.translation - Eigen::Vector3d(0, 0, z0)) * scale;
+    // At most 64 rings, evenly over the rows; 64 segments around.
+    std::vector<std::pair<double, double>> kept;
+    const size_t n = rings.size(), want = std::min<size_t>(n, 64);
+    for (size_t i = 0; i < want; ++i) kept.push_back(rings[want == 1 ? 0 : i * (n - 1) / (want - 1)]);
+    out.coarse = Revolve(kept, 64);
+    out.distance_m = (T.translation - Eigen::Vector3d(0, 0, size.z() / 2)).norm();
+    out.yaw_deg = 0, out.yaw_method = "facing the camera (a surface of revolution has no heading)";
+    const int k = std::max(1, options.rotated_views);
+    for (int i = 0; i < k; ++i) {
+      const Rigid3d Rz = Rigid3d::FromYaw(2 * kPi * i / k, Eigen::Vector3d::Zero());
+      out.views.push_back(MakeView(i == 0 ? std::string("photo") : (Msg() << "rotated_" << i).str(), cam, Rz * T, color, mask));
+    }
+    return out;
+  }
+
+  // Box priors: the camera azimuth given, facing (extrude), or the one whose box outline has the silhouette's
+  // aspect (a bilaterally symmetric object seen at a or -a, from the front or the back, looks the same).
+  BoxFit fit;
+  if (options.yaw_deg) {
+    out.yaw_deg = *options.yaw_deg, out.yaw_method = "given";
+    fit = FitBoxToSilhouette(cam, sil, size, elevation, Rad(out.yaw_deg));
+  } else if (out.prior == ShapePrior::kExtrude) {
+    out.yaw_deg = 0, out.yaw_method = "facing the camera";
+    fit = FitBoxToSilhouette(cam, sil, size, elevation, 0.0);
+  } else {
+    fit.aspect_error = 1e9;
+    for (int a = 0; a <= 90; a += 2) {
+      const BoxFit f = FitBoxToSilhouette(cam, sil, size, elevation, Rad(a));
+      if (f.aspect_error < fit.aspect_error) fit = f, out.yaw_deg = a;
+    }
+    out.yaw_method = "silhouette aspect (front/back ambiguous)";
+  }
+  out.distance_m = fit.distance;
+  out.views.push_back(MakeView("photo", cam, fit.T_world_cam, color, mask));
+  if (out.prior == ShapePrior::kMirror) {
+    // The mirror y -> -y of the object frame: camera centre reflected, its x axis flipped (keeping the frame
+    // right-handed), the photo flipped left-right, so pixel u of the photo is pixel W - u of the mirrored view.
+    const Eigen::Matrix3d M = Eigen::Vector3d(1, -1, 1).asDiagonal();
+    const Eigen::Matrix3d F = Eigen::Vector3d(-1, 1, 1).asDiagonal();
+    PinholeCamera mc = cam;
+    mc.cx = cam.width - cam.cx;
+    const Rigid3d Tm(M * fit.T_world_cam.Rotation() * F, M * fit.T_world_cam.translation);
+    out.views.push_back(MakeView("mirrored", mc, Tm, FlipHorizontal(color), FlipHorizontal(mask)));
+  }
+  std::vector<geometry::SilhouetteView> silhouettes;
+  for (const MultiView& v : out.views) silhouettes.push_back({v.view.camera, v.view.T_world_cam.Inverse(), v.mask});
+  geometry::VisualHullOptions hull;
+  hull.resolution = options.hull_resolution;
+  const Eigen::Vector3f half = (0.5 * size).cast<float>() * 1.02f;
+  hull.bounds.min = Eigen::Vector3f(-half.x(), -half.y(), 0.0f);
+  hull.bounds.max = Eigen::Vector3f(half.x(), half.y(), float(size.z()) * 1.02f);
+  out.coarse = geometry::VisualHull(silhouettes, hull);
+  if (out.coarse.faces.empty()) throw InputError({}, Msg() << ToString(out.prior) << " cannot fit: the carved hull is empty");
+  return out;
+}
+
+}  // namespace sd

@@ -1,0 +1,202 @@
+#include "assetgen/shape_prior.h"
+
+#include <cmath>
+
+#include <gtest/gtest.h>
+
+#include "core/error.h"
+#include "geometry/metrics.h"
+#include "geometry/test_meshes.h"
+
+namespace sd {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// A traffic cone's body: a frustum (base radius 0.18, top 0.03, 0.7 m tall) on a square-ish base disc, about +z,
+// base at z = 0, in metres — the asset frame the prior builds in.
+TriangleMesh Frustum(double r0 = 0.18, double r1 = 0.03, double h = 0.7, int segments = 96) {
+  TriangleMesh m;
+  for (int ring = 0; ring < 2; ++ring)
+    for (int j = 0; j < segments; ++j) {
+      const double a = 2 * kPi * j / segments, r = ring ? r1 : r0;
+      m.positions.emplace_back(float(r * std::cos(a)), float(r * std::sin(a)), float(ring ? h : 0.0));
+    }
+  m.positions.emplace_back(0.f, 0.f, 0.f);
+  m.positions.emplace_back(0.f, 0.f, float(h));
+  const int bottom = 2 * segments, top = bottom + 1;
+  for (int j = 0; j < segments; ++j) {
+    const int k = (j + 1) % segments;
+    m.faces.emplace_back(j, k, segments + k);
+    m.faces.emplace_back(j, segments + k, segments + j);
+    m.faces.emplace_back(bottom, k, j);
+    m.faces.emplace_back(top, segments + j, segments + k);
+  }
+  return m;
+}
+
+// A car-like solid, bilaterally symmetric (y -> -y) but not front to back: a 4 x 1.8 x 0.9 m body with a
+// 2 x 1.5 x 0.6 m cabin set towards the back.
+TriangleMesh Car() {
+  TriangleMesh body = geometry::testing::Cube(Eigen::Vector3f(-2.0f, -0.9f, 0.0f), Eigen::Vector3f(2.0f, 0.9f, 0.9f));
+  const TriangleMesh cabin =
+      geometry::testing::Cube(Eigen::Vector3f(-1.6f, -0.75f, 0.9f), Eigen::Vector3f(0.4f, 0.75f, 1.5f));
+  const int offset = static_cast<int>(body.positions.size());
+  for (const auto& p : cabin.positions) body.positions.push_back(p);
+  for (const auto& f : cabin.faces) body.faces.emplace_back(f + Eigen::Vector3i::Constant(offset));
+  return body;
+}
+
+// The mesh photographed from (azimuth, elevation) by a 640 x 480 camera of 50 degrees vertical field of view,
+// aimed at the object's centre, `distance` away: the photo (colour from a base colour) and its exact mask.
+PhotoObservation Photograph(TriangleMesh mesh, double height, double azimuth_deg, double elevation_deg,
+                            double distance, ViewCamera* camera_out = nullptr) {
+  for (auto& p : mesh.positions) p.z() -= float(height / 2);
+  mesh.colors.assign(mesh.positions.size(), Eigen::Vector4f(0.9f, 0.3f, 0.05f, 1.0f));
+  const ViewCamera cam = OrbitCamera("photo", azimuth_deg, elevation_deg, distance, 50, 640, 480);
+  const MultiViewSet views = RenderOracleViews(mesh, {cam}, 3);
+  PhotoObservation photo;
+  ImageF color = views[0].color;
+  for (int y = 0; y < color.height(); ++y)
+    for (int x = 0; x < color.width(); ++x)
+      if (views[0].mask.at(x, y) < 0.5f)
+        for (int c = 0; c < 3; ++c) color.at(x, y, c) = 0.2f;  // grey road behind it
+  photo.image = ToSrgb8(color);
+  photo.mask = views[0].mask;
+  if (camera_out) *camera_out = cam;
+  return photo;
+}
+
+geometry::GeometryMetrics Compare(const TriangleMesh& pred, const TriangleMesh& truth) {
+  geometry::GeometryMetricsOptions o;
+  o.num_samples = 30000;
+  o.iou_resolution = 64;
+  return geometry::CompareMeshes(pred, truth, o);
+}
+
+TEST(ShapePrior, ChosenFromTheCategoryAndParsedByName) {
+  EXPECT_EQ(DefaultShapePrior("traffic_cone"), ShapePrior::kRevolve);
+  EXPECT_EQ(DefaultShapePrior("car"), ShapePrior::kMirror);
+  EXPECT_EQ(DefaultShapePrior("road_sign"), ShapePrior::kExtrude);
+  EXPECT_EQ(DefaultShapePrior("debris"), ShapePrior::kHull);
+  for (ShapePrior p : {ShapePrior::kRevolve, ShapePrior::kMirror, ShapePrior::kExtrude, ShapePrior::kHull})
+    EXPECT_EQ(ParseShapePrior(ToString(p)), p);
+  EXPECT_FALSE(ParseShapePrior("sphere").has_value());
+}
+
+TEST(FitSymmetryAxis, FindsTheAxisOfASymmetricSilhouetteAndScoresAnAsymmetricOneLow) {
+  ImageF triangle(100, 80, 1, 0.0f), ell(100, 80, 1, 0.0f);
+  for (int y = 10; y < 70; ++y)
+    for (int x = 0; x < 100; ++x) {
+      const double half = 0.5 * (y - 10);  // apex at the top, centred on u = 41
+      if (std::abs(x + 0.5 - 41.0) <= half) triangle.at(x, y) = 1.0f;
+      if ((x >= 20 && x < 35) || (y >= 55 && x >= 20 && x < 80)) ell.at(x, y) = 1.0f;
+    }
+  const SilhouetteAxis t = FitSymmetryAxis(triangle);
+  EXPECT_NEAR(t.a + t.b * 40, 41.0, 0.6);
+  EXPECT_NEAR(t.b, 0.0, 0.02);
+  EXPECT_GT(t.symmetry_iou, 0.95);
+  EXPECT_LT(FitSymmetryAxis(ell).symmetry_iou, 0.6);
+}
+
+TEST(ShapeFromPhoto, RevolvesAConeFromOnePhotoWithTheElevationFromItsBase) {
+  const TriangleMesh truth = Frustum();
+  ViewCamera cam;
+  PhotoObservation photo = Photograph(truth, 0.7, 20, 10, 2.4, &cam);
+  photo.camera = cam.camera;
+  ShapePriorOptions options;
+  options.category = "traffic_cone";
+  options.size = Eigen::Vector3d(0.36, 0.36, 0.7);
+  const PhotoShape shape = ShapeFromPhoto(photo, options);
+  EXPECT_EQ(shape.prior, ShapePrior::kRevolve);
+  EXPECT_GT(shape.symmetry_iou, 0.95);
+  EXPECT_EQ(shape.elevation_method, "base ellipse");
+  EXPECT_NEAR(shape.elevation_deg, 10.0, 3.0);
+  EXPECT_NEAR(shape.distance_m, 2.4, 0.2);
+  EXPECT_EQ(shape.views.size(), 8u);
+  EXPECT_EQ(shape.real_views, 1);
+  const AlignedBox3f b = shape.coarse.Bounds();
+  EXPECT_NEAR(b.min.z(), 0.0f, 1e-4f);
+  EXPECT_NEAR(b.max.z(), 0.7f, 1e-3f);
+  EXPECT_NEAR(b.Size().x(), 0.36f, 0.03f);
+  const geometry::GeometryMetrics m = Compare(shape.coarse, truth);
+  std::printf("revolve, known intrinsics: CD %.4f F %.3f IoU %.3f, elevation %.1f deg\n", m.chamfer, m.fscore,
+              m.volume_iou, shape.elevation_deg);
+  EXPECT_LT(m.chamfer, 0.01);
+  EXPECT_GT(m.volume_iou, 0.8);
+}
+
+TEST(ShapeFromPhoto, RevolveWithAssumedIntrinsicsStillRecoversTheProfile) {
+  const TriangleMesh truth = Frustum();
+  const PhotoObservation photo = Photograph(truth, 0.7, 0, 8, 3.0);  // the camera's 50 degrees are the assumed
+  ShapePriorOptions options;
+  options.category = "traffic_cone";
+  options.size = Eigen::Vector3d(0.36, 0.36, 0.7);
+  const PhotoShape shape = ShapeFromPhoto(photo, options);
+  EXPECT_TRUE(shape.intrinsics_assumed);
+  const geometry::GeometryMetrics m = Compare(shape.coarse, truth);
+  std::printf("revolve, assumed intrinsics: CD %.4f IoU %.3f\n", m.chamfer, m.volume_iou);
+  EXPECT_LT(m.chamfer, 0.015);
+}
+
+TEST(ShapeFromPhoto, TheMirroredViewCarvesAVehicleTighterThanTheSingleViewHull) {
+  const TriangleMesh truth = Car();
+  const PhotoObservation photo = Photograph(truth, 1.5, 35, 8, 12.0);
+  ShapePriorOptions options;
+  options.category = "car";
+  options.size = Eigen::Vector3d(4.0, 1.8, 1.5);
+  options.hull_resolution = 80;
+  const PhotoShape mirror = ShapeFromPhoto(photo, options);
+  EXPECT_EQ(mirror.prior, ShapePrior::kMirror);
+  EXPECT_EQ(mirror.views.size(), 2u);
+  options.prior = ShapePrior::kHull;
+  const PhotoShape hull = ShapeFromPhoto(photo, options);
+  EXPECT_EQ(hull.views.size(), 1u);
+  const geometry::GeometryMetrics mm = Compare(mirror.coarse, truth), mh = Compare(hull.coarse, truth);
+  std::printf("car: mirror CD %.4f IoU %.3f, hull CD %.4f IoU %.3f, yaw %.0f deg\n", mm.chamfer, mm.volume_iou,
+              mh.chamfer, mh.volume_iou, mirror.yaw_deg);
+  EXPECT_LT(mm.chamfer, mh.chamfer);
+  EXPECT_GT(mm.volume_iou, mh.volume_iou);
+}
+
+TEST(ShapeFromPhoto, RefusesWhatCannotMakeAShapeWithOneLine) {
+  const PhotoObservation good = Photograph(Frustum(), 0.7, 0, 8, 3.0);
+  ShapePriorOptions options;
+  options.category = "traffic_cone";
+  options.size = Eigen::Vector3d(0.36, 0.36, 0.7);
+  auto message = [&](PhotoObservation photo, const ShapePriorOptions& o) -> std::string {
+    try {
+      ShapeFromPhoto(photo, o);
+    } catch (const InputError& e) {
+      return e.what();
+    }
+    return "";
+  };
+  PhotoObservation empty = good;
+  empty.mask = ImageF(good.mask.width(), good.mask.height(), 1, 0.0f);
+  EXPECT_NE(message(empty, options).find("holds no object"), std::string::npos);
+  PhotoObservation whole = good;
+  whole.mask = ImageF(good.mask.width(), good.mask.height(), 1, 1.0f);
+  EXPECT_NE(message(whole, options).find("whole photo"), std::string::npos);
+  PhotoObservation small = good;
+  small.mask = ImageF(10, 10, 1, 1.0f);
+  EXPECT_NE(message(small, options).find("the mask is 10x10"), std::string::npos);
+  ShapePriorOptions bad_size = options;
+  bad_size.size = Eigen::Vector3d(0.3, 0, 0.7);
+  EXPECT_NE(message(good, bad_size).find("impossible object size"), std::string::npos);
+  // An L-shaped silhouette: no surface of revolution makes it; forced, revolve refuses; chosen, it becomes hull.
+  PhotoObservation ell = good;
+  ell.mask = ImageF(good.mask.width(), good.mask.height(), 1, 0.0f);
+  for (int y = 100; y < 400; ++y)
+    for (int x = 200; x < 500; ++x)
+      if (x < 280 || y >= 320) ell.mask.at(x, y) = 1.0f;
+  ShapePriorOptions forced = options;
+  forced.prior = ShapePrior::kRevolve;
+  EXPECT_NE(message(ell, forced).find("revolve cannot fit"), std::string::npos);
+  const PhotoShape demoted = ShapeFromPhoto(ell, options);
+  EXPECT_EQ(demoted.prior, ShapePrior::kHull);
+  EXPECT_NE(demoted.prior_reason.find("symmetry"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace sd

@@ -25,6 +25,21 @@ struct AssetInfo {
   nlohmann::json quality = nlohmann::json::object();  // quality figures, if measured
 };
 
+// The quality figures a generated asset carries in asset.json "quality" — the names the bank's gate and
+// queries use. Each is absent where it cannot be measured (one view: nothing to hold out; no LiDAR returns).
+namespace quality {
+// Mean silhouette IoU of the asset redrawn at real views left out of its fit (leave one out), 0..1.
+inline constexpr char kHeldOutSilhouetteIou[] = "heldout_silhouette_iou";
+// Median distance of the object's LiDAR returns to the asset's surface, metres.
+inline constexpr char kLidarPointToMeshMedianM[] = "lidar_p2m_median_m";
+// Fraction of the surface (by area) textured from real camera pixels — not from symmetry, not propagated, 0..1.
+inline constexpr char kRealTextureFraction[] = "real_texture_fraction";
+// 1 when the mesh is a closed 2-manifold, else 0.
+inline constexpr char kWatertight[] = "watertight";
+// An object {"prior": "revolve" | "mirror" | "extrude" | "hull" | "views", "reason": ...}: what made the unseen sides.
+inline constexpr char kShapePrior[] = "shape_prior";
+}  // namespace quality
+
 struct Asset {
   AssetInfo info;
   TriangleMesh mesh;  // canonical frame

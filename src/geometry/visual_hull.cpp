@@ -138,6 +138,47 @@ TriangleMesh SignificantComponents(const TriangleMesh& mesh, float fraction) {
   return out;
 }
 
+// Nodes within half a voxel of a free segment are set outside. The segment is walked in steps of half a voxel;
+// at each step the eight nodes around the sample are tested against the segment itself.
+void CarveFreeSpace(const std::vector<std::pair<Eigen::Vector3f, Eigen::Vector3f>>& segments, ScalarGrid* grid) {
+  const float h = grid->voxel_size, reach2 = 0.25f * h * h;
+  const Eigen::Vector3f lo = grid->origin, hi = grid->NodePosition(grid->dims.x() - 1, grid->dims.y() - 1, grid->dims.z() - 1);
+  for (const auto& [from, to] : segments) {
+    // Clipped to the grid (slabs), so a beam from a sensor metres away walks only the grid's few voxels.
+    float t0 = 0, t1 = 1;
+    const Eigen::Vector3f d = to - from;
+    for (int axis = 0; axis < 3 && t0 <= t1; ++axis) {
+      if (std::abs(d[axis]) < 1e-12f) {
+        if (from[axis] < lo[axis] - h || from[axis] > hi[axis] + h) t1 = -1;
+        continue;
+      }
+      float ta = (lo[axis] - h - from[axis]) / d[axis], tb = (hi[axis] + h - from[axis]) / d[axis];
+      if (ta > tb) std::swap(ta, tb);
+      t0 = std::max(t0, ta), t1 = std::min(t1, tb);
+    }
+    if (t0 > t1) continue;
+    const Eigen::Vector3f a = from + t0 * d, b = from + t1 * d;
+    const Eigen::Vector3f ab = b - a;
+    const float len2 = ab.squaredNorm();
+    const int steps = std::max(1, static_cast<int>(std::ceil(std::sqrt(len2) / (0.5f * h))));
+    for (int s = 0; s <= steps; ++s) {
+      const Eigen::Vector3f q = a + ab * (float(s) / steps);
+      const Eigen::Vector3f g = (q - grid->origin) / h;
+      const int i0 = static_cast<int>(std::floor(g.x())), j0 = static_cast<int>(std::floor(g.y())),
+                k0 = static_cast<int>(std::floor(g.z()));
+      for (int dk = 0; dk < 2; ++dk)
+        for (int dj = 0; dj < 2; ++dj)
+          for (int di = 0; di < 2; ++di) {
+            const int i = i0 + di, j = j0 + dj, k = k0 + dk;
+            if (i < 0 || j < 0 || k < 0 || i >= grid->dims.x() || j >= grid->dims.y() || k >= grid->dims.z()) continue;
+            const Eigen::Vector3f node = grid->NodePosition(i, j, k);
+            const float t = len2 > 0 ? std::clamp((node - a).dot(ab) / len2, 0.0f, 1.0f) : 0.0f;
+            if ((a + t * ab - node).squaredNorm() <= reach2) grid->at(i, j, k) = 0.0f;
+          }
+    }
+  }
+}
+
 }  // namespace
 
 TriangleMesh VisualHull(const std::vector<SilhouetteView>& views, const VisualHullOptions& options) {
@@ -159,33 +200,41 @@ TriangleMesh VisualHull(const std::vector<SilhouetteView>& views, const VisualHu
   ParallelFor(0, views.size(), [&](size_t i) { data[i] = Prepare(views[i]); });
 
   const double half_voxel = 0.5 * grid.voxel_size;
+  const int tolerated = std::max(0, options.tolerated_outside_views);
   ParallelFor(1, size_t(grid.dims.z() - 1), [&](size_t k) {
+    // The (tolerated + 1) smallest coverages seen at a node; its value is the largest of them.
+    std::vector<double> lowest;
     for (int j = 1; j + 1 < grid.dims.y(); ++j) {
       for (int i = 1; i + 1 < grid.dims.x(); ++i) {
         const Eigen::Vector3d p_world = grid.NodePosition(i, j, int(k)).cast<double>();
-        double value = 1;
+        lowest.assign(tolerated + 1, 1.0);
+        auto vote = [&](double v) {
+          // Insert into the sorted list of the smallest values, dropping the largest.
+          if (v >= lowest.back()) return;
+          lowest.back() = v;
+          for (size_t q = lowest.size() - 1; q > 0 && lowest[q] < lowest[q - 1]; --q) std::swap(lowest[q], lowest[q - 1]);
+        };
         bool seen = false;
         for (const ViewData& d : data) {
           const Eigen::Vector3d p_cam = d.R_cam_world * p_world + d.t_cam_world;
           const auto uv = d.view->camera.Project(p_cam);
           if (!uv || !d.view->camera.InImage(*uv)) {
-            if (options.require_all_views) {
-              value = 0;
-              break;
-            }
+            if (options.require_all_views) vote(0);
+            if (lowest.back() <= 0) break;
             continue;
           }
           seen = true;
           // Footprint half-width: half a voxel at the node's depth, at least half a pixel (bilinear-like).
           const double ru = std::max(0.5, half_voxel * d.view->camera.fx / p_cam.z());
           const double rv = std::max(0.5, half_voxel * d.view->camera.fy / p_cam.z());
-          value = std::min(value, d.BoxMean(uv->x(), uv->y(), ru, rv));
-          if (value <= 0) break;
+          vote(d.BoxMean(uv->x(), uv->y(), ru, rv));
+          if (lowest.back() <= 0) break;
         }
-        grid.at(i, j, int(k)) = seen ? static_cast<float>(value) : 0.0f;
+        grid.at(i, j, int(k)) = seen ? static_cast<float>(lowest.back()) : 0.0f;
       }
     }
   });
+  CarveFreeSpace(options.free_segments, &grid);
 
   return SignificantComponents(MarchingCubes(grid, options.mask_threshold), options.min_component_fraction);
 }

@@ -2,6 +2,7 @@
 // Visual hull from silhouettes: the classical coarse mesh. A voxel is kept when its projection falls inside
 // the mask in every view where it lands in the image; the occupancy is smoothed into a field and meshed with
 // marching cubes.
+#include <utility>
 #include <vector>
 
 #include "core/camera.h"
@@ -27,6 +28,13 @@ struct VisualHullOptions {
   bool require_all_views = true;
   // Components enclosing less than this fraction of the largest one's volume are dropped as voxel noise.
   float min_component_fraction = 0.01f;
+  // Noisy masks (a segmenter's, not a renderer's): a node stays inside while at most this many views put it
+  // outside, so one view's bite out of the object does not carve it from all of them.
+  int tolerated_outside_views = 0;
+  // Space known to be empty — a LiDAR beam's path from its sensor to just short of its return: nodes within
+  // half a voxel of a segment are outside whatever the silhouettes say (they carve concavities no silhouette
+  // shows, and the parts of a box the object does not fill).
+  std::vector<std::pair<Eigen::Vector3f, Eigen::Vector3f>> free_segments;
 };
 
 // Throws InputError when no view is given or a mask's size disagrees with its camera (also: a mask with other

@@ -40,7 +40,7 @@ ColorViewSet ColorViewsOf(const MultiViewSet& views) {
   for (size_t i = 0; i < views.size(); ++i) {
     if (views[i].color.empty())
       throw InputError({}, Msg() << "view '" << views[i].view.name << "' has no colour image (texturing needs one per view)");
-    out.push_back({views[i].view, views[i].color, views[i].mask});
+    out.push_back({views[i].view, views[i].color, views[i].mask, views[i].synthetic});
   }
   return out;
 }

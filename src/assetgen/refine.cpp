@@ -11,6 +11,7 @@
 #include "core/error.h"
 #include "core/log.h"
 #include "core/parallel.h"
+#include "geometry/closest_point.h"
 #include "geometry/laplacian.h"
 #include "geometry/normals.h"
 #include "geometry/topology.h"
@@ -55,17 +56,18 @@ void CheckOptions(const RefineOptions& o) {
   if (o.steps < 1 || o.iterations_per_step < 1)
     throw InputError({}, Msg() << "refine: steps (" << o.steps << ") and iterations per step (" << o.iterations_per_step
                            << ") must be at least 1");
-  if (o.lambda_normal < 0 || o.lambda_mask < 0 || o.lambda_lap < 0)
+  if (o.lambda_normal < 0 || o.lambda_mask < 0 || o.lambda_lap < 0 || o.lambda_points < 0)
     throw InputError({}, "refine: loss weights must not be negative");
   if (o.lambda_normal == 0 && o.lambda_mask == 0)
     throw InputError({}, "refine: with both the normal and the mask weight at 0 nothing supervises the shape");
+  if (!(o.max_point_distance > 0)) throw InputError({}, "refine: the points' outlier distance must be positive");
   if (!(o.remesh.edge_length_min > 0) || o.remesh.edge_length_max < o.remesh.edge_length_min)
     throw InputError({}, Msg() << "refine: edge length limits must satisfy 0 < min <= max (got " << o.remesh.edge_length_min
                            << ", " << o.remesh.edge_length_max << ")");
 }
 
 struct Losses {
-  double normal = 0, mask = 0, lap = 0;
+  double normal = 0, mask = 0, lap = 0, points = 0;
 };
 
 // Per-view constant data and scratch buffers, reused across iterations.
@@ -165,7 +167,7 @@ void ViewLossAndGradient(const std::vector<Eigen::Vector3f>& positions, const st
 Losses LossAndGradient(const std::vector<Eigen::Vector3f>& positions, const std::vector<Eigen::Vector3i>& faces,
                        const TopologyCache& cache, const MultiViewSet& views, std::vector<ViewState>& state,
                        const RefineOptions& o, float lap_scale, raster::NormalMaskLoss* gpu,
-                       std::vector<Eigen::Vector3f>* grad) {
+                       const std::vector<Eigen::Vector3f>& points, float radius, std::vector<Eigen::Vector3f>* grad) {
   const size_t nv = positions.size();
   const std::vector<Eigen::Vector3f> vertex_normals = geometry::VertexNormals(positions, faces);
   const std::span<const int32_t> tris(reinterpret_cast<const int32_t*>(faces.data()), 3 * faces.size());
@@ -206,6 +208,11 @@ Losses LossAndGradient(const std::vector<Eigen::Vector3f>& positions, const std:
   geometry::VertexNormalsBackward(positions, faces, grad_vn, grad);
   if (o.lambda_lap > 0) {
     losses.lap = geometry::LaplacianLoss(cache.laplacian, positions, o.lambda_lap * lap_scale, grad) / (o.lambda_lap * lap_scale);
+  }
+  if (!points.empty() && o.lambda_points > 0) {
+    const float per_radius2 = 1.0f / (radius * radius);
+    losses.points = geometry::PointToSurfaceLoss(positions, faces, points, o.lambda_points * per_radius2,
+                                                 o.max_point_distance * radius, grad) / o.lambda_points;
   }
   return losses;
 }
@@ -266,9 +273,12 @@ TriangleMesh PrepareForRefinement(const TriangleMesh& mesh, const std::string& w
   return out;
 }
 
-RefineResult RefineMesh(const TriangleMesh& coarse_in, const MultiViewSet& views, const RefineOptions& options) {
+RefineResult RefineMesh(const TriangleMesh& coarse_in, const MultiViewSet& views, const RefineOptions& options,
+                        const std::vector<Eigen::Vector3f>& points) {
   CheckViews(views);
   CheckOptions(options);
+  for (const Eigen::Vector3f& p : points)
+    if (!p.allFinite()) throw InputError({}, "refine: a target point is not finite");
   const auto t0 = std::chrono::steady_clock::now();
   const TriangleMesh coarse = PrepareForRefinement(coarse_in, "refine: coarse mesh");
 
@@ -283,8 +293,11 @@ RefineResult RefineMesh(const TriangleMesh& coarse_in, const MultiViewSet& views
   std::vector<ViewState> state(views.size());
   for (size_t i = 0; i < views.size(); ++i) {
     const ViewCamera& v = views[i].view;
+    // About the object's depth along the optical axis, not its distance: a crop of a wide camera keeps the
+    // full camera's principal point, so the object can lie far off the axis.
     const float dist = static_cast<float>((v.T_world_cam.translation.cast<float>() - centre).norm());
-    const float near = std::max(1e-3f * dist, dist - 3.0f * radius), far = dist + 3.0f * radius;
+    const float depth = static_cast<float>((v.T_world_cam.Inverse() * centre.cast<double>()).z());
+    const float near = std::max(1e-3f * dist, depth - 3.0f * radius), far = std::max(near * 1.001f, depth + 3.0f * radius);
     state[i].clip_from_world = raster::ClipFromWorld(v.camera, v.T_world_cam.Inverse(), near, far);
     const MultiView& mv = views[i];
     double area = 0;
@@ -336,7 +349,7 @@ RefineResult RefineMesh(const TriangleMesh& coarse_in, const MultiViewSet& views
       // The smoothness weight is per squared edge length so that it means the same at every resolution.
       const float edge = std::max(remesher.MeanTargetEdgeLength(), 1e-6f);
       last = LossAndGradient(remesher.positions(), remesher.faces(), cache, views, state, options, 1.0f / (edge * edge),
-                             gpu_loss.get(), &grad);
+                             gpu_loss.get(), points, radius, &grad);
       remesher.Step(grad);
     }
     RefineStepLog log;
@@ -344,6 +357,7 @@ RefineResult RefineMesh(const TriangleMesh& coarse_in, const MultiViewSet& views
     log.loss_normal = last.normal;
     log.loss_mask = last.mask;
     log.loss_lap = last.lap;
+    log.loss_points = last.points;
     log.vertices = remesher.positions().size();
     log.faces = remesher.faces().size();
     log.mean_target_edge = remesher.MeanTargetEdgeLength();

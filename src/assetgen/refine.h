@@ -3,12 +3,16 @@
 // continuous remeshing (DESIGN.md, generate stage "iterative normal + silhouette mesh refinement").
 //
 // Loss, averaged over views:
-//   L = lambda_normal * L_normal + lambda_mask * L_mask + lambda_lap * L_lap
+//   L = lambda_normal * L_normal + lambda_mask * L_mask + lambda_points * L_points + lambda_lap * L_lap
 //   L_normal: mean over pixels covered by both the render and the target mask (> 0.5) of
 //             |n_render - n_target|^2, n_render the interpolated, re-normalised vertex normal (world frame);
 //   L_mask:   sum over all pixels of (antialiased coverage - target mask)^2, divided by the target mask's
 //             area (so both terms are per object pixel); the analytic edge gradients of raster::Antialias
 //             move the outline;
+//   L_points: (optional, measured points such as an object's LiDAR returns) mean over the points within
+//             max_point_distance of the surface of their squared distance to it (geometry/closest_point.h),
+//             divided by the square of the coarse mesh's bounding-sphere radius so its weight does not
+//             depend on the object's size;
 //   L_lap:    uniform-Laplacian smoothness sum_i |(L x)_i|^2 / n of the positions, divided by the square of
 //             the mesh's mean target edge length so its weight does not depend on resolution.
 // Schedule (the paper's): `steps` refinement steps, each = remesh (split / collapse / flip / smooth towards
@@ -35,6 +39,8 @@ struct RefineOptions {
   float lambda_normal = 1.0f;
   float lambda_mask = 1.0f;
   float lambda_lap = 0.5f;
+  float lambda_points = 1.0f;        // used only when points are given
+  float max_point_distance = 0.25f;  // in bounding-sphere radii: farther points are outliers, not surface
   // Remesher settings in units of the coarse mesh's bounding-sphere radius.
   geometry::RemeshOptions remesh = DefaultRemeshOptions();
   bool show_progress = true;
@@ -42,7 +48,7 @@ struct RefineOptions {
 
 struct RefineStepLog {
   int step = 0;
-  double loss_normal = 0, loss_mask = 0, loss_lap = 0;  // at the step's last iteration, unweighted
+  double loss_normal = 0, loss_mask = 0, loss_lap = 0, loss_points = 0;  // at the step's last iteration, unweighted
   size_t vertices = 0, faces = 0;
   double mean_target_edge = 0;  // world units
   double seconds = 0;           // wall time of the step
@@ -55,8 +61,10 @@ struct RefineResult {
 };
 
 // InputError for: an empty or non-manifold coarse mesh (weld split vertices first), no views, views of
-// different sizes, masks or normal maps whose size disagrees with their camera, impossible options.
-RefineResult RefineMesh(const TriangleMesh& coarse, const MultiViewSet& views, const RefineOptions& options);
+// different sizes, masks or normal maps whose size disagrees with their camera, impossible options, points
+// that are not finite. `points` (views' world frame) switch on the point term.
+RefineResult RefineMesh(const TriangleMesh& coarse, const MultiViewSet& views, const RefineOptions& options,
+                        const std::vector<Eigen::Vector3f>& points = {});
 
 // The classical coarse mesh: the visual hull of the views' masks, carved over a cube that every view sees
 // whole (centred on the point nearest all optical axes), `resolution` voxels along its side.

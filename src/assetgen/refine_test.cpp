@@ -2,7 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include "core/error.h"
+#include "geometry/closest_point.h"
 #include "geometry/metrics.h"
 #include "geometry/test_meshes.h"
 #include "geometry/topology.h"
@@ -49,6 +52,39 @@ TEST(RefineMesh, ImprovesOnTheVisualHullOfAnEllipsoidWithADent) {
   EXPECT_LT(r.log.back().loss_normal, r.log.front().loss_normal);
   const geometry::TopologyReport topo = geometry::AnalyzeTopology(static_cast<int>(r.mesh.NumVertices()), r.mesh.faces);
   EXPECT_TRUE(topo.IsWatertight()) << topo.Describe();
+}
+
+// Silhouettes alone cannot see the dent; points on the true surface (what LiDAR returns give) pull the mesh
+// into it. Masks only (no normal maps, as for a real photo or a log's camera) with and without the points.
+TEST(RefineMesh, PointsRecoverTheConcavityTheSilhouettesCannotSee) {
+  const TriangleMesh gt = DentedEllipsoid();
+  MultiViewSet views = RenderOracleViews(gt, Zero123PlusPlusRig(128), 2);
+  for (MultiView& v : views) v.normals = ImageF(v.normals.width(), v.normals.height(), 3, 0.0f);
+  const TriangleMesh coarse = CoarseMeshFromViews(views, 48);
+  // Points in the dent and around it, as a sensor above the object would see them.
+  std::vector<Eigen::Vector3f> points;
+  for (const auto& p : gt.positions)
+    if (p.z() > 0.1f && p.head<2>().norm() < 0.5f) points.push_back(p);
+  ASSERT_GT(points.size(), 200u);
+  RefineOptions options;
+  options.steps = 15;
+  options.lambda_normal = 0;
+  options.show_progress = false;
+  const RefineResult masks_only = RefineMesh(coarse, views, options);
+  options.lambda_points = 10;
+  const RefineResult with_points = RefineMesh(coarse, views, options, points);
+  auto dent_error = [&](const TriangleMesh& m) {
+    std::vector<Eigen::Vector3f> centre = {Eigen::Vector3f(0, 0, 0.55f - 0.25f)};  // the dent's floor
+    return geometry::PointToSurfaceDistances(m.positions, m.faces, centre)[0];
+  };
+  const float before = dent_error(masks_only.mesh), after = dent_error(with_points.mesh);
+  std::printf("distance of the dent's floor to the mesh: masks only %.4f, with points %.4f\n", before, after);
+  EXPECT_GT(before, 0.12f);  // the hull bridges the dent, 0.25 deep
+  EXPECT_LT(after, 0.04f);
+  EXPECT_GT(with_points.log.back().loss_points, 0);
+  EXPECT_LT(with_points.log.back().loss_points, with_points.log.front().loss_points);
+  std::vector<Eigen::Vector3f> bad = {Eigen::Vector3f(0, 0, std::nanf(""))};
+  EXPECT_THROW(RefineMesh(coarse, views, options, bad), InputError);
 }
 
 TEST(RefineMesh, RejectsBadInput) {

@@ -247,7 +247,8 @@ VertexFusionResult FuseVertexColors(const TriangleMesh& mesh, const ColorViewSet
           const float len = to_eye.norm();
           if (!(len > 0)) continue;
           const float c = n.dot(to_eye) / len;
-          if (c >= options.min_cosine) candidates.emplace_back(-c, static_cast<int>(i));
+          if (c >= options.min_cosine)
+            candidates.emplace_back(-(views[i].synthetic ? kSyntheticViewWeight * c : c), static_cast<int>(i));
         }
         std::sort(candidates.begin(), candidates.end());
         for (const auto& [neg_cos, i] : candidates) {
@@ -360,6 +361,13 @@ VertexFusionResult FuseVertexColors(const TriangleMesh& mesh, const ColorViewSet
     result.colors[v] = color[wv];
     result.source_view[v] = source[wv];
     if (source[wv] < 0) ++result.propagated;
+    double& share = source[wv] < 0 ? result.provenance.propagated
+                                   : (views[source[wv]].synthetic ? result.provenance.synthetic : result.provenance.real);
+    share += 1;
+  }
+  if (n_in > 0) {
+    const double n = static_cast<double>(n_in);
+    result.provenance.real /= n, result.provenance.synthetic /= n, result.provenance.propagated /= n;
   }
   return result;
 }
@@ -370,6 +378,7 @@ ColorViewSet SuperResolveViews(const ColorViewSet& views, const models::Upscaler
   for (const ColorView& v : views) {
     ColorView up;
     up.view = v.view;
+    up.synthetic = v.synthetic;
     up.view.camera = Supersampled(v.view.camera, upscaler.scale());
     ImageF srgb = v.color;
     for (float& c : srgb.vector()) c = LinearToSrgb(std::clamp(c, 0.0f, 1.0f));

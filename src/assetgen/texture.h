@@ -29,6 +29,18 @@ struct ColorView {
   ViewCamera view;
   ImageF color;  // 3 channels, linear RGB, camera.width x camera.height
   ImageF mask;   // empty or 1 channel, same size
+  // Made by a shape prior (a real view rotated about the axis or mirrored), not seen by a camera: it colours
+  // a point only where it sees it clearly more head-on than every real view (kSyntheticViewWeight).
+  bool synthetic = false;
+};
+// Views are ranked by the cosine between the surface normal and the direction to the camera; a synthetic
+// view's cosine counts this much: a real view at 60 degrees still beats a synthetic one seen head-on at 0.
+constexpr float kSyntheticViewWeight = 0.5f;
+
+// Where a texture's colour came from, as fractions of the surface (texels of the atlas, or vertices): real
+// camera pixels, synthetic views (symmetry), or propagated from neighbours (seen by no view).
+struct TextureProvenance {
+  double real = 0, synthetic = 0, propagated = 0;
 };
 using ColorViewSet = std::vector<ColorView>;
 
@@ -43,6 +55,7 @@ struct VertexFusionResult {
   std::vector<Eigen::Vector3f> colors;  // linear RGB, one per vertex
   std::vector<int> source_view;         // the view each vertex took its colour from; -1 = propagated
   int propagated = 0;                   // vertices no view saw
+  TextureProvenance provenance;         // by vertex count
 };
 
 // InputError when the mesh has no faces, no views are given, or a view's image size disagrees with its camera.

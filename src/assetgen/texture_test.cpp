@@ -184,6 +184,32 @@ TEST(FuseVertexColors, AVertexSeenTwiceTakesTheMoreFrontalView) {
   }
 }
 
+// A synthetic view (a shape prior's copy of real pixels) gives colour only where it sees the surface clearly
+// more head-on than every real view; the provenance says where each vertex's colour came from.
+TEST(FuseVertexColors, RealViewsWinOverSyntheticOnesUnlessFarLessHeadOn) {
+  TriangleMesh quad;  // z = 0, facing +z
+  AppendGrid(&quad, 4, Eigen::Vector3f(-0.5f, -0.5f, 0), Eigen::Vector3f::UnitX(), Eigen::Vector3f::UnitY());
+  const ViewCamera frontal = OrbitCamera("frontal", 0, 80, 4, 30, 64, 64);
+  ColorView synthetic = ConstantView(frontal, kRed);
+  synthetic.synthetic = true;
+  // Real view at 40 degrees elevation (cosine ~0.64 > 0.5 x ~0.98): the real view wins.
+  {
+    const ColorViewSet views = {synthetic, ConstantView(OrbitCamera("real", 0, 40, 4, 30, 64, 64), kBlue)};
+    const VertexFusionResult r = FuseVertexColors(quad, views);
+    for (size_t v = 0; v < quad.NumVertices(); ++v) EXPECT_EQ(r.source_view[v], 1) << "vertex " << v;
+    EXPECT_NEAR(r.provenance.real, 1.0, 1e-9);
+    EXPECT_NEAR(r.provenance.synthetic, 0.0, 1e-9);
+  }
+  // Real view at 20 degrees (cosine ~0.34 < 0.5 x ~0.98): the synthetic view sees it far more head-on.
+  {
+    const ColorViewSet views = {synthetic, ConstantView(OrbitCamera("real", 0, 20, 4, 30, 64, 64), kBlue)};
+    const VertexFusionResult r = FuseVertexColors(quad, views);
+    for (size_t v = 0; v < quad.NumVertices(); ++v) EXPECT_EQ(r.source_view[v], 0) << "vertex " << v;
+    EXPECT_NEAR(r.provenance.synthetic, 1.0, 1e-9);
+    EXPECT_NEAR(r.provenance.real + r.provenance.synthetic + r.provenance.propagated, 1.0, 1e-9);
+  }
+}
+
 TEST(FuseVertexColors, SeamSmoothingOnlyTouchesTheSeamBand) {
   // A roof: two planes meeting at x = 0, each seen head-on by its own view (red from -x, blue from +x), so the
   // seam runs along the ridge.

@@ -545,7 +545,8 @@ Eigen::Vector2f ClosestBarycentrics(const Eigen::Vector2d& p, const Eigen::Vecto
 
 }  // namespace
 
-ImageU8 BakeTexture(const TriangleMesh& mesh, const ColorViewSet& views, int texture_size, const BakeOptions& options) {
+ImageU8 BakeTexture(const TriangleMesh& mesh, const ColorViewSet& views, int texture_size, const BakeOptions& options,
+                    TextureProvenance* provenance) {
   if (mesh.NumFaces() == 0) throw InputError({}, "BakeTexture: mesh has no faces");
   if (mesh.uvs.size() != mesh.NumVertices()) throw InputError({}, "BakeTexture: mesh has no UVs (run BuildUvAtlas)");
   if (const std::string bad = mesh.Validate(); !bad.empty()) throw InputError({}, "BakeTexture: " + bad);
@@ -646,7 +647,8 @@ ImageU8 BakeTexture(const TriangleMesh& mesh, const ColorViewSet& views, int tex
   // Per texel: the view that sees its surface point most head-on (the vertex-fusion rule) among those where
   // it is not occluded, colour by bilinear lookup over the taps that show the same surface.
   ImageF color(size, size, 3);
-  std::vector<uint8_t> state(num_texels, 0);  // 0 = gutter, 1 = coloured, 2 = surface no view sees
+  // 0 = gutter, 1 = coloured from a real view, 2 = surface no view sees, 3 = coloured from a synthetic view
+  std::vector<uint8_t> state(num_texels, 0);
   const float tolerance = options.fusion.depth_tolerance, min_cos = options.fusion.min_cosine;
   // A tap shows "the same surface" when its point lies on the texel's tangent plane (within the slack) and its
   // triangle faces within 60 degrees of the texel's: across a crease the neighbouring face's colour would
@@ -663,11 +665,15 @@ ImageU8 BakeTexture(const TriangleMesh& mesh, const ColorViewSet& views, int tex
       const Eigen::Vector3f& n = face_normal[t];
       float best_cos = -1;
       Eigen::Vector3f best = Eigen::Vector3f::Zero();
+      bool best_synthetic = false;
       for (const BakeView& v : bake) {
         const Eigen::Vector3f to_eye = v.eye - X;
         const float range = to_eye.norm();
-        const float cosine = range > 0 ? n.dot(to_eye) / range : -1;
-        if (cosine < min_cos || cosine <= best_cos) continue;
+        const float true_cosine = range > 0 ? n.dot(to_eye) / range : -1;
+        if (true_cosine < min_cos) continue;
+        // The rank (texture.h): a synthetic view's cosine counts kSyntheticViewWeight.
+        const float cosine = v.source->synthetic ? kSyntheticViewWeight * true_cosine : true_cosine;
+        if (cosine <= best_cos) continue;
         const Eigen::Vector4f c = v.clip_from_world * X.homogeneous();
         if (c.w() <= 0) continue;
         const float u = (c.x() / c.w() + 1) * 0.5f * v.width, w = (c.y() / c.w() + 1) * 0.5f * v.height;
@@ -704,15 +710,24 @@ ImageU8 BakeTexture(const TriangleMesh& mesh, const ColorViewSet& views, int tex
         if (weight <= 1e-4f) continue;
         best_cos = cosine;
         best = sum / weight;
+        best_synthetic = v.source->synthetic;
       }
       if (best_cos < 0) {
         state[p] = 2;
         continue;
       }
-      state[p] = 1;
+      state[p] = best_synthetic ? 3 : 1;
       for (int ch = 0; ch < 3; ++ch) color.at(x, static_cast<int>(row), ch) = best[ch];
     }
   }, 4);
+
+  if (provenance) {
+    size_t counts[4] = {0, 0, 0, 0};
+    for (uint8_t s : state) ++counts[s];
+    const double surface = static_cast<double>(counts[1] + counts[2] + counts[3]);
+    *provenance = {};
+    if (surface > 0) *provenance = {counts[1] / surface, counts[3] / surface, counts[2] / surface};
+  }
 
   // Surface no view sees: the vertex fusion's propagated colours, interpolated over the triangle.
   if (std::find(state.begin(), state.end(), uint8_t{2}) != state.end()) {

@@ -39,7 +39,8 @@ struct BakeOptions {
 
 // Bakes the views onto a mesh with UVs: returns an sRGB texture (3 channels) of `texture_size` square.
 // Texels no view sees take the colour propagated from the vertex fusion. InputError when the mesh has no UVs.
+// `provenance` (optional) receives where the surface texels' colour came from.
 ImageU8 BakeTexture(const TriangleMesh& mesh_with_uvs, const ColorViewSet& views, int texture_size,
-                    const BakeOptions& options = {});
+                    const BakeOptions& options = {}, TextureProvenance* provenance = nullptr);
 
 }  // namespace sd

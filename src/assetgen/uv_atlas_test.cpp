@@ -332,8 +332,13 @@ TEST(BakeTexture, SurfaceNoViewSeesTakesTheFusedVertexColours) {
   UvAtlasOptions options;
   options.texture_size = 128;
   const TriangleMesh atlas = BuildUvAtlas(cube.mesh, options);
-  const ImageU8 tex = BakeTexture(atlas, views, 128);
+  TextureProvenance provenance;
+  const ImageU8 tex = BakeTexture(atlas, views, 128, {}, &provenance);
   const VertexFusionResult fused = FuseVertexColors(atlas, views);
+  // Three of the six equal sides face the one view; the bottom and two sides are propagated.
+  EXPECT_NEAR(provenance.real, 0.5, 0.08) << provenance.real;
+  EXPECT_EQ(provenance.synthetic, 0.0);
+  EXPECT_NEAR(provenance.real + provenance.propagated, 1.0, 1e-9);
   auto centroid = [&](int f) {
     Eigen::Vector2f c = Eigen::Vector2f::Zero();
     for (int k = 0; k < 3; ++k) c += atlas.uvs[atlas.faces[f][k]] / 3;

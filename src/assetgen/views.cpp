@@ -291,6 +291,8 @@ MultiViewSet LoadViews(const std::filesystem::path& dir) {
                              << " but views[0] is " << views[0].view.camera.width << "x" << views[0].view.camera.height
                              << " (all views of a set must have one size)");
 
+    if (v.Has("synthetic")) mv.synthetic = v["synthetic"].Bool();
+    if (v.Has("source")) mv.source = v["source"].String();
     if (v.Has("image")) {
       const std::filesystem::path image_file = dir / v["image"].String();
       const ImageU8 image = ReadImage(image_file, 3);
@@ -356,6 +358,8 @@ void SaveViews(const MultiViewSet& views, const std::filesystem::path& dir, cons
       WriteImage(out.path() / cf, ToSrgb8(v.color));
       entry["image"] = cf;
     }
+    if (v.synthetic) entry["synthetic"] = true;
+    if (!v.source.empty()) entry["source"] = v.source;
     list.push_back(entry);
   }
   WriteJsonFile(out.path() / "cameras.json", {{"format", kFormat}, {"normal_frame", normal_frame}, {"views", list}});

@@ -14,6 +14,7 @@
 //                  "width": 320, "height": 320, "fx": ..., "fy": ..., "cx": ..., "cy": ...,
 //                  "T_world_cam": [[...4x4 row-major...]], "image": "image_00.png" }, ... ] }
 // "image" is optional: an sRGB colour picture of the object at that camera (what texture fusion reads).
+// Optional too: "synthetic": true for a view a shape prior made, "source": where a real view came from.
 // Masks are 8-bit grey PNGs, 255 = object (soft edges allowed). All views of a set have the same size.
 #include <cstdint>
 #include <filesystem>
@@ -39,6 +40,10 @@ struct MultiView {
   ImageF normals;  // 3 channels, unit world-frame normals; (0, 0, 0) outside the object
   ImageF mask;     // 1 channel, 0..1
   ImageF color;    // empty, or 3 channels, linear RGB (the "image" of the view)
+  // Made by a shape prior from a real view (rotated about the object's axis, or mirrored), not seen by a
+  // camera; texturing prefers real views (texture.h). cameras.json "synthetic": true.
+  bool synthetic = false;
+  std::string source;  // where a real view came from ("<log> frame 50 back_camera"); cameras.json "source"
 };
 
 using MultiViewSet = std::vector<MultiView>;

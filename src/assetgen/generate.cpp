@@ -7,11 +7,15 @@
 #include <deque>
 #include <memory>
 
+#include "assetgen/asset.h"
 #include "assetgen/texture.h"
 #include "assetgen/texture_eval.h"
 #include "assetgen/uv_atlas.h"
 #include "core/error.h"
 #include "core/log.h"
+#include "geometry/closest_point.h"
+#include "geometry/topology.h"
+#include "geometry/visual_hull.h"
 #include "models/super_resolution.h"
 
 namespace sd {
@@ -58,7 +62,7 @@ namespace {
 
 // `coarse`: a given coarse mesh (a shape prior's) instead of the views' visual hull; `coarse_method` says what it is.
 GeneratedMesh Generate(const MultiViewSet& views, const GenerateOptions& options, const TriangleMesh* given_coarse,
-                       const std::string& coarse_method) {
+                       const std::string& coarse_method, const std::vector<Eigen::Vector3f>& points = {}) {
   if (views.empty()) throw InputError({}, "no views to generate from");
   if (options.texture != "bake" && options.texture != "vertex")
     throw InputError({}, Msg() << "unknown texture mode '" << options.texture << "' (bake or vertex)");
@@ -82,10 +86,11 @@ GeneratedMesh Generate(const MultiViewSet& views, const GenerateOptions& options
     mesh = coarse;
   } else {
     timer.Run("refine", [&] {
-      RefineResult r = RefineMesh(coarse, views, options.refine);
+      RefineResult r = RefineMesh(coarse, views, options.refine, points);
       mesh = std::move(r.mesh);
       out.last_refine_step = r.log.back();
-      return std::string(Msg() << (options.refine.lambda_normal > 0 ? "normal + silhouette, " : "silhouette only, ")
+      return std::string(Msg() << (options.refine.lambda_normal > 0 ? "normal + silhouette" : "silhouette")
+                               << (points.empty() ? std::string(", ") : std::string(Msg() << " + " << points.size() << " LiDAR returns, "))
                                << options.refine.steps << " steps x " << options.refine.iterations_per_step
                                << " iterations, " << mesh.NumFaces() << " triangles");
     });
@@ -102,6 +107,7 @@ GeneratedMesh Generate(const MultiViewSet& views, const GenerateOptions& options
   timer.Run("texture", [&] {
     if (options.texture == "vertex") {
       const VertexFusionResult fused = FuseVertexColors(mesh, color_views);
+      out.texture_provenance = fused.provenance;
       mesh.colors.resize(mesh.NumVertices());
       for (size_t v = 0; v < mesh.NumVertices(); ++v) mesh.colors[v] << fused.colors[v], 1.0f;
       return std::string(Msg() << "vertex colours, " << fused.propagated << " of " << mesh.NumVertices()
@@ -110,13 +116,26 @@ GeneratedMesh Generate(const MultiViewSet& views, const GenerateOptions& options
     UvAtlasOptions atlas;
     atlas.texture_size = options.texture_size;
     UvAtlasStats stats;
-    mesh = BuildUvAtlas(mesh, atlas, &stats);
+    // A mesh of many small charts may not fit the asked size with its gutters: the next size up, to 4096.
+    TriangleMesh with_uvs;
+    for (;;) {
+      try {
+        with_uvs = BuildUvAtlas(mesh, atlas, &stats);
+        break;
+      } catch (const InputError& e) {
+        if (atlas.texture_size >= 4096 || std::string(e.what()).find("do not fit") == std::string::npos) throw;
+        SD_LOG(Info, "texture: " << e.what() << "; trying " << 2 * atlas.texture_size << "^2");
+        atlas.texture_size *= 2;
+      }
+    }
+    mesh = std::move(with_uvs);
     Material material;
     material.name = "baked";
-    material.base_color_texture = std::make_shared<ImageU8>(BakeTexture(mesh, color_views, options.texture_size));
+    material.base_color_texture =
+        std::make_shared<ImageU8>(BakeTexture(mesh, color_views, atlas.texture_size, {}, &out.texture_provenance));
     material.base_color_texture_name = "baked.png";
     mesh.materials = {material};
-    return std::string(Msg() << "UV atlas " << options.texture_size << "^2, " << stats.charts << " charts, "
+    return std::string(Msg() << "UV atlas " << atlas.texture_size << "^2, " << stats.charts << " charts, "
                              << static_cast<int>(100 * stats.utilisation) << "% used");
   });
 
@@ -170,6 +189,184 @@ GeneratedMesh GenerateFromPhotoShape(const PhotoShape& shape, GenerateOptions op
   options.canonical.front_direction.reset();
   return Generate(shape.views, options, &shape.coarse, std::string(ToString(shape.prior)) + " prior");
 }
+
+nlohmann::json MeshQuality(const GeneratedMesh& g) {
+  // The atlas splits vertices along chart borders: weld before asking whether the surface is closed.
+  std::vector<Eigen::Vector3f> positions = g.mesh.positions;
+  std::vector<Eigen::Vector3i> faces = g.mesh.faces;
+  const float diag = g.mesh.Bounds().Size().norm();
+  geometry::WeldVertices(&positions, &faces, 1e-6f * std::max(diag, 1e-12f));
+  const geometry::TopologyReport topo = geometry::AnalyzeTopology(static_cast<int>(positions.size()), faces);
+  return {{quality::kWatertight, topo.IsWatertight() ? 1 : 0},
+          {quality::kRealTextureFraction, g.texture_provenance.real},
+          {"synthetic_texture_fraction", g.texture_provenance.synthetic},
+          {"propagated_texture_fraction", g.texture_provenance.propagated}};
+}
+
+namespace {
+
+// The real view in the middle of the directions seen: the most interior one, whose azimuth is the median of the
+// real views' (a held-out view between others tests interpolation, not extrapolation into the unseen).
+size_t MiddleView(const MultiViewSet& views) {
+  std::vector<std::pair<double, size_t>> az;
+  for (size_t i = 0; i < views.size(); ++i) {
+    const Eigen::Vector3d c = views[i].view.T_world_cam.translation;
+    az.emplace_back(std::atan2(c.y(), c.x()), i);
+  }
+  // Unwrap around the largest gap, so a set of views straddling +-180 degrees sorts in order.
+  std::sort(az.begin(), az.end());
+  size_t gap_after = az.size() - 1;
+  double gap = az.front().first + 2 * 3.14159265358979323846 - az.back().first;
+  for (size_t i = 0; i + 1 < az.size(); ++i)
+    if (az[i + 1].first - az[i].first > gap) gap = az[i + 1].first - az[i].first, gap_after = i;
+  std::rotate(az.begin(), az.begin() + (gap_after + 1) % az.size(), az.end());
+  return az[az.size() / 2].second;
+}
+
+double Median(std::vector<float> v) {
+  if (v.empty()) return 0;
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
+}
+
+}  // namespace
+
+namespace {
+GeneratedMesh GenerateFromHull(const HarvestedObject& object, const MultiViewSet& views, const HarvestFit& fit,
+                               const GenerateOptions& options, const std::vector<Eigen::Vector3f>& points);
+void FillHarvestQuality(const HarvestedObject& object, const GeneratedMesh& g, const std::vector<Eigen::Vector3f>& points,
+                        bool held_out, HarvestFit* fit);
+}  // namespace
+
+GeneratedMesh GenerateFromHarvest(const HarvestedObject& object, GenerateOptions options, HarvestFit* fit_out) {
+  HarvestFit fit;
+  if (object.views.empty()) throw InputError({}, "the harvested object has no views");
+  // Held out: the middle view, when at least two others remain to fit.
+  std::vector<size_t> fit_views;
+  if (object.views.size() >= 3) fit.held_out.push_back(MiddleView(object.views));
+  for (size_t i = 0; i < object.views.size(); ++i)
+    if (std::find(fit.held_out.begin(), fit.held_out.end(), i) == fit.held_out.end()) fit_views.push_back(i);
+  MultiViewSet views;
+  for (size_t i : fit_views) views.push_back(object.views[i]);
+  fit.real_views = static_cast<int>(views.size());
+
+  // The prior: the category's, a revolve demoted when the largest silhouette is not mirror-symmetric.
+  fit.prior = DefaultShapePrior(object.category);
+  fit.prior_reason = "category " + object.category;
+  if (fit.prior == ShapePrior::kRevolve) {
+    size_t largest = 0;
+    double area = -1;
+    for (size_t i = 0; i < views.size(); ++i) {
+      double a = 0;
+      for (float m : views[i].mask.vector()) a += m > 0.5f;
+      if (a > area) area = a, largest = i;
+    }
+    // A log's masks are a segmenter's at a few dozen pixels, shaded on one side: less symmetric than a photo's
+    // (the photo path asks 0.85); what is far below is no surface of revolution (a fallen or crushed cone).
+    constexpr double kMinLogSymmetry = 0.7;
+    const double symmetry = FitSymmetryAxis(views[largest].mask).symmetry_iou;
+    if (symmetry < kMinLogSymmetry) {
+      fit.prior = ShapePrior::kHull;
+      fit.prior_reason = Msg() << "category " << object.category << ", but silhouette symmetry " << symmetry << " < "
+                               << kMinLogSymmetry;
+    }
+  }
+  // Every fifth return is held out of the fit (with 25 or more): the point-to-mesh figure is then measured on
+  // returns the surface was not pulled onto, not a fit residual.
+  std::vector<Eigen::Vector3f> fit_points, held_points;
+  for (size_t i = 0; i < object.points.size(); ++i)
+    (object.points.size() >= 25 && i % 5 == 2 ? held_points : fit_points).push_back(object.points[i]);
+  // A surface of revolution turns about its own axis, which the box's centre only approximates.
+  const Eigen::Vector2d axis = fit.prior == ShapePrior::kRevolve ? RevolveAxis(views, object.size, fit_points) : Eigen::Vector2d::Zero();
+  const MultiViewSet real_views = views;
+  const MultiViewSet synthetic = SymmetryViews(views, fit.prior, 8, axis);
+  fit.synthetic_views = static_cast<int>(synthetic.size());
+  views.insert(views.end(), synthetic.begin(), synthetic.end());
+
+  options.refine.lambda_normal = 0;  // no normal maps: masks and returns
+  options.canonical.up = "+z", options.canonical.front = "+x";
+  options.canonical.scale = 1.0;
+  options.canonical.front_direction.reset();
+  options.canonical.target_size.reset();
+  options.canonical.target_height.reset();
+  GeneratedMesh g;
+  if (fit.prior == ShapePrior::kRevolve) {
+    // Coarse: the profile every silhouette and return agrees on, revolved; a hull of few, noisy masks from one
+    // side would be far less round.
+    const TriangleMesh coarse = RevolveFromViews(real_views, fit_points, axis, object.size);
+    // The profile is already fitted to every silhouette and return (a one-dimensional fit); free-form
+    // refinement would only follow the segmenter's errors out of round.
+    options.refine.steps = 0;
+    g = Generate(views, options, &coarse,
+                 Msg() << "surface of revolution from " << fit.real_views << " silhouettes and " << fit_points.size()
+                       << " LiDAR returns, axis offset (" << axis.x() << ", " << axis.y() << ") m",
+                 fit_points);
+  } else {
+    g = GenerateFromHull(object, views, fit, options, fit_points);
+  }
+  FillHarvestQuality(object, g, held_points.empty() ? fit_points : held_points, !held_points.empty(), &fit);
+  if (fit_out) *fit_out = std::move(fit);
+  return g;
+}
+
+namespace {
+
+// The box priors' coarse mesh: the hull of every view inside the metric box, carved by the beams.
+GeneratedMesh GenerateFromHull(const HarvestedObject& object, const MultiViewSet& views, const HarvestFit& fit,
+                               const GenerateOptions& options, const std::vector<Eigen::Vector3f>& points) {
+  geometry::VisualHullOptions hull;
+  hull.resolution = options.hull_resolution;
+  const Eigen::Vector3f half = (0.5 * object.size).cast<float>() * 1.02f;
+  hull.bounds.min = Eigen::Vector3f(-half.x(), -half.y(), 0.0f);
+  hull.bounds.max = Eigen::Vector3f(half.x(), half.y(), float(object.size.z()) * 1.02f);
+  hull.tolerated_outside_views = fit.real_views >= 6 ? 1 : 0;
+  hull.free_segments = object.free_segments;
+  std::vector<geometry::SilhouetteView> silhouettes;
+  for (const MultiView& v : views) silhouettes.push_back({v.view.camera, v.view.T_world_cam.Inverse(), v.mask});
+  TriangleMesh coarse = geometry::VisualHull(silhouettes, hull);
+  std::string coarse_method = Msg() << "visual hull of " << fit.real_views << " real + " << fit.synthetic_views
+                                    << " " << ToString(fit.prior) << " views in the " << object.size.x() << " x "
+                                    << object.size.y() << " x " << object.size.z() << " m box, "
+                                    << hull.free_segments.size() << " LiDAR beams carving, " << hull.resolution << "^3";
+  if (coarse.faces.empty() && !hull.free_segments.empty()) {
+    // The beams and the masks disagree so much that nothing is left (a mis-registered camera, say): the masks'
+    // hull alone, said in the method.
+    hull.free_segments.clear();
+    coarse = geometry::VisualHull(silhouettes, hull);
+    coarse_method += " (the beams carved everything away: masks only)";
+  }
+  if (coarse.faces.empty()) throw InputError({}, "the views' silhouettes share no volume inside the object's box");
+  return Generate(views, options, &coarse, coarse_method, points);
+}
+
+void FillHarvestQuality(const HarvestedObject& object, const GeneratedMesh& g, const std::vector<Eigen::Vector3f>& measured,
+                        bool held_out, HarvestFit* fit_in) {
+  HarvestFit& fit = *fit_in;
+  fit.quality = MeshQuality(g);
+  fit.quality[quality::kShapePrior] = {{"prior", ToString(fit.prior)}, {"reason", fit.prior_reason},
+                                       {"real_views", fit.real_views}, {"synthetic_views", fit.synthetic_views}};
+  if (!fit.held_out.empty()) {
+    double iou = 0, psnr = 0;
+    for (size_t i : fit.held_out) {
+      const ViewAgreement a = AgreementAtView(g, object.views[i], object.views[i].mask);
+      iou += a.silhouette_iou, psnr += a.masked_psnr_db;
+    }
+    fit.quality[quality::kHeldOutSilhouetteIou] = iou / fit.held_out.size();
+    fit.quality["heldout_masked_psnr_db"] = psnr / fit.held_out.size();
+    fit.quality["heldout_views"] = fit.held_out.size();
+  }
+  if (!measured.empty()) {
+    std::vector<Eigen::Vector3f> points;
+    for (const Eigen::Vector3f& p : measured)
+      points.push_back((g.scale * (g.rotation * p.cast<double>()) + g.translation).cast<float>());
+    fit.quality[quality::kLidarPointToMeshMedianM] = Median(geometry::PointToSurfaceDistances(g.mesh.positions, g.mesh.faces, points));
+    fit.quality["lidar_points"] = object.points.size();
+    fit.quality["lidar_p2m_points"] = points.size();
+    fit.quality["lidar_p2m_held_out"] = held_out;  // false: too few returns to hold any out, a fit residual
+  }
+}
+
+}  // namespace
 
 namespace {
 

@@ -17,10 +17,13 @@
 #include <vector>
 
 #include <Eigen/Core>
+#include <nlohmann/json.hpp>
 
 #include "assetgen/canonical.h"
+#include "assetgen/harvest.h"
 #include "assetgen/refine.h"
 #include "assetgen/shape_prior.h"
+#include "assetgen/texture.h"
 #include "assetgen/views.h"
 #include "core/box3.h"
 #include "core/image.h"
@@ -51,6 +54,7 @@ struct GeneratedMesh {
   Eigen::Vector3d translation;  // canonical = scale · (rotation · world) + translation
   std::vector<StageReport> stages;
   RefineStepLog last_refine_step;
+  TextureProvenance texture_provenance;  // where the texture's colour came from (texture.h)
 
   // Anything given in the views' world frame (a ground-truth mesh, say) moved into the asset's frame, as the
   // asset was: positions by scale · rotation + translation, normals by the rotation.
@@ -64,6 +68,27 @@ GeneratedMesh GenerateFromViews(const MultiViewSet& views, const GenerateOptions
 // refinement on the mask terms alone (its views carry no normals), then the same back end; the prior's frame
 // is already canonical and metric (+z up, +x front, metres): the canonical stage only re-grounds and centres it.
 GeneratedMesh GenerateFromPhotoShape(const PhotoShape& shape, GenerateOptions options);
+
+// The no-model path from an object harvested from a driving log (harvest.h): the shape prior's symmetry views
+// (SymmetryViews) beside the real ones; the coarse mesh is the visual hull of all of them inside the metric box,
+// carved by the LiDAR beams that passed the object (a view may be outvoted once there are six real ones:
+// segmented masks err); refinement on the masks and the object's returns (the point term); then the same back
+// end. With three or more real views, the one nearest the middle of the directions seen is held out of
+// geometry and texture, and the asset redrawn there is the held-out silhouette figure; with 25 or more returns,
+// every fifth is held out of the fit and the point-to-mesh figure measured on those. The harvest's frame is
+// canonical and metric already.
+struct HarvestFit {
+  ShapePrior prior = ShapePrior::kHull;
+  std::string prior_reason;
+  int real_views = 0, synthetic_views = 0;
+  std::vector<size_t> held_out;  // indices into the harvest's views
+  nlohmann::json quality = nlohmann::json::object();  // asset.json figures (asset.h namespace quality)
+};
+GeneratedMesh GenerateFromHarvest(const HarvestedObject& object, GenerateOptions options, HarvestFit* fit);
+
+// The figures every generated asset carries whatever made it (asset.h namespace quality): watertight (after
+// welding the UV seams) and the real-texture fraction.
+nlohmann::json MeshQuality(const GeneratedMesh& generated);
 
 // The finished asset moved back into its views' frame and drawn (unlit base colour) at `view`: its silhouette
 // IoU with `truth` (a mask of the view's size) and the PSNR of its colour against the view's, in sRGB, inside

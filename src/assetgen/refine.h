@@ -39,7 +39,9 @@ struct RefineOptions {
   float lambda_normal = 1.0f;
   float lambda_mask = 1.0f;
   float lambda_lap = 0.5f;
-  float lambda_points = 1.0f;        // used only when points are given
+  // Used only when points are given. LiDAR returns are metric where a segmenter's masks of a few dozen pixels
+  // are not: at 20 the surface follows the returns to about a centimetre (PandaSet cones, bench_harvest).
+  float lambda_points = 20.0f;
   float max_point_distance = 0.25f;  // in bounding-sphere radii: farther points are outliers, not surface
   // Remesher settings in units of the coarse mesh's bounding-sphere radius.
   geometry::RemeshOptions remesh = DefaultRemeshOptions();

@@ -177,6 +177,7 @@ std::vector<ObjectCrop> CropCamera(const Frame& frame, const CameraSensor& cam_i
   std::vector<Candidate> candidates;
   for (size_t i = 0; i < frame.annotations.size(); ++i) {
     const Annotation& a = frame.annotations[i];
+    if (options.select && !options.select(a)) continue;
     if (!options.categories.empty()) {
       const auto info = FindCategory(a.category);
       const std::string name = info ? info->name : a.category;

@@ -16,6 +16,7 @@
 //    a camera at the LiDAR's position cannot see.
 //  - The crop window is box2d grown by `context` of its size on each side, clipped to the image; crops larger
 //    than `max_crop_px` on their longer side are downscaled (area filter).
+#include <functional>
 #include <vector>
 
 #include "core/image.h"
@@ -28,6 +29,7 @@ namespace sd::mining {
 struct LogCropOptions {
   std::vector<std::string> cameras;  // channels to crop from; empty = every camera of the frame
   std::vector<std::string> categories;  // canonical categories to keep; empty = all annotated objects
+  std::function<bool(const Annotation&)> select;  // when set, only the annotations it accepts (one track, say)
   double context = 0.1;           // margin around box2d, fraction of its width / height per side
   int min_box_px = 12;            // skip objects whose clipped box2d is smaller on its shorter side
   double max_truncation = 0.75;   // skip objects mostly outside the image

@@ -407,8 +407,10 @@ void CheckSegmentationInput(const ImageU8& image, const Box2& box, const ImageF*
                                << prior->channels() << ", the image " << w << "x" << h << " (1 channel expected)");
 }
 
-ImageF GrabCut(const ImageU8& image, const Box2& box, const ImageF* prior, const GrabCutOptions& options) {
+ImageF GrabCut(const ImageU8& image, const Box2& box, const ImageF* prior, const GrabCutOptions& options,
+               const ImageF* background) {
   CheckSegmentationInput(image, box, prior);
+  CheckSegmentationInput(image, box, background);
   const int w = image.width(), h = image.height(), ch = image.channels();
   const PixelRect r = PixelsOf(box, w, h);
   SD_CHECK(options.components >= 1 && options.components <= 16 && options.iterations >= 1, << options.components);
@@ -423,7 +425,9 @@ ImageF GrabCut(const ImageU8& image, const Box2& box, const ImageF* prior, const
   for (int y = r.y0; y < r.y1; ++y)
     for (int x = r.x0; x < r.x1; ++x) {
       const size_t i = index(x, y);
-      label[i] = prior != nullptr && prior->vector()[i] >= 0.5f ? kHardForeground : kForeground;
+      label[i] = prior != nullptr && prior->vector()[i] >= 0.5f             ? kHardForeground
+                 : background != nullptr && background->vector()[i] >= 0.5f ? kHardBackground
+                                                                              : kForeground;
     }
 
   // Pairwise weights to the right, down, down-right and down-left neighbours: γ exp(−β‖Δ‖²) / distance.
@@ -496,6 +500,9 @@ ImageF GrabCut(const ImageU8& image, const Box2& box, const ImageF* prior, const
   Gmm fg_model, bg_model;
   const double hard = 1e9;
   MaxFlow graph(0);
+  size_t hard_fg = 0;
+  for (uint8_t l : label) hard_fg += l == kHardForeground;
+  const bool seeded_start = options.foreground_from_prior && hard_fg >= 64;
   for (int iteration = 0; iteration < options.iterations; ++iteration) {
     std::vector<float> fg_samples, bg_samples;
     fg_samples.reserve(3 * static_cast<size_t>(r.Area()));
@@ -504,6 +511,8 @@ ImageF GrabCut(const ImageU8& image, const Box2& box, const ImageF* prior, const
       for (int x = 0; x < w; ++x) {
         const size_t i = index(x, y);
         const bool is_fg = label[i] == kForeground || label[i] == kHardForeground;
+        // A seeded start learns the object from the seeds; the box's other pixels then count for neither model.
+        if (seeded_start && iteration == 0 && label[i] == kForeground) continue;
         std::vector<float>& dst = is_fg ? fg_samples : bg_samples;
         dst.insert(dst.end(), &rgb[3 * i], &rgb[3 * i] + 3);
         if (outside < 64 && iteration == 0 && label[i] != kHardBackground && in_ring(x, y))
@@ -526,8 +535,11 @@ ImageF GrabCut(const ImageU8& image, const Box2& box, const ImageF* prior, const
     graph = edges;  // reuses the previous round's buffers
     for (int node = 0; node < static_cast<int>(nodes); ++node) {
       const auto k = static_cast<size_t>(node);
-      if (label[index(r.x0 + node % bw, r.y0 + node / bw)] == kHardForeground) {
+      const uint8_t fixed = label[index(r.x0 + node % bw, r.y0 + node / bw)];
+      if (fixed == kHardForeground) {
         graph.AddTerminal(node, hard, 0);
+      } else if (fixed == kHardBackground) {
+        graph.AddTerminal(node, 0, hard);
       } else {
         const double lo = std::min(cost_fg[k], cost_bg[k]);
         graph.AddTerminal(node, cost_bg[k] - lo, cost_fg[k] - lo + to_fixed_bg[k]);
@@ -538,7 +550,7 @@ ImageF GrabCut(const ImageU8& image, const Box2& box, const ImageF* prior, const
     for (int y = 0; y < bh; ++y)
       for (int x = 0; x < bw; ++x) {
         const size_t i = index(r.x0 + x, r.y0 + y);
-        if (label[i] == kHardForeground) continue;
+        if (label[i] == kHardForeground || label[i] == kHardBackground) continue;
         const uint8_t now = graph.SourceSide(y * bw + x) ? kForeground : kBackground;
         changed += now != label[i];
         label[i] = now;

@@ -27,6 +27,10 @@ struct GrabCutOptions {
   int components = 5;     // Gaussians per colour model
   int iterations = 5;     // model-fit / cut rounds (stops early when no label changes)
   double gamma = 50.0;    // pairwise weight (the paper's value, for 0..255 colours)
+  // The first round's object colour model from the sure-foreground pixels alone (when there are at least 64)
+  // rather than from every pixel of the box: for a thin object in a wide box (a cone in its projected 3D box)
+  // the box is mostly background, and a model learnt from it calls background object.
+  bool foreground_from_prior = false;
 };
 
 // Min-cut / max-flow on a directed graph with source and sink terminal edges (Boykov & Kolmogorov 2004:
@@ -90,9 +94,12 @@ PixelRect PixelsOf(const Box2& box, int width, int height);
 void CheckSegmentationInput(const ImageU8& image, const Box2& box, const ImageF* prior);
 
 // Foreground mask (1 channel, image size, 0 or 1). `box` is the object's pixel box, clipped to the image;
-// `prior` (optional, 1 channel, image size, 0..1) marks sure foreground. InputError when the box has no pixels
-// inside the image. The caller checks the result's area.
-ImageF GrabCut(const ImageU8& image, const Box2& box, const ImageF* prior = nullptr, const GrabCutOptions& options = {});
+// `prior` (optional, 1 channel, image size, 0..1) marks sure foreground; `background` (optional, the same)
+// marks sure background inside the box too (a projected 3D box's polygon is tighter than its bounding
+// rectangle); sure foreground wins where both are set. InputError when the box has no pixels inside the image.
+// The caller checks the result's area.
+ImageF GrabCut(const ImageU8& image, const Box2& box, const ImageF* prior = nullptr, const GrabCutOptions& options = {},
+               const ImageF* background = nullptr);
 
 // Keeps the largest 4-connected component of mask ≥ 0.5 and fills its holes (background regions not
 // 4-connected to the image border). Returns a 0/1 mask.

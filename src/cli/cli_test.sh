@@ -155,6 +155,38 @@ env SYNTHDRIVE_MODELS="$T/no_models" "$BIN" -q generate --image "$PHOTO" --mask 
   --category traffic_cone --steps 2 --hull-resolution 32 --texture-size 256 --upscale bicubic --out "$T/g_photo" \
   && grep -q '"prior": "revolve"' "$T/g_photo/asset.json" && grep -q '"photo_silhouette_iou"' "$T/g_photo/asset.json" \
   && "$BIN" -q asset show "$T/g_photo" | grep -q "traffic_cone" && ok || bad "generate: one photo by the revolve prior"
+# The report's asset card of that photo asset: its real view (the photo) and not the prior's virtual views
+# (marked "synthetic" here as the shape prior marks them), the turntable, and no network reference.
+if [ -f "$T/g_photo/views/cameras.json" ] && python3 - "$T/g_photo" <<'PY'
+import json, sys
+asset = json.load(open(sys.argv[1] + "/asset.json"))
+real = asset["quality"]["shape_prior"]["real_views"]
+path = sys.argv[1] + "/views/cameras.json"
+cameras = json.load(open(path))
+for k, v in enumerate(cameras["views"]):
+    v["synthetic"] = k >= real
+json.dump(cameras, open(path, "w"))
+PY
+then
+  id=$(python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["id"])' "$T/g_photo/asset.json")
+  card="$T/photo_synth/report/assets/$id"
+  if synth --log "$INFO" --asset "$T/g_photo" --scenario "$T/one_cone.json" --out "$T/photo_synth"; then
+    [ -s "$card/turntable.png" ] && [ -s "$card/view_00.png" ] && [ ! -e "$card/view_01.png" ] \
+      && grep -q "id='asset-$id'" "$T/photo_synth/report.html" && grep -q "href='#asset-$id'" "$T/photo_synth/report.html" \
+      && ! grep -qiE 'https?://' "$T/photo_synth/report.html" && ok || bad "synth report: the photo asset's card"
+    if [ -f "${SYNTHDRIVE_WEB:-${XDG_CACHE_HOME:-$HOME/.cache}/synthdrive/web}/three/build/three.min.js" ]; then
+      [ -s "$T/photo_synth/report/three/three.min.js" ] && [ -s "$T/photo_synth/report/three/LICENSE" ] \
+        && [ -s "$card/mesh_glb.js" ] && ok || bad "synth report: three.js viewer files"
+    else
+      echo "skip: three.js is not installed (scripts/fetch_web.sh); the report's viewer files are not checked"
+      grep -q "three.js is not installed" "$T/photo_synth/report.html" && ok || bad "synth report: no note without three.js"
+    fi
+  else
+    bad "synth with the photo asset"
+  fi
+else
+  bad "generate: the photo asset's views/cameras.json"
+fi
 "$BIN" -q generate --image "$PHOTO" --box 20,10,140,150 --shape hull --category traffic_cone --steps 2 \
   --hull-resolution 32 --texture-size 256 --upscale bicubic --out "$T/g_photo_box" \
   && grep -q '"prior": "hull"' "$T/g_photo_box/asset.json" && ok || bad "generate: one photo, GrabCut in --box, forced hull"

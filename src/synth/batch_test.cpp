@@ -249,7 +249,7 @@ void ExpectPartsLoseNothing(const SynthRequest& r, const fs::path& direct) {
   }
   fs::create_directories(direct);
   WriteDerivative(log, edits, direct, r.options.write);
-  WriteSynthReport(log, outcomes, direct / "report.html");
+  WriteSynthReport(log, outcomes, assets, direct / "report.html");
   fs::copy_file(r.out / "synth.json", direct / "synth.json");  // written by RunSynth only
   ExpectSameTree(r.out, direct);
 }

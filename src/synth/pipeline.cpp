@@ -1154,7 +1154,7 @@ SynthSummary WriteSynthOutput(const SynthInputs& in, const SynthRequest& request
     if (request.options.report) WritePlanReport(log, in.plan, staging.path() / "plan.html");
   }
   WriteJsonFile(staging.path() / "synth.json", j);
-  if (request.options.report) WriteSynthReport(log, outcomes, staging.path() / "report.html");
+  if (request.options.report) WriteSynthReport(log, outcomes, in.assets, staging.path() / "report.html");
   staging.Commit();
   summary.out = staging.final_path();
   summary.report = summary.out / "report.html";

@@ -12,6 +12,7 @@
 #include "io/files.h"
 #include "io/image_io.h"
 #include "synth/pipeline.h"
+#include "synth/report_assets.h"
 
 namespace sd {
 namespace fs = std::filesystem;
@@ -104,17 +105,6 @@ ImageU8 BirdsEye(const Frame& frame, const FrameOutcome& o) {
   return img;
 }
 
-std::string Escape(const std::string& s) {
-  std::string out;
-  for (char c : s) {
-    if (c == '<') out += "&lt;";
-    else if (c == '>') out += "&gt;";
-    else if (c == '&') out += "&amp;";
-    else out += c;
-  }
-  return out;
-}
-
 // The sequence player: per camera (and the LiDAR bird's-eye view) one image with a slider over the frames, a
 // before/after switch and a play button, so a person sees the inserted objects stay put in the world while the
 // ego drives past them. `images[channel][k]` = {before, after} file names of frame k (empty: not seen).
@@ -123,7 +113,7 @@ std::string SequencePlayer(const std::vector<std::string>& tokens,
   std::ostringstream html;
   html << "<h2>Sequence (" << tokens.size() << " frames)</h2><p>Slider: frame; the checkbox shows the input instead "
           "of the output; play steps at 5 frames per second.</p><script>const sdTokens=[";
-  for (size_t k = 0; k < tokens.size(); ++k) html << (k ? "," : "") << "'" << Escape(tokens[k]) << "'";
+  for (size_t k = 0; k < tokens.size(); ++k) html << (k ? "," : "") << "'" << EscapeHtml(tokens[k]) << "'";
   html << "];function sdShow(id){const p=document.getElementById(id),k=+p.querySelector('input[type=range]').value,"
           "b=p.querySelector('input[type=checkbox]').checked,f=JSON.parse(p.dataset.frames)[k];"
           "p.querySelector('img').src=f?'report/'+(b?f[0]:f[1]):'';p.querySelector('span').textContent="
@@ -140,7 +130,7 @@ std::string SequencePlayer(const std::vector<std::string>& tokens,
       list += frames[k].first.empty() ? "null" : "[\"" + frames[k].first + "\",\"" + frames[k].second + "\"]";
     }
     list += "]";
-    html << "<div class='player' id='" << pid << "' data-frames='" << list << "'><h3>" << Escape(channel)
+    html << "<div class='player' id='" << pid << "' data-frames='" << list << "'><h3>" << EscapeHtml(channel)
          << "</h3><input type='range' min='0' max='" << frames.size() - 1 << "' value='0' oninput=\"sdShow('" << pid
          << "')\" style='width:60%'> <label><input type='checkbox' onchange=\"sdShow('" << pid
          << "')\"> before</label> <button onclick=\"sdPlay('" << pid << "')\">play / stop</button> <span></span><br><img></div>"
@@ -151,20 +141,23 @@ std::string SequencePlayer(const std::vector<std::string>& tokens,
 
 }  // namespace
 
-void WriteSynthReport(const Log& log, const std::vector<FrameOutcome>& frames, const fs::path& html_path) {
+void WriteSynthReport(const Log& log, const std::vector<FrameOutcome>& frames, const std::vector<Asset>& assets,
+                      const fs::path& html_path) {
   const fs::path dir = html_path.parent_path() / "report";
   fs::create_directories(dir);
+  const AssetCardsHtml cards = WriteAssetCards(log, frames, assets, html_path.parent_path());
   std::ostringstream html;
   html << "<!doctype html><html><head><meta charset='utf-8'><title>SynthDrive synthesis report</title><style>"
           "body{font-family:sans-serif;background:#111;color:#ddd;margin:20px}h2{border-bottom:1px solid #444}"
           ".pair{display:flex;gap:8px;margin-bottom:14px}.pair figure{margin:0}img{max-width:100%;border:1px solid #333}"
           "table{border-collapse:collapse}td,th{border:1px solid #444;padding:3px 8px;font-size:13px}"
-          "figcaption{font-size:12px;color:#aaa}</style></head><body>";
-  html << "<h1>SynthDrive synthesis report</h1><p>Log: " << Escape(log.source.string()) << " (" << ToString(log.format)
+          "figcaption{font-size:12px;color:#aaa}a{color:#8ab4f8}</style></head><body>";
+  html << "<h1>SynthDrive synthesis report</h1><p>Log: " << EscapeHtml(log.source.string()) << " (" << ToString(log.format)
        << "). Green: visible 2D box of an inserted object; yellow: its 3D box; blue: real annotations.</p>";
   // World-fixed runs write the sequence plan beside this report.
   if (fs::exists(html_path.parent_path() / "plan.html"))
     html << "<p>Placement plan of the sequence(s): <a href='plan.html'>plan.html</a></p>";
+  html << cards.index;
   int img_id = 0;
   // Per camera and frame, the images written (for the sequence player).
   std::map<std::string, std::vector<std::pair<std::string, std::string>>> player;
@@ -179,8 +172,8 @@ void WriteSynthReport(const Log& log, const std::vector<FrameOutcome>& frames, c
   for (size_t fk = 0; fk < frames.size(); ++fk) {
     const FrameOutcome& o = frames[fk];
     const Frame& frame = log.frames[o.frame_index];
-    body << "<h2>Frame " << Escape(frame.token) << "</h2><p>Sun: " << Escape(o.sun_source) << "<br>Light: " << Escape(o.light)
-         << "<br>LiDAR model: " << Escape(o.lidar_model) << (o.lidar_ego_motion ? " (ego motion during the sweep)" : "")
+    body << "<h2 id='" << FrameAnchor(fk) << "'>Frame " << EscapeHtml(frame.token) << "</h2><p>Sun: " << EscapeHtml(o.sun_source) << "<br>Light: " << EscapeHtml(o.light)
+         << "<br>LiDAR model: " << EscapeHtml(o.lidar_model) << (o.lidar_ego_motion ? " (ego motion during the sweep)" : "")
          << "</p>";
     body << "<table><tr><th>#</th><th>asset</th><th>category</th><th>centre (ego, m)</th><th>size (m)</th>"
             "<th>yaw (deg)</th><th>LiDAR points</th><th>visible</th><th>cameras</th></tr>";
@@ -192,7 +185,8 @@ void WriteSynthReport(const Log& log, const std::vector<FrameOutcome>& frames, c
                     b.center().z(), b.size.x(), b.size.y(), b.size.z(), b.Yaw() * 180 / M_PI);
       std::string cams;
       for (const auto& cb : ob.label.camera_boxes) cams += cb.channel + " ";
-      body << "<tr><td>" << k << "</td><td>" << Escape(ob.label.asset_id) << "</td><td>" << ob.label.category << "</td><td>" << buf
+      body << "<tr><td>" << k << "</td><td><a href='#" << AssetAnchor(ob.label.asset_id) << "'>" << EscapeHtml(ob.label.asset_id)
+           << "</a></td><td>" << ob.label.category << "</td><td>" << buf
            << "</td><td>" << ob.lidar_points << "</td><td>"
            << static_cast<int>(100 * (ob.rendered_pixels > 0 ? ob.visible_pixels / ob.rendered_pixels : 0)) << "%</td><td>" << cams
            << "</td></tr>";
@@ -215,7 +209,17 @@ void WriteSynthReport(const Log& log, const std::vector<FrameOutcome>& frames, c
       WriteImage(dir / b_name, factor > 1 ? Downscale(before, factor) : before, 88);
       WriteImage(dir / a_name, factor > 1 ? Downscale(after, factor) : after, 88);
       note(co.channel, fk, b_name, a_name);
-      body << "<h3>" << co.channel << "</h3><p>" << Escape(co.light) << "</p><div class='pair'><figure><img src='report/" << b_name
+      std::map<std::string, int> shown;  // the assets in this picture, each linked to its card below
+      for (int k : co.objects) ++shown[o.objects[k].label.asset_id];
+      body << "<h3 id='" << CameraAnchor(fk, co.channel) << "'>" << EscapeHtml(co.channel) << "</h3><p>";
+      if (!shown.empty()) {
+        body << "Assets:";
+        for (auto it = shown.begin(); it != shown.end(); ++it)
+          body << (it == shown.begin() ? " " : ", ") << "<a href='#" << AssetAnchor(it->first) << "'>" << EscapeHtml(it->first)
+               << "</a>" << (it->second > 1 ? " &times;" + std::to_string(it->second) : "");
+        body << "<br>";
+      }
+      body << EscapeHtml(co.light) << "</p><div class='pair'><figure><img src='report/" << b_name
            << "'><figcaption>before (real annotations)</figcaption></figure><figure><img src='report/" << a_name
            << "'><figcaption>after</figcaption></figure></div>";
     }
@@ -244,6 +248,7 @@ void WriteSynthReport(const Log& log, const std::vector<FrameOutcome>& frames, c
     html << SequencePlayer(tokens, player);
   }
   html << body.str();
+  html << cards.cards;
   html << "</body></html>\n";
   WriteFileAtomic(html_path, html.str());
 }
@@ -255,14 +260,14 @@ void WritePlanReport(const Log& log, const SynthPlan& plan, const fs::path& html
           "body{font-family:sans-serif;background:#111;color:#ddd;margin:20px}h2{border-bottom:1px solid #444}"
           "table{border-collapse:collapse}td,th{border:1px solid #444;padding:1px 4px;font-size:11px;text-align:center}"
           "td.v{background:#264d26}td.r{background:#4d4426}svg{background:#1b1b1b;border:1px solid #333}</style></head><body>";
-  html << "<h1>SynthDrive synthesis plan (dry run)</h1><p>Log: " << Escape(log.source.string()) << " (" << ToString(log.format)
+  html << "<h1>SynthDrive synthesis plan (dry run)</h1><p>Log: " << EscapeHtml(log.source.string()) << " (" << ToString(log.format)
        << "). Top-down, world frame: white = ego path (a dot per frame), blue = annotated boxes of every planned frame, "
           "filled = placed objects (colour per arrangement / request).</p>";
   char buf[256];
   for (const auto& seq : plan.sequences) {
     const SequencePlan& p = seq.plan;
-    html << "<h2>Frames " << p.frame_begin << ".." << p.frame_end - 1 << "</h2><p>Surface: " << Escape(seq.surface) << " ("
-         << Escape(seq.surface_detail) << "). Ego path " << p.ego_path_length_m << " m, " << p.objects.size()
+    html << "<h2>Frames " << p.frame_begin << ".." << p.frame_end - 1 << "</h2><p>Surface: " << EscapeHtml(seq.surface) << " ("
+         << EscapeHtml(seq.surface_detail) << "). Ego path " << p.ego_path_length_m << " m, " << p.objects.size()
          << " objects, seed " << p.seed << ", margin " << p.margin_m << " m.</p>";
     std::vector<std::array<Eigen::Vector2d, 4>> real;
     std::vector<Eigen::Vector2d> path;
@@ -309,22 +314,22 @@ void WritePlanReport(const Log& log, const SynthPlan& plan, const fs::path& html
       const auto c = o.box.Corners();
       const std::array<Eigen::Vector2d, 4> fp{c[0].head<2>(), c[1].head<2>(), c[2].head<2>(), c[3].head<2>()};
       html << "<polygon points='" << polygon(fp) << "' fill='" << kColors[color % 8] << "' stroke='#000' stroke-width='0.5'><title>"
-           << i << ": " << Escape(o.source) << " " << Escape(o.role) << " " << Escape(o.category) << " "
-           << Escape(o.asset_id) << "</title></polygon>";
+           << i << ": " << EscapeHtml(o.source) << " " << EscapeHtml(o.role) << " " << EscapeHtml(o.category) << " "
+           << EscapeHtml(o.asset_id) << "</title></polygon>";
       std::snprintf(buf, sizeof buf, "<text x='%.1f' y='%.1f' fill='#ddd' font-size='10'>%zu</text>", X(o.box.center().head<2>()) + 4,
                     Y(o.box.center().head<2>()) - 4, i);
       html << buf;
     }
     html << "</svg><p>";
     for (size_t s = 0; s < sources.size(); ++s)
-      html << "<span style='color:" << kColors[s % 8] << "'>&#9632;</span> " << Escape(sources[s]) << " &nbsp; ";
+      html << "<span style='color:" << kColors[s % 8] << "'>&#9632;</span> " << EscapeHtml(sources[s]) << " &nbsp; ";
     html << "</p><table><tr><th>frame</th><th>token</th>";
-    for (size_t i = 0; i < p.objects.size(); ++i) html << "<th title='" << Escape(p.objects[i].category) << "'>" << i << "</th>";
+    for (size_t i = 0; i < p.objects.size(); ++i) html << "<th title='" << EscapeHtml(p.objects[i].category) << "'>" << i << "</th>";
     html << "</tr><tr><td></td><td>category</td>";
-    for (const auto& o : p.objects) html << "<td>" << Escape(o.category) << "</td>";
+    for (const auto& o : p.objects) html << "<td>" << EscapeHtml(o.category) << "</td>";
     html << "</tr>";
     for (const PlannedFrame& f : p.frames) {
-      html << "<tr><td>" << f.frame_index << "</td><td>" << Escape(f.token.substr(0, 10)) << "</td>";
+      html << "<tr><td>" << f.frame_index << "</td><td>" << EscapeHtml(f.token.substr(0, 10)) << "</td>";
       for (const PlannedView& v : f.objects) {
         std::snprintf(buf, sizeof buf, "%.1f m", v.distance_m);
         html << "<td class='" << (v.visible ? "v" : v.in_range ? "r" : "") << "' title='" << buf << "'>"

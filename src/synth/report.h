@@ -2,10 +2,13 @@
 // report.html for a synthesis run: per frame, each camera the objects touch before/after (inserted
 // objects' visible 2D boxes in green, projected 3D boxes in yellow, real annotations in thin blue) and a
 // bird's-eye view of the LiDAR (real points grey by height, points on inserted objects red, real boxes
-// blue, inserted boxes red). Images are written as JPEG files beside the HTML under report/.
+// blue, inserted boxes red), and at the end a card per inserted asset (synth/report_assets.h: its real
+// views, turntable, 3D view, quality figures and stages, linked both ways with the frames and cameras that show
+// it). Images are written as JPEG / PNG files beside the HTML under report/.
 #include <filesystem>
 #include <vector>
 
+#include "assetgen/asset.h"
 #include "datasets/log.h"
 
 namespace sd {
@@ -13,7 +16,9 @@ namespace sd {
 struct FrameOutcome;
 struct SynthPlan;
 
-void WriteSynthReport(const Log& log, const std::vector<FrameOutcome>& frames, const std::filesystem::path& html_path);
+// `assets`: the run's assets (--asset and the bank's), for the cards of those the frames' objects use.
+void WriteSynthReport(const Log& log, const std::vector<FrameOutcome>& frames, const std::vector<Asset>& assets,
+                      const std::filesystem::path& html_path);
 
 // plan.html of `synth --dry-run`, one self-contained page (no image files): per planned sequence a top-down SVG
 // in the world frame (x right, y up; the ego path with a dot per frame, every annotated box of the planned

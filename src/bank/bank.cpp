@@ -1,6 +1,7 @@
 #include "bank/bank.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
@@ -235,6 +236,39 @@ std::optional<double> QualityFigure(const nlohmann::json& quality, const std::st
 
 }  // namespace
 
+QualityGate DefaultQualityGate() {
+  QualityGate g;
+  g.min = {{quality::kWatertight, 1.0}, {quality::kHeldOutSilhouetteIou, 0.5}, {quality::kRealTextureFraction, 0.15}};
+  g.max = {{quality::kLidarPointToMeshMedianM, 0.05}};
+  return g;
+}
+
+void ParseGateRule(const std::string& rule, const std::string& option, QualityGate* gate) {
+  for (const char* op : {">=", "<="}) {
+    const size_t at = rule.find(op);
+    if (at == std::string::npos || at == 0) continue;
+    try {
+      size_t used = 0;
+      const std::string number = rule.substr(at + 2);
+      const double v = std::stod(number, &used);
+      if (used != number.size() || !std::isfinite(v)) throw std::invalid_argument("trailing text");
+      (op[0] == '>' ? gate->min : gate->max)[rule.substr(0, at)] = v;
+      return;
+    } catch (const std::exception&) {
+      break;
+    }
+  }
+  throw InputError({}, Msg() << option << " '" << rule << "': expected NAME>=NUMBER or NAME<=NUMBER");
+}
+
+std::optional<std::string> GateFailure(const nlohmann::json& quality, const QualityGate& gate) {
+  for (const auto& [key, min] : gate.min)
+    if (const auto v = QualityFigure(quality, key); v && *v < min) return Msg() << key << " " << *v << " < " << min;
+  for (const auto& [key, max] : gate.max)
+    if (const auto v = QualityFigure(quality, key); v && *v > max) return Msg() << key << " " << *v << " > " << max;
+  return std::nullopt;
+}
+
 fs::path DefaultBankPath() {
   if (const char* env = std::getenv("SYNTHDRIVE_BANK"); env && *env) return env;
   return "bank.sqlite";
@@ -327,6 +361,10 @@ AddResult Bank::Add(const fs::path& asset_dir, const AddOptions& options) {
   dir = fs::canonical(dir);
   const Asset asset = LoadAsset(dir);  // the bank holds only assets synth can use
   const AssetInfo& info = asset.info;
+  if (options.gate)
+    if (const auto failed = GateFailure(info.quality, *options.gate))
+      throw InputError(dir / "asset.json", "below the bank's quality gate: " + *failed +
+                                               " (bank add --gate NAME>=VALUE or --no-gate to change it)");
   // Hashing and embedding happen before the transaction, so the write lock is held only for the inserts.
   const std::vector<BankFile> files = HashFolder(dir);
   std::vector<float> embedding;

@@ -71,8 +71,24 @@ BankQuery BankQueryFromJson(const nlohmann::json& j, const std::filesystem::path
                             std::filesystem::path* bank_path = nullptr);
 nlohmann::json BankEntryToJson(const BankEntry& e, bool with_files);
 
+// The bar a generated asset must clear to enter the bank, on its asset.json quality figures (assetgen/asset.h
+// namespace quality). A figure the asset does not carry is not checked: an imported mesh has no held-out view, a
+// photo asset no LiDAR returns.
+struct QualityGate {
+  std::map<std::string, double> min, max;
+};
+// watertight >= 1, heldout_silhouette_iou >= 0.5, lidar_p2m_median_m <= 0.05, real_texture_fraction >= 0.15:
+// an asset below them would teach a detector the asset's defects (a hole, a silhouette the camera never showed,
+// a surface off its own returns, a texture mostly invented).
+QualityGate DefaultQualityGate();
+// "NAME>=VALUE" or "NAME<=VALUE" into the gate (replacing that side of NAME); InputError naming `option` otherwise.
+void ParseGateRule(const std::string& rule, const std::string& option, QualityGate* gate);
+// The first figure that fails, as "heldout_silhouette_iou 0.42 < 0.5"; nullopt when all pass.
+std::optional<std::string> GateFailure(const nlohmann::json& quality, const QualityGate& gate);
+
 struct AddOptions {
   bool replace = false;                           // replace an entry of the same id whose files differ
+  const QualityGate* gate = nullptr;              // refuse assets below it (InputError naming the figure)
   const models::ClipEncoder* clip = nullptr;       // embed preview.png when set
   std::function<void()> inside_transaction;        // test hook: runs after the rows are written, before commit
 };

@@ -196,6 +196,48 @@ TEST(Bank, QueryByCategoryExtentQualityAndLimit) {
   EXPECT_THROW(bank.Query(text), InputError);  // no CLIP model given
 }
 
+TEST(Bank, TheQualityGateRefusesAssetsBelowItNamingTheFigureAndQueriesFilterOnTheFigures) {
+  TempDir tmp;
+  Bank bank = Bank::Open(tmp / "bank.sqlite", true);
+  const QualityGate gate = DefaultQualityGate();
+  AddOptions gated;
+  gated.gate = &gate;
+  const nlohmann::json good = {{"watertight", 1}, {"heldout_silhouette_iou", 0.8}, {"lidar_p2m_median_m", 0.012},
+                               {"real_texture_fraction", 0.4}};
+  bank.Add(BoxAsset(tmp.path(), "good", "traffic_cone", {0.4, 0.4, 0.7}, good), gated);
+  // An imported mesh carries none of the figures: nothing to check.
+  bank.Add(BoxAsset(tmp.path(), "imported", "traffic_cone", {0.4, 0.4, 0.7}), gated);
+  nlohmann::json off_its_returns = good;
+  off_its_returns["lidar_p2m_median_m"] = 0.09;
+  try {
+    bank.Add(BoxAsset(tmp.path(), "off", "traffic_cone", {0.4, 0.4, 0.7}, off_its_returns), gated);
+    FAIL() << "an asset 9 cm off its own returns entered the bank";
+  } catch (const InputError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("off/asset.json"), std::string::npos) << what;
+    EXPECT_NE(what.find("lidar_p2m_median_m 0.09 > 0.05"), std::string::npos) << what;
+  }
+  nlohmann::json holed = good;
+  holed["watertight"] = 0;
+  EXPECT_THROW(bank.Add(BoxAsset(tmp.path(), "holed", "traffic_cone", {0.4, 0.4, 0.7}, holed), gated), InputError);
+  EXPECT_EQ(Ids(bank.Query({})), (std::vector<std::string>{"good", "imported"}));
+  // The user moves the bar; without a gate anything loadable goes in.
+  QualityGate lenient = gate;
+  ParseGateRule("lidar_p2m_median_m<=0.1", "--gate", &lenient);
+  AddOptions lenient_options;
+  lenient_options.gate = &lenient;
+  bank.Add(tmp / "off", lenient_options);
+  bank.Add(tmp / "holed");
+  EXPECT_THROW(ParseGateRule("watertight=1", "--gate", &lenient), InputError);
+  EXPECT_THROW(ParseGateRule(">=1", "--gate", &lenient), InputError);
+  EXPECT_THROW(ParseGateRule("iou>=high", "--gate", &lenient), InputError);
+  // Queries filter on the same figures.
+  BankQuery q;
+  q.max_quality = {{"lidar_p2m_median_m", 0.05}};
+  EXPECT_EQ(Ids(bank.Query(q)), (std::vector<std::string>{"good", "holed"}));
+  EXPECT_EQ(GateFailure(good, gate), std::nullopt);
+}
+
 TEST(Bank, VerifyFindsChangedMissingAndUnloadableFiles) {
   TempDir tmp;
   Bank bank = Bank::Open(tmp / "bank.sqlite", true);

@@ -233,7 +233,22 @@ expect_error "mine: prompt without a category and no CLIP" "names no known categ
 expect_error "mine: existing run" "mr: exists" "" -- "$BIN" -q mine query --index "$T/mi" --prompt car --out "$T/mr"
 printf '{"id": 1}\n' > "$T/bad_manifest.jsonl"
 expect_error "generate: malformed manifest" "bad_manifest.jsonl:1" "$T/g5" -- "$BIN" -q generate --manifest "$T/bad_manifest.jsonl" --out "$T/g5"
-expect_error "generate: manifest without models" "needs the multi-view diffusion" "$T/g6" -- env SYNTHDRIVE_MODELS="$T/no_models" "$BIN" -q generate --manifest "$T/mr/manifest.jsonl" --out "$T/g6"
+# Without learned models a log hit is harvested from its log (docs/harvest.md): one asset per hit (per track),
+# carrying the quality figures the bank's gate reads; a hit no camera sees whole fails on its own line, exit 1.
+env SYNTHDRIVE_MODELS="$T/no_models" "$BIN" -q mine query --index "$T/mi" --prompt barrier --k 3 --out "$T/mr_barrier" \
+  && { env SYNTHDRIVE_MODELS="$T/no_models" "$BIN" -q generate --manifest "$T/mr_barrier/manifest.jsonl" \
+         --steps 4 --hull-resolution 48 --texture-size 256 --upscale bicubic --out "$T/g6"; [ $? -le 1 ]; } \
+  && [ "$(ls "$T"/g6/*/asset.json | wc -l)" -ge 1 ] \
+  && grep -q '"lidar_p2m_median_m"' "$(ls "$T"/g6/*/asset.json | head -1)" \
+  && grep -q '"real_texture_fraction"' "$(ls "$T"/g6/*/asset.json | head -1)" \
+  && grep -q '"source"' "$(ls -d "$T"/g6/*/views | head -1)/cameras.json" \
+  && ok || bad "generate --manifest without models: harvested log assets with quality figures"
+# The bank's gate: a figure below the bar refuses the asset in one line naming it; --no-gate admits it.
+G6=$(ls -d "$T"/g6/*/ | head -1)
+expect_error "bank add: below the quality gate" "below the bank's quality gate: lidar_p2m_median_m" "" -- "$BIN" -q bank add --bank "$T/gate.sqlite" --gate "lidar_p2m_median_m<=0.00001" "$G6"
+"$BIN" -q bank add --bank "$T/gate.sqlite" --no-gate "$G6" && "$BIN" -q bank list --bank "$T/gate.sqlite" | grep -q barrier \
+  && ok || bad "bank add --no-gate"
+expect_error "bank add: malformed gate" "--gate 'watertight=1'" "" -- "$BIN" -q bank add --bank "$T/gate2.sqlite" --gate watertight=1 "$G6"
 
 # Synth as a batch on the 3-frame KITTI log: shards 0/2 + 1/2 + --merge write what a plain run writes; each
 # shard logs its frames; a bad --shard and a merge with a missing part are refused, creating nothing.

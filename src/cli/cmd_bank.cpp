@@ -125,12 +125,18 @@ Runner AddAdd(CLI::App& app) {
   struct Args {
     std::vector<std::string> paths;
     std::string bank, clip = "auto", device = "cpu", shard = "0/1";
-    bool replace = false;
+    std::vector<std::string> gate;
+    bool replace = false, no_gate = false;
   };
   auto a = std::make_shared<Args>();
   app.add_option("paths", a->paths, "Asset folders, or folders of asset folders")->required();
   AddBankOption(app, a->bank);
   app.add_flag("--replace", a->replace, "Replace an entry of the same id whose files differ");
+  app.add_option("--gate", a->gate,
+                 "NAME>=VALUE or NAME<=VALUE: a quality figure an asset must meet to be added, replacing the default "
+                 "for NAME (repeatable; defaults: watertight>=1 heldout_silhouette_iou>=0.5 "
+                 "lidar_p2m_median_m<=0.05 real_texture_fraction>=0.15; figures an asset lacks are not checked)");
+  app.add_flag("--no-gate", a->no_gate, "Add assets whatever their quality figures");
   app.add_option("--clip", a->clip, "CLIP model folder for preview embeddings, auto (installed one if any) or none")
       ->default_val("auto");
   app.add_option("--device", a->device, "cpu, cuda or cuda:N (CLIP)")->default_val("cpu");
@@ -143,8 +149,12 @@ Runner AddAdd(CLI::App& app) {
       if (shard.Owns(i)) mine.push_back(all[i]);
     const std::optional<models::ClipEncoder> clip = LoadBankClip(a->clip, a->device);
     bank::Bank b = bank::Bank::Open(BankPath(a->bank), true);
+    bank::QualityGate gate = bank::DefaultQualityGate();
+    for (const std::string& rule : a->gate) bank::ParseGateRule(rule, "--gate", &gate);
+    if (a->no_gate && !a->gate.empty()) throw InputError({}, "--gate and --no-gate contradict each other");
     bank::AddOptions options;
     options.replace = a->replace;
+    if (!a->no_gate) options.gate = &gate;
     options.clip = clip ? &*clip : nullptr;
     size_t added = 0, unchanged = 0, replaced = 0;
     std::vector<std::string> failures;

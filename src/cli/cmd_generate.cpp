@@ -3,6 +3,7 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <optional>
 #include <memory>
 #include <vector>
@@ -12,6 +13,7 @@
 
 #include "assetgen/asset.h"
 #include "assetgen/generate.h"
+#include "assetgen/harvest.h"
 #include "assetgen/mined.h"
 #include "assetgen/shape_prior.h"
 #include "assetgen/views.h"
@@ -21,6 +23,7 @@
 #include "core/log.h"
 #include "core/shard.h"
 #include "datasets/categories.h"
+#include "datasets/readers.h"
 #include "io/files.h"
 #include "io/image_io.h"
 #include "mining/query.h"
@@ -44,16 +47,6 @@ bool SingleImageModelsInstalled(const fs::path& model_dir) {
   for (const std::string& f : kSingleImageModels)
     if (!fs::exists(model_dir / f)) return false;
   return true;
-}
-
-void RequireSingleImageModels(const fs::path& image, const fs::path& model_dir) {
-  std::string missing;
-  for (const std::string& f : kSingleImageModels)
-    if (!fs::exists(model_dir / f)) missing += (missing.empty() ? "" : ", ") + f;
-  if (missing.empty()) return;
-  throw InputError(image, Msg() << "generating from a single image needs the multi-view diffusion and normal "
-                                << "estimation models (missing in " << model_dir.string() << ": " << missing
-                                << "; see docs/models.md), or pass --views with multi-view images and cameras");
 }
 
 // The learned front end — segmenter (classical unless --segmenter names a model), Zero123++ and the normal
@@ -242,7 +235,8 @@ void RunPhotoShape(const Args& a, const CategoryInfo& category, GenerateOptions 
   // held-out views are for benchmarks).
   const MultiView& seen = shape.views.front();
   const ViewAgreement agreement = AgreementAtView(g, seen, seen.mask);
-  const nlohmann::json quality = {
+  nlohmann::json quality = MeshQuality(g);
+  quality.update({
       {"shape_prior",
        {{"prior", ToString(shape.prior)},
         {"reason", shape.prior_reason},
@@ -258,15 +252,85 @@ void RunPhotoShape(const Args& a, const CategoryInfo& category, GenerateOptions 
         {"real_views", shape.real_views},
         {"virtual_views", int(shape.views.size()) - shape.real_views}}},
       {"photo_silhouette_iou", agreement.silhouette_iou},
-      {"photo_masked_psnr_db", agreement.masked_psnr_db}};
+      {"photo_masked_psnr_db", agreement.masked_psnr_db}});
   SD_LOG(Info, a.image << ": " << ToString(shape.prior) << " prior, photo silhouette IoU "
                        << quality["photo_silhouette_iou"].get<double>());
   SaveGenerated(std::move(g), shape.views, front, info, a.image, a.out, a.overwrite, quality);
 }
 
+// The no-model path for a mining hit from a log: every view of its track (harvest.h), its returns and box.
+GeneratedMesh HarvestHit(const mining::MinedItem& item, const std::string& where, std::map<std::string, Log>* logs,
+                         const GenerateOptions& options, MultiViewSet* views, std::vector<StageReport>* front,
+                         nlohmann::json* quality, std::string* source) {
+  if (!item.box_ego) throw InputError(where, "the log hit has no 3D box to find its object by");
+  const auto start = std::chrono::steady_clock::now();
+  auto it = logs->find(item.source);
+  if (it == logs->end()) {
+    if (!fs::exists(item.source))
+      throw InputError(where, Msg() << "the hit's log " << item.source
+                                    << " is not found (a relative path is taken from the working directory)");
+    it = logs->emplace(item.source, OpenLog(item.source)).first;
+  }
+  HarvestOptions harvest;
+  harvest.progress = false;
+  const HarvestedObject object = HarvestObject(it->second, {item.frame_token, *item.box_ego}, harvest);
+  front->push_back({"harvest", Msg() << object.source << "; " << object.points.size() << " LiDAR returns, "
+                                     << object.free_segments.size() << " beams",
+                    std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()});
+  HarvestFit fit;
+  GeneratedMesh g = GenerateFromHarvest(object, options, &fit);
+  *views = object.views;
+  *quality = fit.quality;
+  *source = object.source;
+  return g;
+}
+
+// The no-model path for a hit from an image folder or URL list: the crop by its category's shape prior, masked
+// by its alpha (exact) or by GrabCut inside its box.
+GeneratedMesh PhotoHit(const Args& a, const MinedObject& object, const CategoryInfo& category,
+                       const GenerateOptions& options, MultiViewSet* views, std::vector<StageReport>* front,
+                       nlohmann::json* quality) {
+  const auto start = std::chrono::steady_clock::now();
+  PhotoObservation photo;
+  photo.image = object.image;
+  std::string method;
+  if (object.prior && object.prior->source == "alpha") {
+    photo.mask = ImageF(object.image.width(), object.image.height(), 1);
+    for (size_t i = 0; i < photo.mask.vector().size(); ++i) photo.mask.vector()[i] = object.prior->mask.data()[i] > 127 ? 1.0f : 0.0f;
+    method = "the image's alpha";
+  } else {
+    const models::Segmenter segmenter = models::Segmenter::Resolve(a.segmenter);
+    photo.mask = segmenter.Segment(object.image, object.box).mask;
+    method = segmenter.Describe() + " in the hit's box";
+  }
+  front->push_back({"segment", method, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()});
+  ShapePriorOptions prior;
+  if (a.shape != "auto") prior.prior = ParseShapePrior(a.shape);
+  prior.category = category.name;
+  prior.size = object.size_lwh ? *object.size_lwh : ObjectSize(a, category);
+  prior.hull_resolution = options.hull_resolution;
+  const PhotoShape shape = ShapeFromPhoto(photo, prior);
+  GenerateOptions o = options;
+  o.canonical.target_size = prior.size;
+  o.canonical.target_height.reset();
+  GeneratedMesh g = GenerateFromPhotoShape(shape, o);
+  *views = MultiViewSet(shape.views.begin(), shape.views.begin() + shape.real_views);
+  const ViewAgreement agreement = AgreementAtView(g, shape.views.front(), shape.views.front().mask);
+  *quality = MeshQuality(g);
+  (*quality)[quality::kShapePrior] = {{"prior", ToString(shape.prior)}, {"reason", shape.prior_reason},
+                                      {"elevation_deg", shape.elevation_deg}, {"elevation_method", shape.elevation_method},
+                                      {"intrinsics_assumed", shape.intrinsics_assumed}};
+  (*quality)["photo_silhouette_iou"] = agreement.silhouette_iou;
+  (*quality)["photo_masked_psnr_db"] = agreement.masked_psnr_db;
+  return g;
+}
+
 // `generate --manifest`: one asset per mining hit, as a batch (DESIGN.md): the shard's share of the hits, each
 // written atomically to <out>/<hit id>/, hits whose folder exists skipped, progress, and a failed hit reported
-// without losing the others (exit 1 when any failed).
+// without losing the others (exit 1 when any failed). With the learned single-image models installed (and
+// --shape auto) every hit goes through them; without, a log hit is harvested from its log (every view of its
+// track, its returns: docs/harvest.md) and a folder or URL hit gets its category's shape prior. Hits of one
+// track make one asset, under the first hit's id.
 int RunManifest(const Args& a, const fs::path& model_dir) {
   const fs::path manifest(a.manifest);
   std::vector<mining::ManifestEntry> entries = mining::ReadManifest(manifest);
@@ -278,18 +342,33 @@ int RunManifest(const Args& a, const fs::path& model_dir) {
     if (!fallback) throw InputError({}, "unknown category '" + a.category + "' (see `synthdrive categories`)");
   }
   if (fs::exists(a.out) && !fs::is_directory(a.out)) throw InputError(a.out, "exists and is not a folder");
+  const bool learned = a.shape == "auto" && SingleImageModelsInstalled(model_dir);
+  // One asset per track: later hits of a track already taken are skipped (not sharded apart, so that two shards
+  // never build the same track).
+  std::map<std::string, std::string> track_owner;  // "<log>|<instance>" -> the first hit's id
   std::vector<size_t> todo;
-  size_t done = 0;
+  size_t done = 0, same_track = 0;
   for (size_t i = 0; i < entries.size(); ++i) {
+    const mining::MinedItem& item = entries[i].item;
+    if (!learned && item.kind == mining::SourceKind::kLog && !item.instance_token.empty()) {
+      const auto [it, first] = track_owner.emplace(item.source + "|" + item.instance_token, item.id);
+      if (!first) {
+        ++same_track;
+        continue;
+      }
+    }
     if (!shard.Owns(i)) continue;
-    if (fs::exists(fs::path(a.out) / entries[i].item.id / "asset.json")) ++done;
+    if (fs::exists(fs::path(a.out) / item.id / "asset.json")) ++done;
     else todo.push_back(i);
   }
-  SD_LOG(Info, manifest.string() << ": " << entries.size() << " hits; shard " << shard.ToString() << ": "
-                                 << todo.size() << " to build, " << done << " already built");
+  SD_LOG(Info, manifest.string() << ": " << entries.size() << " hits (" << same_track << " more views of a track already"
+                                 << " taken); shard " << shard.ToString() << ": " << todo.size() << " to build, " << done
+                                 << " already built; " << (learned ? "learned multi-view models" : "no learned models: "
+                                 "log hits harvested from their logs, image hits by shape priors"));
   if (todo.empty()) return 0;
-  RequireSingleImageModels(manifest, model_dir);
-  const ImageFrontEnd front_end(model_dir, a.segmenter, a.diffusion_steps, a.guidance, a.seed);
+  std::optional<ImageFrontEnd> front_end;
+  if (learned) front_end.emplace(model_dir, a.segmenter, a.diffusion_steps, a.guidance, a.seed);
+  std::map<std::string, Log> logs;
   fs::create_directories(a.out);
   // One line per hit (done / failed with the reason, seconds), appended as it happens, so a killed or failed
   // shard says what it did; the same shape as synth's run logs.
@@ -311,16 +390,9 @@ int RunManifest(const Args& a, const fs::path& model_dir) {
         throw InputError(where, object.category.empty() ? "hit has no category: pass --category"
                                                         : "unknown category '" + object.category + "'");
       std::vector<StageReport> front;
-      const MultiViewSet views =
-          front_end.Views(object.image, object.box, object.prior ? &*object.prior : nullptr, &front);
       GenerateOptions options = a.options;
       options.refine.show_progress = false;
       options.canonical.up = "+z";
-      if (object.front_in_rig) options.canonical.front_direction = *object.front_in_rig;
-      // Metric scale: the log's 3D box, else --size / --height, else the category's size prior.
-      if (object.size_lwh) options.canonical.target_size = *object.size_lwh;
-      else if (!a.size.empty()) options.canonical.target_size = Eigen::Vector3d(a.size[0], a.size[1], a.size[2]);
-      else options.canonical.target_height = a.height > 0 ? a.height : category->default_size.z();
       AssetInfo info;
       info.id = e.item.id;
       info.name = e.prompt.empty() ? e.item.id : e.prompt + " #" + std::to_string(e.rank);
@@ -328,7 +400,26 @@ int RunManifest(const Args& a, const fs::path& model_dir) {
       info.licence = a.licence;
       info.source = object.source;
       info.attribution = a.attribution;
-      BuildAndSave(views, front, options, info, object.source, fs::path(a.out) / e.item.id, false);
+      const fs::path out = fs::path(a.out) / e.item.id;
+      if (learned) {
+        const MultiViewSet views =
+            front_end->Views(object.image, object.box, object.prior ? &*object.prior : nullptr, &front);
+        if (object.front_in_rig) options.canonical.front_direction = *object.front_in_rig;
+        // Metric scale: the log's 3D box, else --size / --height, else the category's size prior.
+        if (object.size_lwh) options.canonical.target_size = *object.size_lwh;
+        else if (!a.size.empty()) options.canonical.target_size = Eigen::Vector3d(a.size[0], a.size[1], a.size[2]);
+        else options.canonical.target_height = a.height > 0 ? a.height : category->default_size.z();
+        BuildAndSave(views, front, options, info, object.source, out, false);
+      } else {
+        MultiViewSet views;
+        nlohmann::json quality;
+        std::string source = object.source;
+        GeneratedMesh g = e.item.kind == mining::SourceKind::kLog
+                              ? HarvestHit(e.item, where, &logs, options, &views, &front, &quality, &source)
+                              : PhotoHit(a, object, *category, options, &views, &front, &quality);
+        info.source = source;
+        SaveGenerated(std::move(g), views, front, info, source, out, false, quality);
+      }
     } catch (const InputError& err) {
       ++failed;
       const std::string what = err.what();
@@ -357,8 +448,9 @@ Runner AddGenerateCommand(CLI::App& app) {
                     "One object photo: the learned multi-view path when its models are installed, else (or with "
                     "--shape) a shape prior");
   input->add_option("--manifest", a->manifest,
-                    "A mining run's manifest.jsonl (mine query): one asset per hit, into <out>/<hit id>/ (needs the "
-                    "multi-view and normal models installed)");
+                    "A mining run's manifest.jsonl (mine query): one asset per hit (per track for log hits), into "
+                    "<out>/<hit id>/; learned models when installed, else log hits are harvested from their logs and "
+                    "image hits get a shape prior (docs/harvest.md)");
   input->require_option(1);
   app.add_option("--category", a->category,
                  "Object category (see `synthdrive categories`); its size is the default scale. With --manifest, "

@@ -36,6 +36,9 @@ inline constexpr char kLidarPointToMeshMedianM[] = "lidar_p2m_median_m";
 inline constexpr char kRealTextureFraction[] = "real_texture_fraction";
 // 1 when the mesh is a closed 2-manifold, else 0.
 inline constexpr char kWatertight[] = "watertight";
+// The largest ratio, over length, width and height, of the asset's extent to the size it was built for (the log's
+// box, or the category's size for a photo): well above 1, the shape is not the object's.
+inline constexpr char kExtentToSize[] = "extent_to_size_max";
 // An object {"prior": "revolve" | "mirror" | "extrude" | "hull" | "views", "reason": ...}: what made the unseen sides.
 inline constexpr char kShapePrior[] = "shape_prior";
 }  // namespace quality

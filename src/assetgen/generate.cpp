@@ -343,6 +343,7 @@ void FillHarvestQuality(const HarvestedObject& object, const GeneratedMesh& g, c
                         bool held_out, HarvestFit* fit_in) {
   HarvestFit& fit = *fit_in;
   fit.quality = MeshQuality(g);
+  fit.quality[quality::kExtentToSize] = g.extent.cwiseQuotient(object.size).maxCoeff();
   fit.quality[quality::kShapePrior] = {{"prior", ToString(fit.prior)}, {"reason", fit.prior_reason},
                                        {"real_views", fit.real_views}, {"synthetic_views", fit.synthetic_views}};
   if (!fit.held_out.empty()) {

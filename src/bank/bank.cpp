@@ -239,7 +239,7 @@ std::optional<double> QualityFigure(const nlohmann::json& quality, const std::st
 QualityGate DefaultQualityGate() {
   QualityGate g;
   g.min = {{quality::kWatertight, 1.0}, {quality::kHeldOutSilhouetteIou, 0.5}, {quality::kRealTextureFraction, 0.15}};
-  g.max = {{quality::kLidarPointToMeshMedianM, 0.05}};
+  g.max = {{quality::kLidarPointToMeshMedianM, 0.05}, {quality::kExtentToSize, 1.3}};
   return g;
 }
 

@@ -77,9 +77,9 @@ nlohmann::json BankEntryToJson(const BankEntry& e, bool with_files);
 struct QualityGate {
   std::map<std::string, double> min, max;
 };
-// watertight >= 1, heldout_silhouette_iou >= 0.5, lidar_p2m_median_m <= 0.05, real_texture_fraction >= 0.15:
-// an asset below them would teach a detector the asset's defects (a hole, a silhouette the camera never showed,
-// a surface off its own returns, a texture mostly invented).
+// watertight >= 1, heldout_silhouette_iou >= 0.5, lidar_p2m_median_m <= 0.05, real_texture_fraction >= 0.15,
+// extent_to_size_max <= 1.3: an asset below them would teach a detector the asset's defects (a hole, a silhouette
+// the camera never showed, a surface off its own returns, a texture mostly invented, a shape not the object's).
 QualityGate DefaultQualityGate();
 // "NAME>=VALUE" or "NAME<=VALUE" into the gate (replacing that side of NAME); InputError naming `option` otherwise.
 void ParseGateRule(const std::string& rule, const std::string& option, QualityGate* gate);

@@ -135,7 +135,7 @@ Runner AddAdd(CLI::App& app) {
   app.add_option("--gate", a->gate,
                  "NAME>=VALUE or NAME<=VALUE: a quality figure an asset must meet to be added, replacing the default "
                  "for NAME (repeatable; defaults: watertight>=1 heldout_silhouette_iou>=0.5 "
-                 "lidar_p2m_median_m<=0.05 real_texture_fraction>=0.15; figures an asset lacks are not checked)");
+                 "lidar_p2m_median_m<=0.05 real_texture_fraction>=0.15 extent_to_size_max<=1.3; figures an asset lacks are not checked)");
   app.add_flag("--no-gate", a->no_gate, "Add assets whatever their quality figures");
   app.add_option("--clip", a->clip, "CLIP model folder for preview embeddings, auto (installed one if any) or none")
       ->default_val("auto");

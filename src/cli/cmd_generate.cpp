@@ -18,6 +18,7 @@
 #include "assetgen/shape_prior.h"
 #include "assetgen/views.h"
 #include "cli/commands.h"
+#include "cli/hit_assets.h"
 #include "cli/mesh_files.h"
 #include "core/error.h"
 #include "core/log.h"
@@ -81,24 +82,6 @@ class ImageFrontEnd {
   uint64_t seed_;
 };
 
-nlohmann::json StagesJson(const std::vector<StageReport>& front, const GeneratedMesh& g, const std::string& source) {
-  nlohmann::json stages = nlohmann::json::array();
-  for (const StageReport& s : front)
-    stages.push_back({{"stage", s.stage}, {"method", s.method}, {"seconds", s.seconds}});
-  for (const StageReport& s : g.stages)
-    stages.push_back({{"stage", s.stage}, {"method", s.method}, {"seconds", s.seconds}});
-  nlohmann::json rotation = nlohmann::json::array();
-  for (int r = 0; r < 3; ++r) rotation.push_back({g.rotation(r, 0), g.rotation(r, 1), g.rotation(r, 2)});
-  stages.push_back({{"stage", "generate"},
-                    {"version", "synthdrive 0.1.0"},
-                    {"source", source},
-                    {"views_to_asset",
-                     {{"scale", g.scale},
-                      {"rotation", rotation},
-                      {"translation", {g.translation.x(), g.translation.y(), g.translation.z()}},
-                      {"meaning", "p_asset = scale * rotation * p_views + translation"}}}});
-  return stages;
-}
 
 struct Args {
   std::string views, image, manifest, out, category, id, name, licence, source, attribution, model_dir, shard = "0/1";
@@ -115,30 +98,6 @@ struct Args {
   bool overwrite = false;
   GenerateOptions options;
 };
-
-// A generated mesh -> the asset folder (atomic). `info` carries id, name, category and provenance; extent,
-// stages and quality are filled here, `quality` adding to the refinement's figures.
-void SaveGenerated(GeneratedMesh g, const MultiViewSet& views, const std::vector<StageReport>& front,
-                   AssetInfo info, const std::string& source, const fs::path& out, bool overwrite,
-                   const nlohmann::json& quality = nlohmann::json::object()) {
-  Asset asset;
-  asset.mesh = std::move(g.mesh);
-  if (asset.mesh.normals.empty()) asset.mesh.ComputeVertexNormals();
-  asset.info = std::move(info);
-  asset.info.extent = g.extent;
-  asset.info.stages = StagesJson(front, g, source);
-  asset.info.quality = {{"refine_final_loss_normal", g.last_refine_step.loss_normal},
-                        {"refine_final_loss_mask", g.last_refine_step.loss_mask},
-                        {"views", views.size()}};
-  for (const auto& [key, value] : quality.items()) asset.info.quality[key] = value;
-  SaveAsset(asset, out, overwrite, &views);
-  double total = 0;
-  for (const StageReport& s : front) total += s.seconds;
-  for (const StageReport& s : g.stages) total += s.seconds;
-  SD_LOG(Info, "asset " << asset.info.id << " (" << asset.info.category << "), " << g.extent.x() << " x "
-                        << g.extent.y() << " x " << g.extent.z() << " m, " << asset.mesh.NumFaces() << " triangles, "
-                        << total << " s -> " << out.string());
-}
 
 // Views -> refined, textured, canonical mesh -> the asset folder.
 void BuildAndSave(const MultiViewSet& views, const std::vector<StageReport>& front, const GenerateOptions& options,
@@ -258,73 +217,6 @@ void RunPhotoShape(const Args& a, const CategoryInfo& category, GenerateOptions 
   SaveGenerated(std::move(g), shape.views, front, info, a.image, a.out, a.overwrite, quality);
 }
 
-// The no-model path for a mining hit from a log: every view of its track (harvest.h), its returns and box.
-GeneratedMesh HarvestHit(const mining::MinedItem& item, const std::string& where, std::map<std::string, Log>* logs,
-                         const GenerateOptions& options, MultiViewSet* views, std::vector<StageReport>* front,
-                         nlohmann::json* quality, std::string* source) {
-  if (!item.box_ego) throw InputError(where, "the log hit has no 3D box to find its object by");
-  const auto start = std::chrono::steady_clock::now();
-  auto it = logs->find(item.source);
-  if (it == logs->end()) {
-    if (!fs::exists(item.source))
-      throw InputError(where, Msg() << "the hit's log " << item.source
-                                    << " is not found (a relative path is taken from the working directory)");
-    it = logs->emplace(item.source, OpenLog(item.source)).first;
-  }
-  HarvestOptions harvest;
-  harvest.progress = false;
-  const HarvestedObject object = HarvestObject(it->second, {item.frame_token, *item.box_ego}, harvest);
-  front->push_back({"harvest", Msg() << object.source << "; " << object.points.size() << " LiDAR returns, "
-                                     << object.free_segments.size() << " beams",
-                    std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()});
-  HarvestFit fit;
-  GeneratedMesh g = GenerateFromHarvest(object, options, &fit);
-  *views = object.views;
-  *quality = fit.quality;
-  *source = object.source;
-  return g;
-}
-
-// The no-model path for a hit from an image folder or URL list: the crop by its category's shape prior, masked
-// by its alpha (exact) or by GrabCut inside its box.
-GeneratedMesh PhotoHit(const Args& a, const MinedObject& object, const CategoryInfo& category,
-                       const GenerateOptions& options, MultiViewSet* views, std::vector<StageReport>* front,
-                       nlohmann::json* quality) {
-  const auto start = std::chrono::steady_clock::now();
-  PhotoObservation photo;
-  photo.image = object.image;
-  std::string method;
-  if (object.prior && object.prior->source == "alpha") {
-    photo.mask = ImageF(object.image.width(), object.image.height(), 1);
-    for (size_t i = 0; i < photo.mask.vector().size(); ++i) photo.mask.vector()[i] = object.prior->mask.data()[i] > 127 ? 1.0f : 0.0f;
-    method = "the image's alpha";
-  } else {
-    const models::Segmenter segmenter = models::Segmenter::Resolve(a.segmenter);
-    photo.mask = segmenter.Segment(object.image, object.box).mask;
-    method = segmenter.Describe() + " in the hit's box";
-  }
-  front->push_back({"segment", method, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()});
-  ShapePriorOptions prior;
-  if (a.shape != "auto") prior.prior = ParseShapePrior(a.shape);
-  prior.category = category.name;
-  prior.size = object.size_lwh ? *object.size_lwh : ObjectSize(a, category);
-  prior.hull_resolution = options.hull_resolution;
-  const PhotoShape shape = ShapeFromPhoto(photo, prior);
-  GenerateOptions o = options;
-  o.canonical.target_size = prior.size;
-  o.canonical.target_height.reset();
-  GeneratedMesh g = GenerateFromPhotoShape(shape, o);
-  *views = MultiViewSet(shape.views.begin(), shape.views.begin() + shape.real_views);
-  const ViewAgreement agreement = AgreementAtView(g, shape.views.front(), shape.views.front().mask);
-  *quality = MeshQuality(g);
-  (*quality)[quality::kShapePrior] = {{"prior", ToString(shape.prior)}, {"reason", shape.prior_reason},
-                                      {"elevation_deg", shape.elevation_deg}, {"elevation_method", shape.elevation_method},
-                                      {"intrinsics_assumed", shape.intrinsics_assumed}};
-  (*quality)["photo_silhouette_iou"] = agreement.silhouette_iou;
-  (*quality)["photo_masked_psnr_db"] = agreement.masked_psnr_db;
-  return g;
-}
-
 // `generate --manifest`: one asset per mining hit, as a batch (DESIGN.md): the shard's share of the hits, each
 // written atomically to <out>/<hit id>/, hits whose folder exists skipped, progress, and a failed hit reported
 // without losing the others (exit 1 when any failed). With the learned single-image models installed (and
@@ -368,7 +260,12 @@ int RunManifest(const Args& a, const fs::path& model_dir) {
   if (todo.empty()) return 0;
   std::optional<ImageFrontEnd> front_end;
   if (learned) front_end.emplace(model_dir, a.segmenter, a.diffusion_steps, a.guidance, a.seed);
-  std::map<std::string, Log> logs;
+  HitAssetOptions hit_options;
+  hit_options.generate = a.options;
+  hit_options.generate.refine.show_progress = false;
+  hit_options.segmenter = a.segmenter;
+  if (a.shape != "auto") hit_options.shape = ParseShapePrior(a.shape);
+  HitAssetBuilder builder(hit_options);
   fs::create_directories(a.out);
   // One line per hit (done / failed with the reason, seconds), appended as it happens, so a killed or failed
   // shard says what it did; the same shape as synth's run logs.
@@ -411,14 +308,11 @@ int RunManifest(const Args& a, const fs::path& model_dir) {
         else options.canonical.target_height = a.height > 0 ? a.height : category->default_size.z();
         BuildAndSave(views, front, options, info, object.source, out, false);
       } else {
-        MultiViewSet views;
-        nlohmann::json quality;
-        std::string source = object.source;
-        GeneratedMesh g = e.item.kind == mining::SourceKind::kLog
-                              ? HarvestHit(e.item, where, &logs, options, &views, &front, &quality, &source)
-                              : PhotoHit(a, object, *category, options, &views, &front, &quality);
-        info.source = source;
-        SaveGenerated(std::move(g), views, front, info, source, out, false, quality);
+        const Eigen::Vector3d size = ObjectSize(a, *category);
+        BuiltAsset built = builder.Build(e, where, *category, size);
+        front.insert(front.end(), built.front.begin(), built.front.end());
+        info.source = built.source;
+        SaveGenerated(std::move(built.mesh), built.views, front, info, built.source, out, false, built.quality);
       }
     } catch (const InputError& err) {
       ++failed;

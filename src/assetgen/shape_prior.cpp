@@ -146,6 +146,31 @@ Image<T> FlipHorizontal(const Image<T>& img) {
   return out;
 }
 
+// The kept component (`binary`: the largest, holes filled) with the given mask's partial coverage restored along
+// its outline: the pixels of the component below 0.5 and their neighbours outside it. An antialiased mask (an
+// alpha channel, a render) places the outline to a fraction of a pixel, which the revolve's radii (HalfWidths)
+// and refinement's silhouette loss use; thresholding would quantise a 20 px radius to 2.5 %.
+ImageF OutlineCoverageKept(const ImageF& given, const ImageF& binary) {
+  ImageF out = binary;
+  const int w = binary.width(), h = binary.height();
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float g = std::clamp(given.at(x, y), 0.0f, 1.0f);
+      if (binary.at(x, y) > 0.5f) {
+        if (g >= 0.5f) out.at(x, y) = g;  // inside (below 0.5 only where a hole was filled)
+        continue;
+      }
+      bool next_to_object = false;
+      for (int dy = -1; dy <= 1 && !next_to_object; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int u = x + dx, v = y + dy;
+          if (u >= 0 && v >= 0 && u < w && v < h && binary.at(u, v) > 0.5f) { next_to_object = true; break; }
+        }
+      if (next_to_object) out.at(x, y) = g;
+    }
+  return out;
+}
+
 // A closed surface of revolution about +z: rings (z ascending, radius), `segments` around, capped at both ends.
 TriangleMesh Revolve(const std::vector<std::pair<double, double>>& rings, int segments) {
   TriangleMesh m;
@@ -253,7 +278,7 @@ PhotoShape ShapeFromPhoto(const PhotoObservation& photo, const ShapePriorOptions
                                << photo.mask.channels() << ", the photo " << image.width() << "x" << image.height());
   if (!(options.size.minCoeff() > 0) || !std::isfinite(options.size.maxCoeff()))
     throw InputError({}, Msg() << "impossible object size " << options.size.transpose() << " m (all three must be > 0)");
-  const ImageF mask_full = models::LargestComponentFilled(photo.mask);
+  const ImageF mask_full = OutlineCoverageKept(photo.mask, models::LargestComponentFilled(photo.mask));
   const auto sil_full = BoundsOf(mask_full);
   double area = 0;
   for (float m : mask_full.vector()) area += m > 0.5f;
@@ -358,11 +383,26 @@ PhotoShape ShapeFromPhoto(const PhotoObservation& photo, const ShapePriorOptions
 
   if (out.prior == ShapePrior::kRevolve) {
     // Rows between the top rim's and the base's widest rows: above and below them the outline is the ellipse of a
-    // cap, not the side.
-    const double s = std::sin(elevation);
-    int top = sil.y0, bottom = sil.y1 - 1;
-    for (int y = sil.y0; y < sil.y1; ++y) if (y - sil.y0 + 1 >= half_width(y) * s) { top = y; break; }
-    for (int y = sil.y1 - 1; y >= sil.y0; --y) if (sil.y1 - y >= half_width(y) * s) { bottom = y; break; }
+    // cap, not the side. A cap of radius a (pixels) seen at elevation e is an ellipse of half-height b = a sin(e)
+    // whose widest row lies b from the outline's extreme: b is the fixed point of b = sin(e) · (the widest
+    // half-width within b + 1 rows of the extreme), reached from 0 upwards; the row beyond keeps a pointed outline
+    // growing (a square base plate seen corner-on, whose corner drops by at most a sin(e) too). (Comparing each
+    // row's own half-width with its distance from the extreme also holds at the extreme itself, where both
+    // vanish: a partly covered last row of an antialiased mask stopped that scan before any cap was cut.) The
+    // caps are seen more (base) and less (top) steeply than the centre, by about half the object's angular height.
+    const double half_angle = 0.5 * sil.Height() / cam.fy;
+    auto cap_rows = [&](int extreme, int step) {
+      const double s = std::max(0.0, std::sin(elevation - step * half_angle));
+      double b = 0;
+      for (int it = 0; it < sil.Height(); ++it) {
+        double a = 0;
+        for (int k = 0; k <= b + 1 && k < sil.Height(); ++k) a = std::max(a, half_width(extreme + step * k));
+        if (s * a <= b) break;
+        b = s * a;
+      }
+      return static_cast<int>(std::ceil(b - 0.5));  // rows whose centre lies less than b from the extreme
+    };
+    const int top = sil.y0 + cap_rows(sil.y0, 1), bottom = sil.y1 - 1 - cap_rows(sil.y1 - 1, -1);
     if (bottom - top < 2) throw InputError({}, "revolve cannot fit: the silhouette is too flat for a side to be seen");
     const double radius_guess = size.head<2>().maxCoeff() / 2;
     const int mid = (top + bottom) / 2;

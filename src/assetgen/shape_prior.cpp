@@ -361,22 +361,36 @@ PhotoShape ShapeFromPhoto(const PhotoObservation& photo, const ShapePriorOptions
     int widest_row = sil.y1 - 1;
     for (int y = band0; y < sil.y1; ++y)
       if (half_width(y) > widest) widest = half_width(y), widest_row = y;
-    std::vector<double> minors;
+    std::vector<double> minors, depth, width;
     for (int y = widest_row + 1; y < sil.y1 && widest > 0; ++y) {
       const double w = half_width(y) / widest;
       if (w < 0.3 || w > 0.95) continue;
-      minors.push_back((sil.y1 - (y + 0.5)) / (1 - std::sqrt(1 - w * w)));
+      depth.push_back(sil.y1 - (y + 0.5)), width.push_back(half_width(y));
+      minors.push_back(depth.back() / (1 - std::sqrt(1 - w * w)));
     }
-    double ratio = 0;
+    double ratio = 0, rms = 0;
     if (minors.size() >= 2) {
-      std::nth_element(minors.begin(), minors.begin() + minors.size() / 2, minors.end());
-      ratio = minors[minors.size() / 2] / widest;
+      std::vector<double> sorted = minors;
+      std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+      const double b = sorted[sorted.size() / 2];
+      ratio = b / widest;
+      for (size_t i = 0; i < depth.size(); ++i) {
+        const double t = std::clamp((b - depth[i]) / b, -1.0, 1.0);
+        rms += std::pow(width[i] - widest * std::sqrt(1 - t * t), 2);
+      }
+      rms = std::sqrt(rms / depth.size());
     }
-    if (ratio >= 0.05 && ratio <= 0.7) {
+    // The rule holds for a circular base only: a square plate (a traffic cone's, seen corner-on: a V), a rounded
+    // bottom edge or a flared foot also drop below the widest row, by other laws. The rows' half-widths must then
+    // follow the fitted ellipse to half a pixel plus 3 % of its width, else the elevation is assumed.
+    const bool ellipse = rms <= 0.5 + 0.03 * widest;
+    if (ellipse && ratio >= 0.05 && ratio <= 0.7) {
       const double e_base = std::asin(ratio);
       const double h_over_d = sil.Height() / cam.fy;
       out.elevation_deg = Deg(e_base - std::asin(std::clamp(0.5 * h_over_d * std::cos(e_base), 0.0, 0.9)));
       out.elevation_method = "base ellipse";
+    } else if (minors.size() >= 2) {
+      out.elevation_method = Msg() << "assumed (the base's outline is no ellipse: " << rms << " px rms)";
     }
   }
   const double elevation = Rad(out.elevation_deg);

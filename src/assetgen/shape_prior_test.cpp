@@ -47,6 +47,17 @@ TriangleMesh Car() {
   return body;
 }
 
+// A traffic cone as they are made: the frustum standing on a square base plate (0.4 m, 3 cm thick).
+TriangleMesh ConeOnPlate() {
+  TriangleMesh cone = Frustum(0.16, 0.03, 0.7);
+  for (auto& p : cone.positions) p.z() += 0.03f;
+  TriangleMesh plate = geometry::testing::Cube(Eigen::Vector3f(-0.2f, -0.2f, 0.0f), Eigen::Vector3f(0.2f, 0.2f, 0.03f));
+  const int offset = static_cast<int>(plate.positions.size());
+  for (const auto& p : cone.positions) plate.positions.push_back(p);
+  for (const auto& f : cone.faces) plate.faces.emplace_back(f + Eigen::Vector3i::Constant(offset));
+  return plate;
+}
+
 // The mesh photographed from (azimuth, elevation) by a 640 x 480 camera of 50 degrees vertical field of view,
 // aimed at the object's centre, `distance` away: the photo (colour from a base colour) and its exact mask.
 PhotoObservation Photograph(TriangleMesh mesh, double height, double azimuth_deg, double elevation_deg,
@@ -144,6 +155,26 @@ TEST(ShapeFromPhoto, RevolveWithAssumedIntrinsicsStillRecoversTheProfile) {
   std::printf("revolve, assumed intrinsics: CD %.4f IoU %.3f, elevation %.1f deg\n", m.chamfer, m.volume_iou,
               shape.elevation_deg);
   EXPECT_LT(m.chamfer, 0.005);
+}
+
+TEST(ShapeFromPhoto, AssumesTheElevationWhereTheBaseIsNoEllipse) {
+  // A square plate seen corner-on drops below its widest row as a V, not as the lower half of an ellipse: read
+  // as one it gave 36 degrees for a 10 degree view. The fit's residual rejects it and the default is used.
+  const TriangleMesh truth = ConeOnPlate();
+  ViewCamera cam;
+  PhotoObservation photo = Photograph(truth, 0.73, 30, 10, 3.0, &cam);
+  photo.camera = cam.camera;
+  ShapePriorOptions options;
+  options.category = "traffic_cone";
+  options.size = Eigen::Vector3d(0.4, 0.4, 0.73);
+  const PhotoShape shape = ShapeFromPhoto(photo, options);
+  EXPECT_EQ(shape.prior, ShapePrior::kRevolve);
+  EXPECT_EQ(shape.elevation_method.rfind("assumed (the base's outline is no ellipse", 0), 0u) << shape.elevation_method;
+  EXPECT_DOUBLE_EQ(shape.elevation_deg, options.assumed_elevation_deg);
+  const geometry::GeometryMetrics m = Compare(shape.coarse, truth);
+  std::printf("cone on a square plate: CD %.4f, elevation %.1f (%s)\n", m.chamfer, shape.elevation_deg,
+              shape.elevation_method.c_str());
+  EXPECT_LT(m.chamfer, 0.02);
 }
 
 TEST(ShapeFromPhoto, TheMirroredViewCarvesAVehicleTighterThanTheSingleViewHull) {

@@ -4,7 +4,10 @@
 #include <array>
 #include <cmath>
 
+#include <Eigen/LU>
+
 #include "core/error.h"
+#include "geometry/polygon.h"
 #include "geometry/visual_hull.h"
 #include "models/grabcut.h"
 
@@ -101,30 +104,73 @@ std::vector<Eigen::Vector3d> BoxCorners(const Eigen::Vector3d& size) {
   return c;
 }
 
-// The camera distance and aim at which the metric box's projection covers the silhouette's bounds.
+// The camera distance and aim at which the metric box's projection has the silhouette's bounds: their centre and
+// height matched by Newton's method on (aim u, aim v, log distance) with a numeric Jacobian. (Shifting the aim by
+// the centres' offset and scaling the distance by the heights' ratio, in turn, oscillates for an object a few of
+// its lengths from the camera, where the projected height is far from proportional to 1 / distance.)
 struct BoxFit {
   Rigid3d T_world_cam;
   double distance = 0;
-  double aspect_error = 0;  // |log(projected aspect / silhouette aspect)|
 };
 BoxFit FitBoxToSilhouette(const PinholeCamera& cam, const PixelBounds& sil, const Eigen::Vector3d& size,
                           double elevation, double azimuth) {
   const std::vector<Eigen::Vector3d> corners = BoxCorners(size);
   const Eigen::Vector3d centre(0, 0, size.z() / 2);
-  Eigen::Vector2d aim(0.5 * (sil.x0 + sil.x1), 0.5 * (sil.y0 + sil.y1));
-  double distance = cam.fy * size.z() / std::max(1, sil.Height());
-  BoxFit fit;
-  for (int it = 0; it < 8; ++it) {
-    fit.T_world_cam = PlaceCamera(cam, aim, centre, elevation, azimuth, distance);
-    const auto b = ProjectedBounds(cam, fit.T_world_cam, corners);
-    if (!b) { distance *= 2; continue; }
-    aim += Eigen::Vector2d(0.5 * (sil.x0 + sil.x1) - 0.5 * ((*b)[0] + (*b)[2]), 0.5 * (sil.y0 + sil.y1) - 0.5 * ((*b)[1] + (*b)[3]));
-    distance *= ((*b)[3] - (*b)[1]) / sil.Height();
-    fit.aspect_error = std::abs(std::log(((*b)[2] - (*b)[0]) / ((*b)[3] - (*b)[1]) / (double(sil.Width()) / sil.Height())));
+  const Eigen::Vector2d sil_centre(0.5 * (sil.x0 + sil.x1), 0.5 * (sil.y0 + sil.y1));
+  const double sil_height = sil.Height();
+  // Residuals in pixels: the bounds' centre offset, and the height's log ratio times the silhouette's height.
+  auto residual = [&](const Eigen::Vector3d& x, Eigen::Vector3d* r) {
+    const auto b = ProjectedBounds(cam, PlaceCamera(cam, x.head<2>(), centre, elevation, azimuth, std::exp(x.z())), corners);
+    if (!b || !((*b)[3] - (*b)[1] > 0)) return false;
+    *r << 0.5 * ((*b)[0] + (*b)[2]) - sil_centre.x(), 0.5 * ((*b)[1] + (*b)[3]) - sil_centre.y(),
+        sil_height * std::log(((*b)[3] - (*b)[1]) / sil_height);
+    return true;
+  };
+  Eigen::Vector3d x(sil_centre.x(), sil_centre.y(), std::log(cam.fy * size.z() / std::max(1.0, sil_height)));
+  Eigen::Vector3d r = Eigen::Vector3d::Constant(1e9);
+  for (int k = 0; k < 40 && !residual(x, &r); ++k) x.z() += std::log(2.0);  // a corner behind the camera: back off
+  for (int it = 0; it < 30 && r.norm() > 1e-3; ++it) {
+    Eigen::Matrix3d J;
+    const double h[3] = {0.25, 0.25, 1e-3};
+    bool ok = true;
+    for (int j = 0; j < 3 && ok; ++j) {
+      Eigen::Vector3d xj = x, rj;
+      xj[j] += h[j];
+      ok = residual(xj, &rj);
+      J.col(j) = (rj - r) / h[j];
+    }
+    if (!ok) break;
+    const Eigen::Vector3d step = J.fullPivLu().solve(-r);
+    if (!step.allFinite()) break;
+    double t = 1;
+    Eigen::Vector3d rn = r;
+    while (t > 1e-3 && !(residual(x + t * step, &rn) && rn.norm() < r.norm())) t *= 0.5;
+    if (t <= 1e-3) break;
+    x += t * step, r = rn;
   }
-  fit.T_world_cam = PlaceCamera(cam, aim, centre, elevation, azimuth, distance);
-  fit.distance = distance;
+  BoxFit fit;
+  fit.distance = std::exp(x.z());
+  fit.T_world_cam = PlaceCamera(cam, x.head<2>(), centre, elevation, azimuth, fit.distance);
   return fit;
+}
+
+// IoU of the silhouette with the convex hull of the box's projected corners (0 when a corner is behind the camera).
+double BoxOutlineIou(const ImageF& mask, const PinholeCamera& cam, const Rigid3d& T_world_cam, const Eigen::Vector3d& size) {
+  const Rigid3d T_cam_world = T_world_cam.Inverse();
+  std::vector<Eigen::Vector2d> points;
+  for (const Eigen::Vector3d& p : BoxCorners(size)) {
+    const auto uv = cam.Project(T_cam_world * p);
+    if (!uv) return 0;
+    points.push_back(*uv);
+  }
+  const std::vector<Eigen::Vector2d> outline = geometry::ConvexHull2D(points);
+  double inter = 0, uni = 0;
+  for (int y = 0; y < mask.height(); ++y)
+    for (int x = 0; x < mask.width(); ++x) {
+      const bool in = mask.at(x, y) > 0.5f, box = geometry::InsideConvexPolygon(outline, {x + 0.5, y + 0.5});
+      inter += in && box, uni += in || box;
+    }
+  return uni > 0 ? inter / uni : 0;
 }
 
 MultiView MakeView(const std::string& name, const PinholeCamera& cam, const Rigid3d& T_world_cam, const ImageF& color,
@@ -476,12 +522,17 @@ PhotoShape ShapeFromPhoto(const PhotoObservation& photo, const ShapePriorOptions
     out.yaw_deg = 0, out.yaw_method = "facing the camera";
     fit = FitBoxToSilhouette(cam, sil, size, elevation, 0.0);
   } else {
-    fit.aspect_error = 1e9;
-    for (int a = 0; a <= 90; a += 2) {
+    // Every azimuth 0-90 degrees (the other quadrants look the same, mirrored or from behind), scored by how well
+    // the box's outline covers the silhouette: the bounds' aspect alone has several azimuths to each value for
+    // a long box (the outline is widest near the diagonal), while the outline's sloping top and bottom edges say
+    // which way the box runs.
+    double best = -1;
+    for (int a = 0; a <= 90; ++a) {
       const BoxFit f = FitBoxToSilhouette(cam, sil, size, elevation, Rad(a));
-      if (f.aspect_error < fit.aspect_error) fit = f, out.yaw_deg = a;
+      const double iou = BoxOutlineIou(mask, cam, f.T_world_cam, size);
+      if (iou > best) best = iou, fit = f, out.yaw_deg = a;
     }
-    out.yaw_method = "silhouette aspect (front/back ambiguous)";
+    out.yaw_method = Msg() << "silhouette vs box outline, IoU " << best << " (front/back, left/right ambiguous)";
   }
   out.distance_m = fit.distance;
   out.views.push_back(MakeView("photo", cam, fit.T_world_cam, color, mask));

@@ -228,6 +228,31 @@ TEST(ShapeFromPhoto, TheMirroredViewCarvesAVehicleTighterThanTheSingleViewHull) 
   EXPECT_GT(mm.volume_iou, mh.volume_iou);
 }
 
+TEST(ShapeFromPhoto, TheMirroredViewIsTheMirrorImageOfTheObjectSeenFromTheMirroredCamera) {
+  // The mirrored view's camera (centre reflected in y = 0, x axis flipped, principal point W - cx of the crop)
+  // must see any y-symmetric object exactly as the photo's camera sees it, flipped left-right: the car, not
+  // symmetric front to back, drawn at both of the prior's cameras.
+  const TriangleMesh car = Car();
+  const PhotoObservation photo = Photograph(car, 1.5, 35, 8, 12.0);
+  ShapePriorOptions options;
+  options.category = "car";
+  options.size = Eigen::Vector3d(4.0, 1.8, 1.5);
+  const PhotoShape shape = ShapeFromPhoto(photo, options);
+  ASSERT_EQ(shape.views.size(), 2u);
+  const MultiViewSet drawn = RenderOracleViews(car, {shape.views[0].view, shape.views[1].view}, 3);
+  const ImageF& a = drawn[0].mask;
+  const ImageF& b = drawn[1].mask;
+  ASSERT_EQ(a.width(), b.width());
+  double inter = 0, uni = 0, area = 0;
+  for (int y = 0; y < a.height(); ++y)
+    for (int x = 0; x < a.width(); ++x) {
+      const bool p = a.at(a.width() - 1 - x, y) > 0.5f, q = b.at(x, y) > 0.5f;
+      inter += p && q, uni += p || q, area += q;
+    }
+  EXPECT_GT(area, 1000);
+  EXPECT_GT(inter / uni, 0.995);
+}
+
 TEST(ShapeFromPhoto, RefusesWhatCannotMakeAShapeWithOneLine) {
   const PhotoObservation good = Photograph(Frustum(), 0.7, 0, 8, 3.0);
   ShapePriorOptions options;

@@ -8,7 +8,7 @@
 // unlit base colour on a dark road. ShapeFromPhoto gets the photo, its exact mask and the object's box size
 // (what a log's label or --size gives); the intrinsics are known (a log's camera). Each object runs with its
 // class's prior and with the single-view hull inside the same box (the baseline), both through the same back end
-// (GenerateFromPhotoShape: mask-only refinement, x2 SR, UV texture, canonical frame), twice: with the elevation
+// (GenerateFromPhotoShape: x2 SR, UV texture, canonical frame; no refinement), twice: with the elevation
 // the prior estimates (revolve: the base ellipse) or assumes (8°), and with the photo's elevation given, as a
 // log's camera pose and 3D box give it.
 //
@@ -37,7 +37,7 @@
 // ground-truth mask), the masked PSNR there, the symmetry and elevation found, and seconds; a turntable strip per
 // cone (the photo's crop, then 8 unlit views) goes to bench/results/shape_prior_photos/.
 //
-// Usage: bench_shape_prior [--objects a,b] [--steps N] [--height-px H] [--elevation DEG]
+// Usage: bench_shape_prior [--objects a,b] [--height-px H] [--elevation DEG]
 //                          [--elevation-mode estimated|given|both] [--no-photos] [--only-photos]
 #include <algorithm>
 #include <chrono>
@@ -112,7 +112,7 @@ ImageF CropLike(const ImageF& full, const PhotoShape& shape) {
   return out;
 }
 
-int RunPhotos(const fs::path& frames, const fs::path& out_dir, int steps) {
+int RunPhotos(const fs::path& frames, const fs::path& out_dir) {
   if (!fs::exists(frames)) {
     std::printf("\nreal photos: %s not found, skipped\n", frames.c_str());
     return 0;
@@ -159,8 +159,6 @@ int RunPhotos(const fs::path& frames, const fs::path& out_dir, int steps) {
       prior_options.category = "traffic_cone";
       prior_options.size = Eigen::Vector3d(0.41, 0.41, 1.07);
       GenerateOptions options;
-      options.refine.steps = steps;
-      options.refine.show_progress = false;
       options.upscale = "bicubic";
       options.canonical.target_size = prior_options.size;
       const std::string name = photo_file.stem().string().substr(0, 38);
@@ -322,7 +320,6 @@ double Median(std::vector<double> v) {
 
 int main(int argc, char** argv) {
   std::vector<std::string> only;
-  int steps = RefineOptions{}.steps;
   double height_px = 120, elevation = 10, azimuth = 30;
   bool photos = true, only_photos = false;
   std::vector<bool> elevation_modes = {false, true};  // estimated (or assumed), given
@@ -338,8 +335,6 @@ int main(int argc, char** argv) {
     if (a == "--objects") {
       std::stringstream ss(next());
       for (std::string item; std::getline(ss, item, ',');) only.push_back(item);
-    } else if (a == "--steps") {
-      steps = std::max(0, std::atoi(next().c_str()));
     } else if (a == "--height-px") {
       height_px = std::atof(next().c_str());
     } else if (a == "--elevation") {
@@ -379,8 +374,8 @@ int main(int argc, char** argv) {
   std::printf("geometry protocol: %s\ntexture protocol: %s\n", geometry::DescribeProtocol(metric_options).c_str(),
               DescribeTextureProtocol().c_str());
   std::printf("photo: 640x480, 50 deg vertical fov (known), elevation %.0f deg, azimuth %.0f deg, object %.0f px "
-              "tall; refinement %d steps (mask terms)\n\n",
-              elevation, azimuth, height_px, steps);
+              "tall; no refinement (GenerateFromPhotoShape runs none: the prior's views carry masks only)\n\n",
+              elevation, azimuth, height_px);
   std::printf("frames: %s\n", kFrameProtocol);
   std::printf("%-26s %-12s %-8s %-9s %5s %5s %8s %6s %7s %6s %6s %6s  %s\n", "object", "category", "prior", "elevation",
               "elev", "dyaw", "CD", "F", "IoU", "PSNR", "SSIM", "s", "note");
@@ -473,9 +468,7 @@ int main(int argc, char** argv) {
           if (moved_back > 0)
             row.note += (row.note.empty() ? "" : "; ") + (Msg() << "framed " << shown_px << " px tall to be whole").str();
           GenerateOptions options;
-          options.refine.steps = steps;
-          options.refine.show_progress = false;
-          options.upscale = "bicubic";
+                  options.upscale = "bicubic";
           options.canonical.target_size = size;
           const GeneratedMesh g = GenerateFromPhotoShape(shape, options);
           row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -573,12 +566,11 @@ int main(int argc, char** argv) {
                            {"photo", {{"width", 640}, {"height", 480}, {"vertical_fov_deg", 50},
                                       {"elevation_deg", elevation}, {"azimuth_deg", azimuth},
                                       {"object_height_px", height_px}}},
-                           {"refine_steps", steps},
                            {"results", results},
                            {"summary", summary}});
   std::printf("\nwrote %s\n", json_out.c_str());
   if (photos || only_photos)
     RunPhotos(root / ".." / "shared" / "data" / "images" / "roadanomaly-cones" / "frames",
-              root / "bench" / "results" / "shape_prior_photos", steps);
+              root / "bench" / "results" / "shape_prior_photos");
   return 0;
 }

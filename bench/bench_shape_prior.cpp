@@ -560,15 +560,17 @@ int main(int argc, char** argv) {
   std::printf("targets: revolve CD <= 0.01 and PSNR >= 22 dB; mirror CD >= 30%% below the hull's. For scale, not "
               "comparable: the paper's learned pipeline on GSO, CD 0.0164 / PSNR 19.05, under its own "
               "normalisation, alignment and views\n");
-  const fs::path json_out = root / "bench" / "results" / "shape_prior.json";
-  WriteJsonFile(json_out, {{"geometry_protocol", geometry::DescribeProtocol(metric_options)},
-                           {"texture_protocol", DescribeTextureProtocol()},
-                           {"photo", {{"width", 640}, {"height", 480}, {"vertical_fov_deg", 50},
-                                      {"elevation_deg", elevation}, {"azimuth_deg", azimuth},
-                                      {"object_height_px", height_px}}},
-                           {"results", results},
-                           {"summary", summary}});
-  std::printf("\nwrote %s\n", json_out.c_str());
+  if (!only_photos) {  // a photos-only run leaves the synthetic figures of the last full run in place
+    const fs::path json_out = root / "bench" / "results" / "shape_prior.json";
+    WriteJsonFile(json_out, {{"geometry_protocol", geometry::DescribeProtocol(metric_options)},
+                             {"texture_protocol", DescribeTextureProtocol()},
+                             {"photo", {{"width", 640}, {"height", 480}, {"vertical_fov_deg", 50},
+                                        {"elevation_deg", elevation}, {"azimuth_deg", azimuth},
+                                        {"object_height_px", height_px}}},
+                             {"results", results},
+                             {"summary", summary}});
+    std::printf("\nwrote %s\n", json_out.c_str());
+  }
   if (photos || only_photos)
     RunPhotos(root / ".." / "shared" / "data" / "images" / "roadanomaly-cones" / "frames",
               root / "bench" / "results" / "shape_prior_photos");

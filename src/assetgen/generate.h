@@ -64,9 +64,10 @@ struct GeneratedMesh {
 // InputError when a view has no colour image, or from any stage (refine.h, texture.h, canonical.h list them).
 // options.refine.steps == 0 skips refinement (the coarse mesh is textured as it is).
 GeneratedMesh GenerateFromViews(const MultiViewSet& views, const GenerateOptions& options);
-// The no-model path from one photo (shape_prior.h): the prior's coarse mesh instead of the visual hull,
-// refinement on the mask terms alone (its views carry no normals), then the same back end; the prior's frame
-// is already canonical and metric (+z up, +x front, metres): the canonical stage only re-grounds and centres it.
+// The no-model path from one photo (shape_prior.h): the prior's coarse mesh instead of the visual hull, not
+// refined (options.refine is ignored: its views carry masks only, which the coarse mesh already fits), then the
+// same back end; the prior's frame is already canonical and metric (+z up, +x front, metres): the canonical
+// stage only re-grounds and centres it.
 GeneratedMesh GenerateFromPhotoShape(const PhotoShape& shape, GenerateOptions options);
 
 // The no-model path from an object harvested from a driving log (harvest.h): the shape prior's symmetry views

@@ -4,7 +4,10 @@
 #include <array>
 #include <cmath>
 
+#include <Eigen/LU>
+
 #include "core/error.h"
+#include "geometry/polygon.h"
 #include "geometry/visual_hull.h"
 #include "models/grabcut.h"
 
@@ -101,30 +104,73 @@ std::vector<Eigen::Vector3d> BoxCorners(const Eigen::Vector3d& size) {
   return c;
 }
 
-// The camera distance and aim at which the metric box's projection covers the silhouette's bounds.
+// The camera distance and aim at which the metric box's projection has the silhouette's bounds: their centre and
+// height matched by Newton's method on (aim u, aim v, log distance) with a numeric Jacobian. (Shifting the aim by
+// the centres' offset and scaling the distance by the heights' ratio, in turn, oscillates for an object a few of
+// its lengths from the camera, where the projected height is far from proportional to 1 / distance.)
 struct BoxFit {
   Rigid3d T_world_cam;
   double distance = 0;
-  double aspect_error = 0;  // |log(projected aspect / silhouette aspect)|
 };
 BoxFit FitBoxToSilhouette(const PinholeCamera& cam, const PixelBounds& sil, const Eigen::Vector3d& size,
                           double elevation, double azimuth) {
   const std::vector<Eigen::Vector3d> corners = BoxCorners(size);
   const Eigen::Vector3d centre(0, 0, size.z() / 2);
-  Eigen::Vector2d aim(0.5 * (sil.x0 + sil.x1), 0.5 * (sil.y0 + sil.y1));
-  double distance = cam.fy * size.z() / std::max(1, sil.Height());
-  BoxFit fit;
-  for (int it = 0; it < 8; ++it) {
-    fit.T_world_cam = PlaceCamera(cam, aim, centre, elevation, azimuth, distance);
-    const auto b = ProjectedBounds(cam, fit.T_world_cam, corners);
-    if (!b) { distance *= 2; continue; }
-    aim += Eigen::Vector2d(0.5 * (sil.x0 + sil.x1) - 0.5 * ((*b)[0] + (*b)[2]), 0.5 * (sil.y0 + sil.y1) - 0.5 * ((*b)[1] + (*b)[3]));
-    distance *= ((*b)[3] - (*b)[1]) / sil.Height();
-    fit.aspect_error = std::abs(std::log(((*b)[2] - (*b)[0]) / ((*b)[3] - (*b)[1]) / (double(sil.Width()) / sil.Height())));
+  const Eigen::Vector2d sil_centre(0.5 * (sil.x0 + sil.x1), 0.5 * (sil.y0 + sil.y1));
+  const double sil_height = sil.Height();
+  // Residuals in pixels: the bounds' centre offset, and the height's log ratio times the silhouette's height.
+  auto residual = [&](const Eigen::Vector3d& x, Eigen::Vector3d* r) {
+    const auto b = ProjectedBounds(cam, PlaceCamera(cam, x.head<2>(), centre, elevation, azimuth, std::exp(x.z())), corners);
+    if (!b || !((*b)[3] - (*b)[1] > 0)) return false;
+    *r << 0.5 * ((*b)[0] + (*b)[2]) - sil_centre.x(), 0.5 * ((*b)[1] + (*b)[3]) - sil_centre.y(),
+        sil_height * std::log(((*b)[3] - (*b)[1]) / sil_height);
+    return true;
+  };
+  Eigen::Vector3d x(sil_centre.x(), sil_centre.y(), std::log(cam.fy * size.z() / std::max(1.0, sil_height)));
+  Eigen::Vector3d r = Eigen::Vector3d::Constant(1e9);
+  for (int k = 0; k < 40 && !residual(x, &r); ++k) x.z() += std::log(2.0);  // a corner behind the camera: back off
+  for (int it = 0; it < 30 && r.norm() > 1e-3; ++it) {
+    Eigen::Matrix3d J;
+    const double h[3] = {0.25, 0.25, 1e-3};
+    bool ok = true;
+    for (int j = 0; j < 3 && ok; ++j) {
+      Eigen::Vector3d xj = x, rj;
+      xj[j] += h[j];
+      ok = residual(xj, &rj);
+      J.col(j) = (rj - r) / h[j];
+    }
+    if (!ok) break;
+    const Eigen::Vector3d step = J.fullPivLu().solve(-r);
+    if (!step.allFinite()) break;
+    double t = 1;
+    Eigen::Vector3d rn = r;
+    while (t > 1e-3 && !(residual(x + t * step, &rn) && rn.norm() < r.norm())) t *= 0.5;
+    if (t <= 1e-3) break;
+    x += t * step, r = rn;
   }
-  fit.T_world_cam = PlaceCamera(cam, aim, centre, elevation, azimuth, distance);
-  fit.distance = distance;
+  BoxFit fit;
+  fit.distance = std::exp(x.z());
+  fit.T_world_cam = PlaceCamera(cam, x.head<2>(), centre, elevation, azimuth, fit.distance);
   return fit;
+}
+
+// IoU of the silhouette with the convex hull of the box's projected corners (0 when a corner is behind the camera).
+double BoxOutlineIou(const ImageF& mask, const PinholeCamera& cam, const Rigid3d& T_world_cam, const Eigen::Vector3d& size) {
+  const Rigid3d T_cam_world = T_world_cam.Inverse();
+  std::vector<Eigen::Vector2d> points;
+  for (const Eigen::Vector3d& p : BoxCorners(size)) {
+    const auto uv = cam.Project(T_cam_world * p);
+    if (!uv) return 0;
+    points.push_back(*uv);
+  }
+  const std::vector<Eigen::Vector2d> outline = geometry::ConvexHull2D(points);
+  double inter = 0, uni = 0;
+  for (int y = 0; y < mask.height(); ++y)
+    for (int x = 0; x < mask.width(); ++x) {
+      const bool in = mask.at(x, y) > 0.5f, box = geometry::InsideConvexPolygon(outline, {x + 0.5, y + 0.5});
+      inter += in && box, uni += in || box;
+    }
+  return uni > 0 ? inter / uni : 0;
 }
 
 MultiView MakeView(const std::string& name, const PinholeCamera& cam, const Rigid3d& T_world_cam, const ImageF& color,
@@ -143,6 +189,31 @@ Image<T> FlipHorizontal(const Image<T>& img) {
   for (int y = 0; y < img.height(); ++y)
     for (int x = 0; x < img.width(); ++x)
       for (int c = 0; c < img.channels(); ++c) out.at(img.width() - 1 - x, y, c) = img.at(x, y, c);
+  return out;
+}
+
+// The kept component (`binary`: the largest, holes filled) with the given mask's partial coverage restored along
+// its outline: the pixels of the component below 0.5 and their neighbours outside it. An antialiased mask (an
+// alpha channel, a render) places the outline to a fraction of a pixel, which the revolve's radii (HalfWidths)
+// and refinement's silhouette loss use; thresholding would quantise a 20 px radius to 2.5 %.
+ImageF OutlineCoverageKept(const ImageF& given, const ImageF& binary) {
+  ImageF out = binary;
+  const int w = binary.width(), h = binary.height();
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float g = std::clamp(given.at(x, y), 0.0f, 1.0f);
+      if (binary.at(x, y) > 0.5f) {
+        if (g >= 0.5f) out.at(x, y) = g;  // inside (below 0.5 only where a hole was filled)
+        continue;
+      }
+      bool next_to_object = false;
+      for (int dy = -1; dy <= 1 && !next_to_object; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int u = x + dx, v = y + dy;
+          if (u >= 0 && v >= 0 && u < w && v < h && binary.at(u, v) > 0.5f) { next_to_object = true; break; }
+        }
+      if (next_to_object) out.at(x, y) = g;
+    }
   return out;
 }
 
@@ -253,7 +324,7 @@ PhotoShape ShapeFromPhoto(const PhotoObservation& photo, const ShapePriorOptions
                                << photo.mask.channels() << ", the photo " << image.width() << "x" << image.height());
   if (!(options.size.minCoeff() > 0) || !std::isfinite(options.size.maxCoeff()))
     throw InputError({}, Msg() << "impossible object size " << options.size.transpose() << " m (all three must be > 0)");
-  const ImageF mask_full = models::LargestComponentFilled(photo.mask);
+  const ImageF mask_full = OutlineCoverageKept(photo.mask, models::LargestComponentFilled(photo.mask));
   const auto sil_full = BoundsOf(mask_full);
   double area = 0;
   for (float m : mask_full.vector()) area += m > 0.5f;
@@ -336,33 +407,62 @@ PhotoShape ShapeFromPhoto(const PhotoObservation& photo, const ShapePriorOptions
     int widest_row = sil.y1 - 1;
     for (int y = band0; y < sil.y1; ++y)
       if (half_width(y) > widest) widest = half_width(y), widest_row = y;
-    std::vector<double> minors;
+    std::vector<double> minors, depth, width;
     for (int y = widest_row + 1; y < sil.y1 && widest > 0; ++y) {
       const double w = half_width(y) / widest;
       if (w < 0.3 || w > 0.95) continue;
-      minors.push_back((sil.y1 - (y + 0.5)) / (1 - std::sqrt(1 - w * w)));
+      depth.push_back(sil.y1 - (y + 0.5)), width.push_back(half_width(y));
+      minors.push_back(depth.back() / (1 - std::sqrt(1 - w * w)));
     }
-    double ratio = 0;
+    double ratio = 0, rms = 0;
     if (minors.size() >= 2) {
-      std::nth_element(minors.begin(), minors.begin() + minors.size() / 2, minors.end());
-      ratio = minors[minors.size() / 2] / widest;
+      std::vector<double> sorted = minors;
+      std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+      const double b = sorted[sorted.size() / 2];
+      ratio = b / widest;
+      for (size_t i = 0; i < depth.size(); ++i) {
+        const double t = std::clamp((b - depth[i]) / b, -1.0, 1.0);
+        rms += std::pow(width[i] - widest * std::sqrt(1 - t * t), 2);
+      }
+      rms = std::sqrt(rms / depth.size());
     }
-    if (ratio >= 0.05 && ratio <= 0.7) {
+    // The rule holds for a circular base only: a square plate (a traffic cone's, seen corner-on: a V), a rounded
+    // bottom edge or a flared foot also drop below the widest row, by other laws. The rows' half-widths must then
+    // follow the fitted ellipse to half a pixel plus 3 % of its width, else the elevation is assumed.
+    const bool ellipse = rms <= 0.5 + 0.03 * widest;
+    if (ellipse && ratio >= 0.05 && ratio <= 0.7) {
       const double e_base = std::asin(ratio);
       const double h_over_d = sil.Height() / cam.fy;
       out.elevation_deg = Deg(e_base - std::asin(std::clamp(0.5 * h_over_d * std::cos(e_base), 0.0, 0.9)));
       out.elevation_method = "base ellipse";
+    } else if (minors.size() >= 2) {
+      out.elevation_method = Msg() << "assumed (the base's outline is no ellipse: " << rms << " px rms)";
     }
   }
   const double elevation = Rad(out.elevation_deg);
 
   if (out.prior == ShapePrior::kRevolve) {
     // Rows between the top rim's and the base's widest rows: above and below them the outline is the ellipse of a
-    // cap, not the side.
-    const double s = std::sin(elevation);
-    int top = sil.y0, bottom = sil.y1 - 1;
-    for (int y = sil.y0; y < sil.y1; ++y) if (y - sil.y0 + 1 >= half_width(y) * s) { top = y; break; }
-    for (int y = sil.y1 - 1; y >= sil.y0; --y) if (sil.y1 - y >= half_width(y) * s) { bottom = y; break; }
+    // cap, not the side. A cap of radius a (pixels) seen at elevation e is an ellipse of half-height b = a sin(e)
+    // whose widest row lies b from the outline's extreme: b is the fixed point of b = sin(e) · (the widest
+    // half-width within b + 1 rows of the extreme), reached from 0 upwards; the row beyond keeps a pointed outline
+    // growing (a square base plate seen corner-on, whose corner drops by at most a sin(e) too). (Comparing each
+    // row's own half-width with its distance from the extreme also holds at the extreme itself, where both
+    // vanish: a partly covered last row of an antialiased mask stopped that scan before any cap was cut.) The
+    // caps are seen more (base) and less (top) steeply than the centre, by about half the object's angular height.
+    const double half_angle = 0.5 * sil.Height() / cam.fy;
+    auto cap_rows = [&](int extreme, int step) {
+      const double s = std::max(0.0, std::sin(elevation - step * half_angle));
+      double b = 0;
+      for (int it = 0; it < sil.Height(); ++it) {
+        double a = 0;
+        for (int k = 0; k <= b + 1 && k < sil.Height(); ++k) a = std::max(a, half_width(extreme + step * k));
+        if (s * a <= b) break;
+        b = s * a;
+      }
+      return static_cast<int>(std::ceil(b - 0.5));  // rows whose centre lies less than b from the extreme
+    };
+    const int top = sil.y0 + cap_rows(sil.y0, 1), bottom = sil.y1 - 1 - cap_rows(sil.y1 - 1, -1);
     if (bottom - top < 2) throw InputError({}, "revolve cannot fit: the silhouette is too flat for a side to be seen");
     const double radius_guess = size.head<2>().maxCoeff() / 2;
     const int mid = (top + bottom) / 2;
@@ -422,12 +522,17 @@ PhotoShape ShapeFromPhoto(const PhotoObservation& photo, const ShapePriorOptions
     out.yaw_deg = 0, out.yaw_method = "facing the camera";
     fit = FitBoxToSilhouette(cam, sil, size, elevation, 0.0);
   } else {
-    fit.aspect_error = 1e9;
-    for (int a = 0; a <= 90; a += 2) {
+    // Every azimuth 0-90 degrees (the other quadrants look the same, mirrored or from behind), scored by how well
+    // the box's outline covers the silhouette: the bounds' aspect alone has several azimuths to each value for
+    // a long box (the outline is widest near the diagonal), while the outline's sloping top and bottom edges say
+    // which way the box runs.
+    double best = -1;
+    for (int a = 0; a <= 90; ++a) {
       const BoxFit f = FitBoxToSilhouette(cam, sil, size, elevation, Rad(a));
-      if (f.aspect_error < fit.aspect_error) fit = f, out.yaw_deg = a;
+      const double iou = BoxOutlineIou(mask, cam, f.T_world_cam, size);
+      if (iou > best) best = iou, fit = f, out.yaw_deg = a;
     }
-    out.yaw_method = "silhouette aspect (front/back ambiguous)";
+    out.yaw_method = Msg() << "silhouette vs box outline, IoU " << best << " (front/back, left/right ambiguous)";
   }
   out.distance_m = fit.distance;
   out.views.push_back(MakeView("photo", cam, fit.T_world_cam, color, mask));
@@ -445,9 +550,14 @@ PhotoShape ShapeFromPhoto(const PhotoObservation& photo, const ShapePriorOptions
   for (const MultiView& v : out.views) silhouettes.push_back({v.view.camera, v.view.T_world_cam.Inverse(), v.mask});
   geometry::VisualHullOptions hull;
   hull.resolution = options.hull_resolution;
-  const Eigen::Vector3f half = (0.5 * size).cast<float>() * 1.02f;
-  hull.bounds.min = Eigen::Vector3f(-half.x(), -half.y(), 0.0f);
-  hull.bounds.max = Eigen::Vector3f(half.x(), half.y(), float(size.z()) * 1.02f);
+  // The carved region is the metric box shrunk by 3/4 voxel: marching cubes puts the surface of a hull that fills
+  // its bounds 1/2 to 1 voxel beyond them (the grid's outer nodes lie up to half a voxel outside, the surface
+  // half a voxel beyond those), which made a flat pack 8 % too tall at 96 voxels along its length; shrunk, the
+  // faces land within a quarter voxel of the box's.
+  const float inset = 0.75f * float(size.maxCoeff()) / float(std::max(2, options.hull_resolution));
+  const Eigen::Vector3f half = (0.5 * size).cast<float>() - Eigen::Vector3f::Constant(inset);
+  hull.bounds.min = Eigen::Vector3f(-half.x(), -half.y(), inset);
+  hull.bounds.max = Eigen::Vector3f(half.x(), half.y(), float(size.z()) - inset);
   out.coarse = geometry::VisualHull(silhouettes, hull);
   if (out.coarse.faces.empty()) throw InputError({}, Msg() << ToString(out.prior) << " cannot fit: the carved hull is empty");
   return out;

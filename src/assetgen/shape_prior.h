@@ -67,7 +67,7 @@ struct PhotoShape {
   double elevation_deg = 0;
   std::string elevation_method;          // "given", "base ellipse", "assumed"
   double yaw_deg = 0;
-  std::string yaw_method;                // "given", "silhouette aspect (front/back ambiguous)", "facing the camera"
+  std::string yaw_method;                // "given", "silhouette vs box outline ...", "facing the camera"
   double distance_m = 0;                 // camera to the object's centre
   TriangleMesh coarse;                   // canonical frame, metres; watertight
   // The photo's view first (colour, mask), then the views the prior made (rotated or mirrored photo, same

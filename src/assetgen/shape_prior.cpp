@@ -508,6 +508,7 @@ PhotoShape ShapeFromPhoto(const PhotoObservation& photo, const ShapePriorOptions
     for (int i = 0; i < k; ++i) {
       const Rigid3d Rz = Rigid3d::FromYaw(2 * kPi * i / k, Eigen::Vector3d::Zero());
       out.views.push_back(MakeView(i == 0 ? std::string("photo") : (Msg() << "rotated_" << i).str(), cam, Rz * T, color, mask));
+      out.views.back().synthetic = i > 0;  // the photo turned about the axis: texture prefers the photo itself
     }
     return out;
   }
@@ -545,6 +546,7 @@ PhotoShape ShapeFromPhoto(const PhotoObservation& photo, const ShapePriorOptions
     mc.cx = cam.width - cam.cx;
     const Rigid3d Tm(M * fit.T_world_cam.Rotation() * F, M * fit.T_world_cam.translation);
     out.views.push_back(MakeView("mirrored", mc, Tm, FlipHorizontal(color), FlipHorizontal(mask)));
+    out.views.back().synthetic = true;
   }
   std::vector<geometry::SilhouetteView> silhouettes;
   for (const MultiView& v : out.views) silhouettes.push_back({v.view.camera, v.view.T_world_cam.Inverse(), v.mask});

@@ -491,31 +491,6 @@ Eigen::Vector2d RevolveAxis(const MultiViewSet& real, const Eigen::Vector3d& siz
 
 namespace {
 
-// A closed surface of revolution about the vertical through `axis`: rings (z ascending, radius), capped.
-TriangleMesh SurfaceOfRevolution(const std::vector<std::pair<double, double>>& rings, int segments, const Eigen::Vector2d& axis) {
-  TriangleMesh m;
-  const int n = static_cast<int>(rings.size());
-  for (const auto& [z, r] : rings)
-    for (int j = 0; j < segments; ++j) {
-      const double a = 2 * std::numbers::pi * j / segments;
-      m.positions.emplace_back(float(axis.x() + r * std::cos(a)), float(axis.y() + r * std::sin(a)), float(z));
-    }
-  const int bottom = static_cast<int>(m.positions.size());
-  m.positions.emplace_back(float(axis.x()), float(axis.y()), float(rings.front().first));
-  const int top = bottom + 1;
-  m.positions.emplace_back(float(axis.x()), float(axis.y()), float(rings.back().first));
-  auto at = [&](int i, int j) { return i * segments + (j % segments); };
-  for (int i = 0; i + 1 < n; ++i)
-    for (int j = 0; j < segments; ++j) {
-      m.faces.emplace_back(at(i, j), at(i, j + 1), at(i + 1, j + 1));
-      m.faces.emplace_back(at(i, j), at(i + 1, j + 1), at(i + 1, j));
-    }
-  for (int j = 0; j < segments; ++j) {
-    m.faces.emplace_back(bottom, at(0, j + 1), at(0, j));
-    m.faces.emplace_back(top, at(n - 1, j), at(n - 1, j + 1));
-  }
-  return m;
-}
 
 double MedianOf(std::vector<double> v) {
   std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());

@@ -20,24 +20,8 @@ constexpr double kPi = 3.14159265358979323846;
 
 // A cone-like body of revolution (radius 0.2 at the bottom to 0.03 at the top, 0.7 m), about the vertical through
 // `axis`, base at z = 0.
-TriangleMesh Frustum(const Eigen::Vector2f& axis, int segments = 96) {
-  TriangleMesh m;
-  for (int ring = 0; ring < 2; ++ring)
-    for (int j = 0; j < segments; ++j) {
-      const double a = 2 * kPi * j / segments, r = ring ? 0.03 : 0.2;
-      m.positions.emplace_back(axis.x() + float(r * std::cos(a)), axis.y() + float(r * std::sin(a)), ring ? 0.7f : 0.0f);
-    }
-  m.positions.emplace_back(axis.x(), axis.y(), 0.f);
-  m.positions.emplace_back(axis.x(), axis.y(), 0.7f);
-  const int bottom = 2 * segments, top = bottom + 1;
-  for (int j = 0; j < segments; ++j) {
-    const int k = (j + 1) % segments;
-    m.faces.emplace_back(j, k, segments + k);
-    m.faces.emplace_back(j, segments + k, segments + j);
-    m.faces.emplace_back(bottom, k, j);
-    m.faces.emplace_back(top, segments + j, segments + k);
-  }
-  return m;
+TriangleMesh Frustum(const Eigen::Vector2f& axis) {
+  return SurfaceOfRevolution({{0.0, 0.2}, {0.7, 0.03}}, 96, axis.cast<double>());
 }
 
 // A camera at (azimuth, elevation) `distance` from the point (0, 0, 0.35) in the object frame, looking at it.

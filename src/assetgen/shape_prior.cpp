@@ -217,19 +217,22 @@ ImageF OutlineCoverageKept(const ImageF& given, const ImageF& binary) {
   return out;
 }
 
-// A closed surface of revolution about +z: rings (z ascending, radius), `segments` around, capped at both ends.
-TriangleMesh Revolve(const std::vector<std::pair<double, double>>& rings, int segments) {
+
+}  // namespace
+
+TriangleMesh SurfaceOfRevolution(const std::vector<std::pair<double, double>>& rings, int segments,
+                                 const Eigen::Vector2d& axis) {
   TriangleMesh m;
   const int n = static_cast<int>(rings.size());
   for (const auto& [z, r] : rings)
     for (int j = 0; j < segments; ++j) {
       const double a = 2 * kPi * j / segments;
-      m.positions.emplace_back(float(r * std::cos(a)), float(r * std::sin(a)), float(z));
+      m.positions.emplace_back(float(axis.x() + r * std::cos(a)), float(axis.y() + r * std::sin(a)), float(z));
     }
   const int bottom = static_cast<int>(m.positions.size());
-  m.positions.emplace_back(0.f, 0.f, float(rings.front().first));
+  m.positions.emplace_back(float(axis.x()), float(axis.y()), float(rings.front().first));
   const int top = bottom + 1;
-  m.positions.emplace_back(0.f, 0.f, float(rings.back().first));
+  m.positions.emplace_back(float(axis.x()), float(axis.y()), float(rings.back().first));
   auto at = [&](int i, int j) { return i * segments + (j % segments); };
   for (int i = 0; i + 1 < n; ++i)
     for (int j = 0; j < segments; ++j) {
@@ -242,8 +245,6 @@ TriangleMesh Revolve(const std::vector<std::pair<double, double>>& rings, int se
   }
   return m;
 }
-
-}  // namespace
 
 const char* ToString(ShapePrior prior) {
   switch (prior) {
@@ -501,7 +502,7 @@ PhotoShape ShapeFromPhoto(const PhotoObservation& photo, const ShapePriorOptions
     std::vector<std::pair<double, double>> kept;
     const size_t n = rings.size(), want = std::min<size_t>(n, 64);
     for (size_t i = 0; i < want; ++i) kept.push_back(rings[want == 1 ? 0 : i * (n - 1) / (want - 1)]);
-    out.coarse = Revolve(kept, 64);
+    out.coarse = SurfaceOfRevolution(kept, 64);
     out.distance_m = (T.translation - Eigen::Vector3d(0, 0, size.z() / 2)).norm();
     out.yaw_deg = 0, out.yaw_method = "facing the camera (a surface of revolution has no heading)";
     const int k = std::max(1, options.rotated_views);

@@ -82,6 +82,11 @@ struct PhotoShape {
 // silhouette (symmetry_iou below min_revolve_symmetry).
 PhotoShape ShapeFromPhoto(const PhotoObservation& photo, const ShapePriorOptions& options);
 
+// A closed surface of revolution about the vertical through `axis`: rings (z ascending, radius), `segments` around,
+// capped at both ends; watertight, outward-facing.
+TriangleMesh SurfaceOfRevolution(const std::vector<std::pair<double, double>>& rings, int segments,
+                                 const Eigen::Vector2d& axis = Eigen::Vector2d::Zero());
+
 // The silhouette's IoU with its mirror image about the best vertical-ish axis (u = a + b v), and that axis.
 struct SilhouetteAxis {
   double a = 0, b = 0;  // u = a + b * v, pixels

@@ -180,22 +180,6 @@ std::vector<size_t> SpreadViews(const std::vector<Eigen::Vector3d>& directions, 
   return chosen;
 }
 
-// Segment [a, b] against the box [lo, hi] (slabs).
-bool SegmentHitsBox(const Eigen::Vector3f& a, const Eigen::Vector3f& b, const Eigen::Vector3f& lo, const Eigen::Vector3f& hi) {
-  float t0 = 0, t1 = 1;
-  const Eigen::Vector3f d = b - a;
-  for (int k = 0; k < 3; ++k) {
-    if (std::abs(d[k]) < 1e-12f) {
-      if (a[k] < lo[k] || a[k] > hi[k]) return false;
-      continue;
-    }
-    float ta = (lo[k] - a[k]) / d[k], tb = (hi[k] - a[k]) / d[k];
-    if (ta > tb) std::swap(ta, tb);
-    t0 = std::max(t0, ta), t1 = std::min(t1, tb);
-    if (t0 > t1) return false;
-  }
-  return true;
-}
 
 }  // namespace
 
@@ -260,7 +244,8 @@ HarvestedObject HarvestObject(const Log& log, const HarvestTarget& target, const
   const Eigen::Vector3f hi(0.5f * float(out.size.x()) + float(o.lidar_margin_m), 0.5f * float(out.size.y()) + float(o.lidar_margin_m),
                            float(out.size.z()) + float(o.lidar_margin_m));
   // Beams carve only near the object: the hull's bounds are the box (scaled 1.02), a few centimetres more.
-  const Eigen::Vector3f carve_lo(lo.x() - 0.05f, lo.y() - 0.05f, -0.05f), carve_hi = hi + Eigen::Vector3f::Constant(0.05f);
+  AlignedBox3f carve;
+  carve.min = Eigen::Vector3f(lo.x() - 0.05f, lo.y() - 0.05f, -0.05f), carve.max = hi + Eigen::Vector3f::Constant(0.05f);
   std::map<std::string, int> cameras_used;
 
   // An object that stands still keeps one pose in the world for every frame (the annotation's jitter from frame to
@@ -322,7 +307,8 @@ HarvestedObject HarvestObject(const Log& log, const HarvestTarget& target, const
           const float range = beam.norm();
           if (!(range > o.free_space_stop_m)) continue;
           const Eigen::Vector3f stop = p - beam * (float(o.free_space_stop_m) / range);
-          if (SegmentHitsBox(origin, stop, carve_lo, carve_hi)) out.free_segments.emplace_back(origin, stop);
+          float t0 = 0, t1 = 0;
+          if (carve.ClipSegment(origin, stop, &t0, &t1)) out.free_segments.emplace_back(origin, stop);
         }
         out.frames_with_lidar += any;
       } catch (const InputError& e) {

@@ -1,10 +1,27 @@
 #include "core/mesh.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "core/error.h"
 
 namespace sd {
+
+bool AlignedBox3f::ClipSegment(const Eigen::Vector3f& a, const Eigen::Vector3f& b, float* t0, float* t1) const {
+  *t0 = 0, *t1 = 1;
+  const Eigen::Vector3f d = b - a;
+  for (int k = 0; k < 3; ++k) {
+    if (std::abs(d[k]) < 1e-12f) {
+      if (a[k] < min[k] || a[k] > max[k]) return false;
+      continue;
+    }
+    float ta = (min[k] - a[k]) / d[k], tb = (max[k] - a[k]) / d[k];
+    if (ta > tb) std::swap(ta, tb);
+    *t0 = std::max(*t0, ta), *t1 = std::min(*t1, tb);
+    if (*t0 > *t1) return false;
+  }
+  return true;
+}
 
 AlignedBox3f TriangleMesh::Bounds() const {
   AlignedBox3f b;

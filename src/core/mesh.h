@@ -33,6 +33,8 @@ struct AlignedBox3f {
   Eigen::Vector3f Size() const { return max - min; }
   Eigen::Vector3f Center() const { return 0.5f * (min + max); }
   bool IsEmpty() const { return (max.array() < min.array()).any(); }
+  // The part of the segment a + t (b - a), t in [0, 1], inside the box (slabs): true and *t0 <= *t1 when it meets it.
+  bool ClipSegment(const Eigen::Vector3f& a, const Eigen::Vector3f& b, float* t0, float* t1) const;
 };
 
 struct TriangleMesh {

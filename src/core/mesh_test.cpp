@@ -138,5 +138,19 @@ TEST(Mesh, ValidateCatchesInconsistencies) {
   EXPECT_NE(m.Validate(), "");
 }
 
+TEST(AlignedBox3f, ClipSegmentKeepsThePartInsideTheBox) {
+  AlignedBox3f box;
+  box.min = Eigen::Vector3f(0, 0, 0), box.max = Eigen::Vector3f(1, 1, 1);
+  float t0 = -1, t1 = -1;
+  ASSERT_TRUE(box.ClipSegment({-1, 0.5f, 0.5f}, {3, 0.5f, 0.5f}, &t0, &t1));
+  EXPECT_FLOAT_EQ(t0, 0.25f);
+  EXPECT_FLOAT_EQ(t1, 0.5f);
+  ASSERT_TRUE(box.ClipSegment({0.5f, 0.5f, 0.5f}, {0.6f, 0.5f, 0.5f}, &t0, &t1));  // wholly inside
+  EXPECT_FLOAT_EQ(t0, 0.0f);
+  EXPECT_FLOAT_EQ(t1, 1.0f);
+  EXPECT_FALSE(box.ClipSegment({-1, 2, 0.5f}, {3, 2, 0.5f}, &t0, &t1));   // parallel to x, above the box
+  EXPECT_FALSE(box.ClipSegment({-2, 0.5f, 0.5f}, {-1, 0.5f, 0.5f}, &t0, &t1));  // stops short of it
+}
+
 }  // namespace
 }  // namespace sd

@@ -142,21 +142,14 @@ TriangleMesh SignificantComponents(const TriangleMesh& mesh, float fraction) {
 // at each step the eight nodes around the sample are tested against the segment itself.
 void CarveFreeSpace(const std::vector<std::pair<Eigen::Vector3f, Eigen::Vector3f>>& segments, ScalarGrid* grid) {
   const float h = grid->voxel_size, reach2 = 0.25f * h * h;
-  const Eigen::Vector3f lo = grid->origin, hi = grid->NodePosition(grid->dims.x() - 1, grid->dims.y() - 1, grid->dims.z() - 1);
+  // The grid's nodes grown by a voxel: a beam from a sensor metres away walks only the grid's few voxels.
+  AlignedBox3f reach;
+  reach.min = grid->origin - Eigen::Vector3f::Constant(h);
+  reach.max = grid->NodePosition(grid->dims.x() - 1, grid->dims.y() - 1, grid->dims.z() - 1) + Eigen::Vector3f::Constant(h);
   for (const auto& [from, to] : segments) {
-    // Clipped to the grid (slabs), so a beam from a sensor metres away walks only the grid's few voxels.
-    float t0 = 0, t1 = 1;
+    float t0 = 0, t1 = 0;
+    if (!reach.ClipSegment(from, to, &t0, &t1)) continue;
     const Eigen::Vector3f d = to - from;
-    for (int axis = 0; axis < 3 && t0 <= t1; ++axis) {
-      if (std::abs(d[axis]) < 1e-12f) {
-        if (from[axis] < lo[axis] - h || from[axis] > hi[axis] + h) t1 = -1;
-        continue;
-      }
-      float ta = (lo[axis] - h - from[axis]) / d[axis], tb = (hi[axis] + h - from[axis]) / d[axis];
-      if (ta > tb) std::swap(ta, tb);
-      t0 = std::max(t0, ta), t1 = std::min(t1, tb);
-    }
-    if (t0 > t1) continue;
     const Eigen::Vector3f a = from + t0 * d, b = from + t1 * d;
     const Eigen::Vector3f ab = b - a;
     const float len2 = ab.squaredNorm();

@@ -13,6 +13,7 @@
 #include "assetgen/uv_atlas.h"
 #include "core/error.h"
 #include "core/log.h"
+#include "core/stats.h"
 #include "geometry/closest_point.h"
 #include "geometry/topology.h"
 #include "geometry/visual_hull.h"
@@ -227,94 +228,6 @@ size_t MiddleView(const MultiViewSet& views) {
   return az[az.size() / 2].second;
 }
 
-double Median(std::vector<float> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
-}
-
-}  // namespace
-
-namespace {
-GeneratedMesh GenerateFromHull(const HarvestedObject& object, const MultiViewSet& views, const HarvestFit& fit,
-                               const GenerateOptions& options, const std::vector<Eigen::Vector3f>& points);
-void FillHarvestQuality(const HarvestedObject& object, const GeneratedMesh& g, const std::vector<Eigen::Vector3f>& points,
-                        bool held_out, HarvestFit* fit);
-}  // namespace
-
-GeneratedMesh GenerateFromHarvest(const HarvestedObject& object, GenerateOptions options, HarvestFit* fit_out) {
-  HarvestFit fit;
-  if (object.views.empty()) throw InputError({}, "the harvested object has no views");
-  // Held out: the middle view, when at least two others remain to fit.
-  std::vector<size_t> fit_views;
-  if (object.views.size() >= 3) fit.held_out.push_back(MiddleView(object.views));
-  for (size_t i = 0; i < object.views.size(); ++i)
-    if (std::find(fit.held_out.begin(), fit.held_out.end(), i) == fit.held_out.end()) fit_views.push_back(i);
-  MultiViewSet views;
-  for (size_t i : fit_views) views.push_back(object.views[i]);
-  fit.real_views = static_cast<int>(views.size());
-
-  // The prior: the category's, a revolve demoted when the largest silhouette is not mirror-symmetric.
-  fit.prior = DefaultShapePrior(object.category);
-  fit.prior_reason = "category " + object.category;
-  if (fit.prior == ShapePrior::kRevolve) {
-    size_t largest = 0;
-    double area = -1;
-    for (size_t i = 0; i < views.size(); ++i) {
-      double a = 0;
-      for (float m : views[i].mask.vector()) a += m > 0.5f;
-      if (a > area) area = a, largest = i;
-    }
-    // A log's masks are a segmenter's at a few dozen pixels, shaded on one side: less symmetric than a photo's
-    // (the photo path asks 0.85); what is far below is no surface of revolution (a fallen or crushed cone).
-    constexpr double kMinLogSymmetry = 0.7;
-    const double symmetry = FitSymmetryAxis(views[largest].mask).symmetry_iou;
-    if (symmetry < kMinLogSymmetry) {
-      fit.prior = ShapePrior::kHull;
-      fit.prior_reason = Msg() << "category " << object.category << ", but silhouette symmetry " << symmetry << " < "
-                               << kMinLogSymmetry;
-    }
-  }
-  // Every fifth return is held out of the fit (with 25 or more): the point-to-mesh figure is then measured on
-  // returns the surface was not pulled onto, not a fit residual.
-  std::vector<Eigen::Vector3f> fit_points, held_points;
-  for (size_t i = 0; i < object.points.size(); ++i)
-    (object.points.size() >= 25 && i % 5 == 2 ? held_points : fit_points).push_back(object.points[i]);
-  // A surface of revolution turns about its own axis, which the box's centre only approximates.
-  const Eigen::Vector2d axis = fit.prior == ShapePrior::kRevolve ? RevolveAxis(views, object.size, fit_points) : Eigen::Vector2d::Zero();
-  const MultiViewSet real_views = views;
-  const MultiViewSet synthetic = SymmetryViews(views, fit.prior, 8, axis);
-  fit.synthetic_views = static_cast<int>(synthetic.size());
-  views.insert(views.end(), synthetic.begin(), synthetic.end());
-
-  options.refine.lambda_normal = 0;  // no normal maps: masks and returns
-  options.canonical.up = "+z", options.canonical.front = "+x";
-  options.canonical.scale = 1.0;
-  options.canonical.front_direction.reset();
-  options.canonical.target_size.reset();
-  options.canonical.target_height.reset();
-  GeneratedMesh g;
-  if (fit.prior == ShapePrior::kRevolve) {
-    // Coarse: the profile every silhouette and return agrees on, revolved; a hull of few, noisy masks from one
-    // side would be far less round.
-    const TriangleMesh coarse = RevolveFromViews(real_views, fit_points, axis, object.size);
-    // The profile is already fitted to every silhouette and return (a one-dimensional fit); free-form
-    // refinement would only follow the segmenter's errors out of round.
-    options.refine.steps = 0;
-    g = Generate(views, options, &coarse,
-                 Msg() << "surface of revolution from " << fit.real_views << " silhouettes and " << fit_points.size()
-                       << " LiDAR returns, axis offset (" << axis.x() << ", " << axis.y() << ") m",
-                 fit_points);
-  } else {
-    g = GenerateFromHull(object, views, fit, options, fit_points);
-  }
-  FillHarvestQuality(object, g, held_points.empty() ? fit_points : held_points, !held_points.empty(), &fit);
-  if (fit_out) *fit_out = std::move(fit);
-  return g;
-}
-
-namespace {
-
 // The box priors' coarse mesh: the hull of every view inside the metric box, carved by the beams.
 GeneratedMesh GenerateFromHull(const HarvestedObject& object, const MultiViewSet& views, const HarvestFit& fit,
                                const GenerateOptions& options, const std::vector<Eigen::Vector3f>& points) {
@@ -343,35 +256,99 @@ GeneratedMesh GenerateFromHull(const HarvestedObject& object, const MultiViewSet
   return Generate(views, options, &coarse, coarse_method, points);
 }
 
+// The asset's figures (asset.h namespace quality): `measured` are the returns its surface is judged against (held
+// out of the fit when `held_out`).
 void FillHarvestQuality(const HarvestedObject& object, const GeneratedMesh& g, const std::vector<Eigen::Vector3f>& measured,
-                        bool held_out, HarvestFit* fit_in) {
-  HarvestFit& fit = *fit_in;
-  fit.quality = MeshQuality(g);
-  fit.quality[quality::kExtentToSize] = g.extent.cwiseQuotient(object.size).maxCoeff();
-  fit.quality[quality::kShapePrior] = {{"prior", ToString(fit.prior)}, {"reason", fit.prior_reason},
-                                       {"real_views", fit.real_views}, {"synthetic_views", fit.synthetic_views}};
-  if (!fit.held_out.empty()) {
+                        bool held_out, HarvestFit* fit) {
+  fit->quality = MeshQuality(g);
+  fit->quality[quality::kExtentToSize] = g.extent.cwiseQuotient(object.size).maxCoeff();
+  fit->quality[quality::kShapePrior] = {{"prior", ToString(fit->prior)}, {"reason", fit->prior_reason},
+                                        {"real_views", fit->real_views}, {"synthetic_views", fit->synthetic_views}};
+  if (!fit->held_out.empty()) {
     double iou = 0, psnr = 0;
-    for (size_t i : fit.held_out) {
+    for (size_t i : fit->held_out) {
       const ViewAgreement a = AgreementAtView(g, object.views[i], object.views[i].mask);
       iou += a.silhouette_iou, psnr += a.masked_psnr_db;
     }
-    fit.quality[quality::kHeldOutSilhouetteIou] = iou / fit.held_out.size();
-    fit.quality["heldout_masked_psnr_db"] = psnr / fit.held_out.size();
-    fit.quality["heldout_views"] = fit.held_out.size();
+    fit->quality[quality::kHeldOutSilhouetteIou] = iou / fit->held_out.size();
+    fit->quality["heldout_masked_psnr_db"] = psnr / fit->held_out.size();
+    fit->quality["heldout_views"] = fit->held_out.size();
   }
   if (!measured.empty()) {
-    std::vector<Eigen::Vector3f> points;
-    for (const Eigen::Vector3f& p : measured)
-      points.push_back((g.scale * (g.rotation * p.cast<double>()) + g.translation).cast<float>());
-    fit.quality[quality::kLidarPointToMeshMedianM] = Median(geometry::PointToSurfaceDistances(g.mesh.positions, g.mesh.faces, points));
-    fit.quality["lidar_points"] = object.points.size();
-    fit.quality["lidar_p2m_points"] = points.size();
-    fit.quality["lidar_p2m_held_out"] = held_out;  // false: too few returns to hold any out, a fit residual
+    TriangleMesh cloud;
+    cloud.positions = measured;
+    cloud = g.ToAssetFrame(std::move(cloud));
+    const std::vector<float> d = geometry::PointToSurfaceDistances(g.mesh.positions, g.mesh.faces, cloud.positions);
+    fit->quality[quality::kLidarPointToMeshMedianM] = Median(std::vector<double>(d.begin(), d.end()));
+    fit->quality["lidar_points"] = object.points.size();
+    fit->quality["lidar_p2m_points"] = measured.size();
+    fit->quality["lidar_p2m_held_out"] = held_out;  // false: too few returns to hold any out, a fit residual
   }
 }
 
 }  // namespace
+
+GeneratedMesh GenerateFromHarvest(const HarvestedObject& object, GenerateOptions options, HarvestFit* fit_out) {
+  HarvestFit fit;
+  if (object.views.empty()) throw InputError({}, "the harvested object has no views");
+  // Held out: the middle view, when at least two others remain to fit.
+  if (object.views.size() >= 3) fit.held_out.push_back(MiddleView(object.views));
+  MultiViewSet views;
+  for (size_t i = 0; i < object.views.size(); ++i)
+    if (std::find(fit.held_out.begin(), fit.held_out.end(), i) == fit.held_out.end()) views.push_back(object.views[i]);
+  fit.real_views = static_cast<int>(views.size());
+
+  // The prior: the category's, a revolve demoted when the largest silhouette is not mirror-symmetric.
+  fit.prior = DefaultShapePrior(object.category);
+  fit.prior_reason = "category " + object.category;
+  if (fit.prior == ShapePrior::kRevolve) {
+    // A log's masks are a segmenter's at a few dozen pixels, shaded on one side: less symmetric than a photo's
+    // (the photo path asks 0.85); what is far below is no surface of revolution (a fallen or crushed cone).
+    constexpr double kMinLogSymmetry = 0.7;
+    const double symmetry = FitSymmetryAxis(views[LargestView(views)].mask).symmetry_iou;
+    if (symmetry < kMinLogSymmetry) {
+      fit.prior = ShapePrior::kHull;
+      fit.prior_reason = Msg() << "category " << object.category << ", but silhouette symmetry " << symmetry << " < "
+                               << kMinLogSymmetry;
+    }
+  }
+  // Every fifth return is held out of the fit (with 25 or more): the point-to-mesh figure is then measured on
+  // returns the surface was not pulled onto, not a fit residual.
+  std::vector<Eigen::Vector3f> fit_points, held_points;
+  for (size_t i = 0; i < object.points.size(); ++i)
+    (object.points.size() >= 25 && i % 5 == 2 ? held_points : fit_points).push_back(object.points[i]);
+  // A surface of revolution turns about its own axis, which the box's centre only approximates. Its coarse mesh is
+  // the profile every real silhouette and return agrees on, revolved (a hull of few, noisy masks from one side
+  // would be far less round).
+  const bool revolve = fit.prior == ShapePrior::kRevolve;
+  const Eigen::Vector2d axis = revolve ? RevolveAxis(views, object.size, fit_points) : Eigen::Vector2d::Zero();
+  const TriangleMesh revolved = revolve ? RevolveFromViews(views, fit_points, axis, object.size) : TriangleMesh{};
+  const MultiViewSet synthetic = SymmetryViews(views, fit.prior, 8, axis);
+  fit.synthetic_views = static_cast<int>(synthetic.size());
+  views.insert(views.end(), synthetic.begin(), synthetic.end());
+
+  options.refine.lambda_normal = 0;  // no normal maps: masks and returns
+  options.canonical.up = "+z", options.canonical.front = "+x";
+  options.canonical.scale = 1.0;
+  options.canonical.front_direction.reset();
+  options.canonical.target_size.reset();
+  options.canonical.target_height.reset();
+  GeneratedMesh g;
+  if (revolve) {
+    // The profile is already fitted to every silhouette and return (a one-dimensional fit); free-form
+    // refinement would only follow the segmenter's errors out of round.
+    options.refine.steps = 0;
+    g = Generate(views, options, &revolved,
+                 Msg() << "surface of revolution from " << fit.real_views << " silhouettes and " << fit_points.size()
+                       << " LiDAR returns, axis offset (" << axis.x() << ", " << axis.y() << ") m",
+                 fit_points);
+  } else {
+    g = GenerateFromHull(object, views, fit, options, fit_points);
+  }
+  FillHarvestQuality(object, g, held_points.empty() ? fit_points : held_points, !held_points.empty(), &fit);
+  if (fit_out) *fit_out = std::move(fit);
+  return g;
+}
 
 namespace {
 

@@ -11,6 +11,7 @@
 
 #include "core/error.h"
 #include "core/log.h"
+#include "core/stats.h"
 #include "datasets/categories.h"
 #include "datasets/readers.h"
 #include "geometry/polygon.h"
@@ -478,11 +479,6 @@ Eigen::Vector2d RevolveAxis(const MultiViewSet& real, const Eigen::Vector3d& siz
 namespace {
 
 
-double MedianOf(std::vector<double> v) {
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
-}
-
 }  // namespace
 
 TriangleMesh RevolveFromViews(const MultiViewSet& real, const std::vector<Eigen::Vector3f>& points,
@@ -546,8 +542,8 @@ TriangleMesh RevolveFromViews(const MultiViewSet& real, const std::vector<Eigen:
   // a few dozen pixels is not — else the silhouettes' median.
   std::vector<double> radius(kBins, -1);
   for (int i = 0; i < kBins; ++i) {
-    if (from_points[i].size() >= 3) radius[i] = MedianOf(from_points[i]);
-    else if (!from_views[i].empty()) radius[i] = MedianOf(from_views[i]);
+    if (from_points[i].size() >= 3) radius[i] = Median(from_points[i]);
+    else if (!from_views[i].empty()) radius[i] = Median(from_views[i]);
   }
   // Empty bins take their nearest neighbours' (linearly between two, flat beyond the ends).
   std::vector<int> known;
@@ -567,7 +563,7 @@ TriangleMesh RevolveFromViews(const MultiViewSet& real, const std::vector<Eigen:
   // A 3-bin median against single outliers, a 3-bin mean against the returns' range noise, then the box's bound.
   std::vector<double> median(kBins);
   for (int i = 0; i < kBins; ++i)
-    median[i] = MedianOf({radius[std::max(0, i - 1)], radius[i], radius[std::min(kBins - 1, i + 1)]});
+    median[i] = Median({radius[std::max(0, i - 1)], radius[i], radius[std::min(kBins - 1, i + 1)]});
   std::vector<std::pair<double, double>> rings;
   for (int i = 0; i < kBins; ++i) {
     const double mean = (median[std::max(0, i - 1)] + median[i] + median[std::min(kBins - 1, i + 1)]) / 3;
@@ -577,6 +573,16 @@ TriangleMesh RevolveFromViews(const MultiViewSet& real, const std::vector<Eigen:
   rings.front().first = 0;
   rings.back().first = h;
   return SurfaceOfRevolution(rings, 64, axis);
+}
+
+size_t LargestView(const MultiViewSet& views) {
+  size_t best = 0;
+  double best_area = -1;
+  for (size_t i = 0; i < views.size(); ++i) {
+    const double a = Area(views[i].mask);
+    if (a > best_area) best_area = a, best = i;
+  }
+  return best;
 }
 
 MultiViewSet SymmetryViews(const MultiViewSet& real, ShapePrior prior, int limit, const Eigen::Vector2d& axis) {
@@ -593,13 +599,8 @@ MultiViewSet SymmetryViews(const MultiViewSet& real, ShapePrior prior, int limit
   std::vector<double> covered;
   for (const MultiView& v : real) covered.push_back(azimuth_of(v));
   if (prior == ShapePrior::kRevolve) {
-    // The view that shows the object largest (most mask pixels) stands in for every side.
-    size_t best = 0;
-    double best_area = -1;
-    for (size_t i = 0; i < real.size(); ++i) {
-      const double a = Area(real[i].mask);
-      if (a > best_area) best_area = a, best = i;
-    }
+    // The view that shows the object largest stands in for every side.
+    const size_t best = LargestView(real);
     const double base = azimuth_of(real[best]);
     for (int k = 1; k < 8 && static_cast<int>(out.size()) < limit; ++k) {
       const double turn = k * 45.0 * kDeg, az = base + turn;

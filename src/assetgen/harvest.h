@@ -98,6 +98,9 @@ Eigen::Vector2d RevolveAxis(const MultiViewSet& real, const Eigen::Vector3d& siz
 TriangleMesh RevolveFromViews(const MultiViewSet& real, const std::vector<Eigen::Vector3f>& points,
                               const Eigen::Vector2d& axis, const Eigen::Vector3d& size);
 
+// The view whose mask covers the most pixels: the one that shows the object largest. 0 for no views.
+size_t LargestView(const MultiViewSet& views);
+
 // Shape-prior views from real ones, with exact cameras (the object frame's axes are the symmetry's):
 //   revolve  copies of the best real view rotated about the vertical axis through `axis` into the azimuths no real
 //            view covers (every 45 degrees), up to 8;

@@ -9,6 +9,7 @@
 #include <Eigen/Dense>
 
 #include "core/error.h"
+#include "core/stats.h"
 #include "core/log.h"
 #include "core/parallel.h"
 
@@ -19,13 +20,6 @@ constexpr double kDeg = M_PI / 180.0;
 
 float Luma(const float* rgb) { return 0.2126f * rgb[0] + 0.7152f * rgb[1] + 0.0722f * rgb[2]; }
 float Luma(const Eigen::Vector3f& rgb) { return 0.2126f * rgb[0] + 0.7152f * rgb[1] + 0.0722f * rgb[2]; }
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  const size_t m = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + m, v.end());
-  return v[m];
-}
 
 // Integer hash -> [0, 1): deterministic per (seed, index) sampling, independent of threads.
 double Hash01(uint32_t a, uint32_t b) {

@@ -9,18 +9,13 @@
 #include <Eigen/Dense>
 
 #include "core/error.h"
+#include "core/stats.h"
 #include "datasets/categories.h"
 
 namespace sd {
 namespace {
 
 constexpr double kTwoPi = 2 * M_PI;
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
-}
 
 double RobustSigma(const std::vector<double>& v) {
   const double m = Median(v);

@@ -160,8 +160,15 @@ Runner AddDemoCommand(CLI::App& app) {
       const std::string id = "photo_" + p.photo.stem().string().substr(0, 6) + "_" + std::to_string(p.id);
       const CategoryInfo cone = *FindCategory("traffic_cone");
       try {
-        BuiltAsset a = PhotoAsset(ReadImage(p.photo, 3), p.mask, "the photo's own instance mask (Road Anomaly labels)",
-                                  cone, Eigen::Vector3d(0.41, 0.41, 0.7), hit_options,
+        PhotoObservation photo;
+        photo.image = ReadImage(p.photo, 3);
+        photo.mask = p.mask;
+        ShapePriorOptions prior;
+        prior.category = cone.name;
+        prior.size = Eigen::Vector3d(0.41, 0.41, 0.7);
+        const fs::path labels = p.photo.parent_path() / (p.photo.stem().string() + ".labels");
+        BuiltAsset a = PhotoAsset(photo, prior, hit_options.generate,
+                                  {"segment", "the photo's own instance mask (Road Anomaly labels)", 0.0}, p.photo, labels,
                                   "data/images/roadanomaly-cones/frames/" + p.photo.filename().string());
         AssetInfo info;
         info.id = id;

@@ -118,7 +118,7 @@ Eigen::Vector3d ObjectSize(const Args& a, const CategoryInfo& category) {
 
 // The object's mask in the photo: --mask, else the photo's alpha channel, else GrabCut (or --segmenter's
 // model) inside --box (or the whole photo less a 2% border: a photo of the object alone).
-ImageF PhotoMask(const Args& a, const ImageU8& raw, const ImageU8& image, std::vector<StageReport>* front) {
+ImageF PhotoMask(const Args& a, const ImageU8& raw, const ImageU8& image, StageReport* stage) {
   const auto start = std::chrono::steady_clock::now();
   ImageF mask(image.width(), image.height(), 1, 0.0f);
   std::string method;
@@ -149,7 +149,7 @@ ImageF PhotoMask(const Args& a, const ImageU8& raw, const ImageU8& image, std::v
     mask = segmenter.Segment(image, box).mask;
     method = segmenter.Describe() + (a.box.empty() ? " in the whole photo" : " in --box");
   }
-  front->push_back({"segment", method, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()});
+  *stage = {"segment", method, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()};
   return mask;
 }
 
@@ -159,9 +159,9 @@ ImageF PhotoMask(const Args& a, const ImageU8& raw, const ImageU8& image, std::v
 void RunPhotoShape(const Args& a, const CategoryInfo& category, GenerateOptions options, const AssetInfo& info) {
   const ImageU8 raw = ReadImage(a.image);
   const ImageU8 image = raw.channels() == 3 ? raw : ReadImage(a.image, 3);
-  std::vector<StageReport> front;
+  StageReport segmentation;
   PhotoObservation photo;
-  photo.mask = PhotoMask(a, raw, image, &front);
+  photo.mask = PhotoMask(a, raw, image, &segmentation);
   photo.image = image;
   photo.elevation_deg = a.elevation;
   ShapePriorOptions prior;
@@ -170,51 +170,10 @@ void RunPhotoShape(const Args& a, const CategoryInfo& category, GenerateOptions 
   prior.size = ObjectSize(a, category);
   prior.yaw_deg = a.yaw;
   prior.assumed_vertical_fov_deg = a.fov;
-  prior.hull_resolution = options.hull_resolution;
-  const auto start = std::chrono::steady_clock::now();
-  PhotoShape shape;
-  try {
-    shape = ShapeFromPhoto(photo, prior);
-  } catch (const InputError& e) {
-    throw InputError(a.mask.empty() ? a.image : a.mask, e.what());
-  }
-  front.push_back({"shape_prior",
-                   Msg() << ToString(shape.prior) << " (" << shape.prior_reason << "), " << shape.views.size()
-                         << " views, elevation " << shape.elevation_deg << " deg (" << shape.elevation_method << ")",
-                   std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()});
-  options.canonical.target_size = prior.size;
-  options.canonical.target_height.reset();
-  GeneratedMesh g;
-  try {
-    g = GenerateFromPhotoShape(shape, options);
-  } catch (const InputError& e) {
-    throw InputError(a.image, e.what());
-  }
-  // How well the asset reproduces the photo (a self-consistency figure: the photo supervised the shape;
-  // held-out views are for benchmarks).
-  const MultiView& seen = shape.views.front();
-  const ViewAgreement agreement = AgreementAtView(g, seen, seen.mask);
-  nlohmann::json quality = MeshQuality(g);
-  quality.update({
-      {"shape_prior",
-       {{"prior", ToString(shape.prior)},
-        {"reason", shape.prior_reason},
-        {"silhouette_symmetry_iou", shape.symmetry_iou},
-        {"axis_tilt_deg", shape.axis_tilt_deg},
-        {"intrinsics_assumed", shape.intrinsics_assumed},
-        {"vertical_fov_deg", 2 * std::atan(0.5 * shape.camera.height / shape.camera.fy) * 180 / 3.14159265358979323846},
-        {"elevation_deg", shape.elevation_deg},
-        {"elevation_method", shape.elevation_method},
-        {"yaw_deg", shape.yaw_deg},
-        {"yaw_method", shape.yaw_method},
-        {"camera_distance_m", shape.distance_m},
-        {"real_views", shape.real_views},
-        {"virtual_views", int(shape.views.size()) - shape.real_views}}},
-      {"photo_silhouette_iou", agreement.silhouette_iou},
-      {"photo_masked_psnr_db", agreement.masked_psnr_db}});
-  SD_LOG(Info, a.image << ": " << ToString(shape.prior) << " prior, photo silhouette IoU "
-                       << quality["photo_silhouette_iou"].get<double>());
-  SaveGenerated(std::move(g), shape.views, front, info, a.image, a.out, a.overwrite, quality);
+  BuiltAsset built = PhotoAsset(photo, prior, options, segmentation, a.image, a.mask, a.image);
+  SD_LOG(Info, a.image << ": " << built.quality[quality::kShapePrior]["prior"].get<std::string>()
+                       << " prior, photo silhouette IoU " << built.quality["photo_silhouette_iou"].get<double>());
+  SaveGenerated(std::move(built.mesh), built.views, built.front, info, a.image, a.out, a.overwrite, built.quality);
 }
 
 // `generate --manifest`: one asset per mining hit, as a batch (DESIGN.md): the shard's share of the hits, each

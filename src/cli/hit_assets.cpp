@@ -1,6 +1,7 @@
 #include "cli/hit_assets.h"
 
 #include <chrono>
+#include <cmath>
 
 #include "assetgen/harvest.h"
 #include "assetgen/mined.h"
@@ -71,20 +72,25 @@ BuiltAsset HitAssetBuilder::Build(const mining::ManifestEntry& entry, const std:
     // An image hit: its crop, masked by its alpha (exact) or by the segmenter inside its box.
     const MinedObject object = LoadMinedObject(entry);
     const auto start = std::chrono::steady_clock::now();
-    ImageF mask(object.image.width(), object.image.height(), 1, 0.0f);
+    PhotoObservation photo;
+    photo.image = object.image;
+    photo.mask = ImageF(object.image.width(), object.image.height(), 1, 0.0f);
     std::string method;
     if (object.prior && object.prior->source == "alpha") {
-      for (size_t i = 0; i < mask.vector().size(); ++i) mask.vector()[i] = object.prior->mask.data()[i] > 127 ? 1.0f : 0.0f;
+      for (size_t i = 0; i < photo.mask.vector().size(); ++i)
+        photo.mask.vector()[i] = object.prior->mask.data()[i] > 127 ? 1.0f : 0.0f;
       method = "the image's alpha";
     } else {
       const models::Segmenter segmenter = models::Segmenter::Resolve(options_.segmenter);
-      mask = segmenter.Segment(object.image, object.box).mask;
+      photo.mask = segmenter.Segment(object.image, object.box).mask;
       method = segmenter.Describe() + " in the hit's box";
     }
-    BuiltAsset built = PhotoAsset(object.image, mask, method, category, object.size_lwh.value_or(size), options_,
-                                  object.source);
-    built.front.front().seconds += Since(start);
-    return built;
+    ShapePriorOptions prior;
+    prior.prior = options_.shape;
+    prior.category = category.name;
+    prior.size = object.size_lwh.value_or(size);
+    return PhotoAsset(photo, prior, options_.generate, {"segment", method, Since(start)}, item.crop_file,
+                      item.mask_file, object.source);
   }
   // A log hit: every view of its track, its returns and box.
   if (!item.box_ego) throw InputError(where, "the log hit has no 3D box to find its object by");
@@ -110,38 +116,53 @@ BuiltAsset HitAssetBuilder::Build(const mining::ManifestEntry& entry, const std:
   return built;
 }
 
-BuiltAsset PhotoAsset(const ImageU8& photo_image, const ImageF& mask, const std::string& mask_method,
-                      const CategoryInfo& category, const Eigen::Vector3d& size, const HitAssetOptions& options,
+BuiltAsset PhotoAsset(const PhotoObservation& photo, ShapePriorOptions prior, const GenerateOptions& options,
+                      StageReport segmentation, const fs::path& photo_file, const fs::path& mask_file,
                       const std::string& source) {
   BuiltAsset built;
-  built.front.push_back({"segment", mask_method, 0.0});
+  built.front.push_back(std::move(segmentation));
   const auto start = std::chrono::steady_clock::now();
-  PhotoObservation photo;
-  photo.image = photo_image;
-  photo.mask = mask;
-  ShapePriorOptions prior;
-  prior.prior = options.shape;
-  prior.category = category.name;
-  prior.size = size;
-  prior.hull_resolution = options.generate.hull_resolution;
-  const PhotoShape shape = ShapeFromPhoto(photo, prior);
+  prior.hull_resolution = options.hull_resolution;
+  PhotoShape shape;
+  try {
+    shape = ShapeFromPhoto(photo, prior);
+  } catch (const InputError& e) {
+    throw InputError(mask_file.empty() ? photo_file : mask_file, e.what());
+  }
   built.front.push_back({"shape_prior",
                          Msg() << ToString(shape.prior) << " (" << shape.prior_reason << "), " << shape.views.size()
                                << " views, elevation " << shape.elevation_deg << " deg (" << shape.elevation_method << ")",
                          Since(start)});
-  GenerateOptions o = options.generate;
-  o.canonical.target_size = size;
+  GenerateOptions o = options;
+  o.canonical.target_size = prior.size;
   o.canonical.target_height.reset();
-  built.mesh = GenerateFromPhotoShape(shape, o);
-  built.views = MultiViewSet(shape.views.begin(), shape.views.begin() + shape.real_views);
-  for (MultiView& v : built.views) v.source = source;
+  try {
+    built.mesh = GenerateFromPhotoShape(shape, o);
+  } catch (const InputError& e) {
+    throw InputError(photo_file, e.what());
+  }
+  built.views = shape.views;
+  for (MultiView& v : built.views)
+    if (!v.synthetic) v.source = source;
+  // How well the asset reproduces the photo (a self-consistency figure: the photo supervised the shape;
+  // held-out views are for benchmarks).
   const ViewAgreement agreement = AgreementAtView(built.mesh, shape.views.front(), shape.views.front().mask);
   built.quality = MeshQuality(built.mesh);
-  built.quality[quality::kExtentToSize] = built.mesh.extent.cwiseQuotient(size).maxCoeff();
-  built.quality[quality::kShapePrior] = {{"prior", ToString(shape.prior)}, {"reason", shape.prior_reason},
-                                         {"elevation_deg", shape.elevation_deg},
-                                         {"elevation_method", shape.elevation_method},
-                                         {"intrinsics_assumed", shape.intrinsics_assumed}};
+  built.quality[quality::kExtentToSize] = built.mesh.extent.cwiseQuotient(prior.size).maxCoeff();
+  built.quality[quality::kShapePrior] = {
+      {"prior", ToString(shape.prior)},
+      {"reason", shape.prior_reason},
+      {"silhouette_symmetry_iou", shape.symmetry_iou},
+      {"axis_tilt_deg", shape.axis_tilt_deg},
+      {"intrinsics_assumed", shape.intrinsics_assumed},
+      {"vertical_fov_deg", 2 * std::atan(0.5 * shape.camera.height / shape.camera.fy) * 180 / 3.14159265358979323846},
+      {"elevation_deg", shape.elevation_deg},
+      {"elevation_method", shape.elevation_method},
+      {"yaw_deg", shape.yaw_deg},
+      {"yaw_method", shape.yaw_method},
+      {"camera_distance_m", shape.distance_m},
+      {"real_views", shape.real_views},
+      {"virtual_views", int(shape.views.size()) - shape.real_views}};
   built.quality["photo_silhouette_iou"] = agreement.silhouette_iou;
   built.quality["photo_masked_psnr_db"] = agreement.masked_psnr_db;
   built.source = source;

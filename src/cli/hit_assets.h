@@ -14,6 +14,7 @@
 
 #include "assetgen/asset.h"
 #include "assetgen/generate.h"
+#include "assetgen/shape_prior.h"
 #include "datasets/categories.h"
 #include "datasets/log.h"
 #include "mining/query.h"
@@ -58,10 +59,13 @@ class HitAssetBuilder {
   std::map<std::string, Log> logs_;
 };
 
-// One photo and its object's mask (1 channel, the photo's size, > 0.5 object) -> an asset by the shape prior:
-// quality records the prior and the photo's self-agreement (photo_silhouette_iou, photo_masked_psnr_db).
-BuiltAsset PhotoAsset(const ImageU8& photo, const ImageF& mask, const std::string& mask_method,
-                      const CategoryInfo& category, const Eigen::Vector3d& size, const HitAssetOptions& options,
-                      const std::string& source);
+// One photo and its object's mask -> an asset by the shape prior (ShapeFromPhoto, GenerateFromPhotoShape);
+// `prior` says the category, size and anything known of the camera. `segmentation` is the stage that made the
+// mask. quality records the prior, what it assumed, the extent against the size and the photo's self-agreement
+// (photo_silhouette_iou, photo_masked_psnr_db); views are the prior's (the photo, and its synthetic copies).
+// InputError naming `mask_file` (or `photo_file` when empty) for a mask no prior fits, `photo_file` otherwise.
+BuiltAsset PhotoAsset(const PhotoObservation& photo, ShapePriorOptions prior, const GenerateOptions& options,
+                      StageReport segmentation, const std::filesystem::path& photo_file,
+                      const std::filesystem::path& mask_file, const std::string& source);
 
 }  // namespace sd::cli

@@ -85,6 +85,35 @@ std::vector<PhotoObject> ShippedConePhotos(const fs::path& dir, size_t limit) {
   return out;
 }
 
+// Catalogues the asset folders in a new bank behind the default quality gate; with `report`, one line per asset
+// with its figures and the gate's verdict. Returns how many of each category went in.
+std::map<std::string, int> BankBehindTheGate(const fs::path& bank_path, const std::vector<fs::path>& dirs, bool report) {
+  bank::Bank bank = bank::Bank::Open(bank_path, true);
+  const bank::QualityGate gate = bank::DefaultQualityGate();
+  std::map<std::string, int> banked;
+  for (const fs::path& dir : dirs) {
+    const AssetInfo info = LoadAsset(dir).info;
+    std::string verdict = "banked";
+    if (const auto failed = bank::GateFailure(info.quality, gate)) {
+      verdict = "refused: " + *failed;
+    } else {
+      bank.Add(dir);
+      ++banked[info.category];
+    }
+    if (!report) continue;
+    const nlohmann::json& q = info.quality;
+    auto figure = [&](const char* key) -> std::string {
+      return q.contains(key) && q[key].is_number() ? Fixed(q[key].get<double>(), 3) : std::string("-");
+    };
+    SD_LOG(Info, "demo: " << info.id << " " << info.category << ": real texture " << figure(quality::kRealTextureFraction)
+                          << ", by symmetry " << figure("synthetic_texture_fraction") << ", propagated "
+                          << figure("propagated_texture_fraction") << ", held-out IoU "
+                          << figure(quality::kHeldOutSilhouetteIou) << ", LiDAR p2m "
+                          << figure(quality::kLidarPointToMeshMedianM) << " m -> " << verdict);
+  }
+  return banked;
+}
+
 }  // namespace
 
 Runner AddDemoCommand(CLI::App& app) {
@@ -186,34 +215,7 @@ Runner AddDemoCommand(CLI::App& app) {
 
     // 2. The bank, behind its quality gate: what a detector should learn from.
     const fs::path bank_path = staging.path() / "bank.sqlite";
-    std::map<std::string, int> banked;
-    {
-      bank::Bank bank = bank::Bank::Open(bank_path, true);
-      const bank::QualityGate gate = bank::DefaultQualityGate();
-      bank::AddOptions add;
-      add.gate = &gate;
-      for (const fs::path& dir : built) {
-        const AssetInfo info = LoadAsset(dir).info;
-        const nlohmann::json& q = info.quality;
-        auto figure = [&](const char* key) -> std::string {
-          return q.contains(key) && q[key].is_number() ? Fixed(q[key].get<double>(), 3) : std::string("-");
-        };
-        std::string verdict = "banked";
-        try {
-          bank.Add(dir, add);
-          ++banked[info.category];
-        } catch (const InputError& err) {
-          verdict = err.what();
-          verdict = verdict.substr(verdict.find("below the bank's quality gate: ") + 31);
-          verdict = "refused: " + verdict.substr(0, verdict.find(" ("));
-        }
-        SD_LOG(Info, "demo: " << info.id << " " << info.category << ": real texture " << figure(quality::kRealTextureFraction)
-                              << ", by symmetry " << figure("synthetic_texture_fraction") << ", propagated "
-                              << figure("propagated_texture_fraction") << ", held-out IoU "
-                              << figure(quality::kHeldOutSilhouetteIou) << ", LiDAR p2m "
-                              << figure(quality::kLidarPointToMeshMedianM) << " m -> " << verdict);
-      }
-    }
+    std::map<std::string, int> banked = BankBehindTheGate(bank_path, built, true);
     SD_LOG(Info, "demo: " << built.size() << " assets built (" << failed << " hits not buildable), "
                           << banked["traffic_cone"] << " cones, " << banked["barrier"] << " barriers, "
                           << banked["car"] << " cars passed the bank's gate");
@@ -253,18 +255,9 @@ Runner AddDemoCommand(CLI::App& app) {
     {
       const fs::path final_bank = staging.final_path() / "bank.sqlite";
       const fs::path fresh = TemporarySibling(final_bank);
-      {
-        bank::Bank bank = bank::Bank::Open(fresh, true);
-        const bank::QualityGate gate = bank::DefaultQualityGate();
-        bank::AddOptions add;
-        add.gate = &gate;
-        for (const fs::path& dir : built) {
-          try {
-            bank.Add(staging.final_path() / "assets" / dir.filename(), add);
-          } catch (const InputError&) {
-          }
-        }
-      }
+      std::vector<fs::path> published;
+      for (const fs::path& dir : built) published.push_back(staging.final_path() / "assets" / dir.filename());
+      BankBehindTheGate(fresh, published, false);
       for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(final_bank.string() + suffix);
       fs::rename(fresh, final_bank);
       for (const char* suffix : {"-wal", "-shm"}) fs::remove(fresh.string() + suffix);

@@ -215,8 +215,7 @@ HarvestedObject HarvestObject(const Log& log, const HarvestTarget& target, const
   for (int k = 0; k < 3; ++k) {
     std::vector<double> s;
     for (const auto& [f, a] : track) s.push_back(a->box.size[k]);
-    std::nth_element(s.begin(), s.begin() + s.size() / 2, s.end());
-    out.size[k] = s[s.size() / 2];
+    out.size[k] = Median(std::move(s));
   }
   if (!(out.size.minCoeff() > 0) || !out.size.allFinite())
     throw InputError(log.source, Msg() << "frame " << frame0->token << ": the object's box size " << out.size.transpose()
@@ -260,8 +259,7 @@ HarvestedObject HarvestObject(const Log& log, const HarvestTarget& target, const
     for (int k = 0; k < 3; ++k) {
       std::vector<double> c;
       for (const Eigen::Vector3d& x : centres) c.push_back(x[k]);
-      std::nth_element(c.begin(), c.begin() + c.size() / 2, c.end());
-      median[k] = c[c.size() / 2];
+      median[k] = Median(std::move(c));
     }
     double spread = 0;
     for (const Eigen::Vector3d& x : centres) spread = std::max(spread, (x - median).norm());
@@ -288,18 +286,21 @@ HarvestedObject HarvestObject(const Log& log, const HarvestTarget& target, const
         const PointCloud pc = ReadLidar(*frame->lidar);
         const LidarSensor& l = *frame->lidar;
         const int sensor_feature = l.sensor_feature.empty() ? -1 : pc.FeatureIndex(l.sensor_feature);
+        // Each beam starts at its own sensor (PandaSet's two LiDARs): the sensors' origins in the object frame.
+        const Eigen::Vector3f first_sensor = (T_obj_ego * l.T_ego_lidar.translation).cast<float>();
+        std::vector<Eigen::Vector3f> sensors;
+        for (const Rigid3d& T : l.T_lidar_sensors) sensors.push_back((T_obj_ego * (l.T_ego_lidar * T.translation)).cast<float>());
         sweep_ego.resize(pc.size());
         bool any = false;
         for (size_t i = 0; i < pc.size(); ++i) {
           const Eigen::Vector3d p_lidar = pc.xyz(i).cast<double>();
           sweep_ego[i] = l.T_ego_lidar * p_lidar;
-          Eigen::Vector3d origin_lidar = Eigen::Vector3d::Zero();
+          Eigen::Vector3f origin = first_sensor;
           if (sensor_feature >= 0) {
             const int s = static_cast<int>(std::lround(pc.feature(i, sensor_feature)));
-            if (s >= 0 && s < static_cast<int>(l.T_lidar_sensors.size())) origin_lidar = l.T_lidar_sensors[s].translation;
+            if (s >= 0 && s < static_cast<int>(sensors.size())) origin = sensors[s];
           }
           const Eigen::Vector3f p = (T_obj_ego * sweep_ego[i]).cast<float>();
-          const Eigen::Vector3f origin = (T_obj_ego * (l.T_ego_lidar * origin_lidar)).cast<float>();
           if ((p.array() >= lo.array()).all() && (p.array() <= hi.array()).all()) {
             out.points.push_back(p);
             any = true;

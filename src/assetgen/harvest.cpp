@@ -83,10 +83,14 @@ ImageF RefineMask(const models::Segmenter& segmenter, const ImageU8& crop, const
   std::vector<Eigen::Vector2d> inside;
   for (const Eigen::Vector2d& q : seeds)
     if (geometry::InsideConvexPolygon(grown, q)) inside.push_back(q);
+  // By row, so each seed's band is a short run (a vehicle's returns from twelve frames are thousands of seeds).
+  std::sort(inside.begin(), inside.end(), [](const Eigen::Vector2d& a, const Eigen::Vector2d& b) { return a.y() < b.y(); });
   for (const Eigen::Vector2d& q : inside) {
     double lo_x = q.x(), hi_x = q.x();
-    for (const Eigen::Vector2d& r : inside)
-      if (std::abs(r.y() - q.y()) <= 2.5) lo_x = std::min(lo_x, r.x()), hi_x = std::max(hi_x, r.x());
+    const auto first = std::lower_bound(inside.begin(), inside.end(), q.y() - 2.6,
+                                        [](const Eigen::Vector2d& a, double y) { return a.y() < y; });
+    for (auto r = first; r != inside.end() && r->y() <= q.y() + 2.6; ++r)
+      if (std::abs(r->y() - q.y()) <= 2.5) lo_x = std::min(lo_x, r->x()), hi_x = std::max(hi_x, r->x());
     const double margin = 0.3 * (hi_x - lo_x);
     if (q.x() < lo_x + margin || q.x() > hi_x - margin) continue;
     const int x = static_cast<int>(std::floor(q.x())), y = static_cast<int>(std::floor(q.y()));

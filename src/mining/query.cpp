@@ -13,6 +13,7 @@
 #include "datasets/categories.h"
 #include "io/files.h"
 #include "io/image_io.h"
+#include "io/html.h"
 #include "io/json.h"
 #include "mining/descriptor.h"
 #include "models/clip.h"
@@ -226,20 +227,6 @@ std::vector<PromptResult> RunQuery(const MiningIndex& index, const QueryOptions&
 
 namespace {
 
-std::string HtmlEscape(const std::string& s) {
-  std::string out;
-  for (char c : s) {
-    switch (c) {
-      case '&': out += "&amp;"; break;
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '"': out += "&quot;"; break;
-      default: out += c;
-    }
-  }
-  return out;
-}
-
 std::string ContactSheet(const MiningIndex& index, const std::vector<PromptResult>& results) {
   std::ostringstream h;
   h << "<!doctype html><html><head><meta charset=\"utf-8\"><title>SynthDrive mining run</title><style>"
@@ -249,8 +236,8 @@ std::string ContactSheet(const MiningIndex& index, const std::vector<PromptResul
        ".pair{display:flex;gap:2px}.pair img{width:98px;height:98px;object-fit:contain;background:#222}"
        "</style></head><body><h1>Mining run</h1>";
   for (const PromptResult& r : results) {
-    h << "<h2>" << HtmlEscape(r.prompt) << "</h2><p>" << ToString(r.mode) << " mode"
-      << (r.category.empty() ? "" : ", category " + HtmlEscape(r.category)) << "; " << r.hits.size() << " hits of "
+    h << "<h2>" << EscapeHtml(r.prompt) << "</h2><p>" << ToString(r.mode) << " mode"
+      << (r.category.empty() ? "" : ", category " + EscapeHtml(r.category)) << "; " << r.hits.size() << " hits of "
       << r.candidates << " candidates; rejected " << r.rejected_score << " by score, " << r.rejected_quality
       << " by quality, " << r.rejected_duplicate << " as near-duplicates, " << r.rejected_diversity
       << " for diversity</p><div class=\"grid\">";
@@ -261,10 +248,10 @@ std::string ContactSheet(const MiningIndex& index, const std::vector<PromptResul
       h << "<div class=\"hit\"><div class=\"pair\"><img src=\"crops/" << item.id << ".jpg\" loading=\"lazy\">";
       if (!item.mask_file.empty()) h << "<img src=\"masks/" << item.id << ".png\" loading=\"lazy\">";
       h << "</div>#" << hit.rank << " score " << Fixed(hit.score, 3) << " quality " << Fixed(hit.quality, 2)
-        << "<br>" << HtmlEscape(item.category.empty() ? "(no label)" : item.category) << " · "
+        << "<br>" << EscapeHtml(item.category.empty() ? "(no label)" : item.category) << " · "
         << static_cast<int>(ObjectSizePx(item)) << " px · sharp " << static_cast<int>(item.sharpness)
         << "<br>trunc " << Fixed(item.truncation, 2) << " · occl " << Fixed(item.occlusion, 2) << " · mask "
-        << HtmlEscape(item.mask_source.empty() ? "none" : item.mask_source) << "<br>" << HtmlEscape(where)
+        << EscapeHtml(item.mask_source.empty() ? "none" : item.mask_source) << "<br>" << EscapeHtml(where)
         << "</div>";
     }
     h << "</div>";

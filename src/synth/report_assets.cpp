@@ -513,22 +513,6 @@ std::string CameraAnchor(size_t frame_position, const std::string& channel) {
 }
 std::string AssetAnchor(const std::string& asset_id) { return "asset-" + FileKey(asset_id); }
 
-std::string EscapeHtml(std::string_view text) {
-  std::string out;
-  out.reserve(text.size());
-  for (char c : text) {
-    switch (c) {
-      case '&': out += "&amp;"; break;
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '"': out += "&quot;"; break;
-      case '\'': out += "&#39;"; break;
-      default: out += c;
-    }
-  }
-  return out;
-}
-
 AssetCardsHtml WriteAssetCards(const Log& log, const std::vector<FrameOutcome>& frames, const std::vector<Asset>& assets,
                                const fs::path& html_dir) {
   const std::map<std::string, std::vector<Insertion>> insertions = InsertionsByAsset(frames);

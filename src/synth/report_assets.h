@@ -22,6 +22,7 @@
 
 #include "assetgen/asset.h"
 #include "datasets/log.h"
+#include "io/html.h"
 
 namespace sd {
 
@@ -37,9 +38,6 @@ std::filesystem::path ThreeJsDir();
 std::string FrameAnchor(size_t frame_position);
 std::string CameraAnchor(size_t frame_position, const std::string& channel);
 std::string AssetAnchor(const std::string& asset_id);
-
-// Text or quoted attribute value of HTML: & < > " ' escaped.
-std::string EscapeHtml(std::string_view text);
 
 struct AssetCardsHtml {
   std::string index;  // one line naming the inserted assets, each linked to its card (empty: nothing inserted)

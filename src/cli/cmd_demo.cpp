@@ -240,7 +240,9 @@ Runner AddDemoCommand(CLI::App& app) {
     }
     if (objects.empty()) throw InputError(bank_path, "no generated asset passed the quality gate: nothing to insert");
     scenario["objects"] = objects;
-    scenario["assets_from_bank"] = {{"bank", bank_path.string()},
+    // The bank relative to the scenario file (bank queries resolve it there), so the scenario, and synth.json's copy
+    // of it, stay true once the staging folder is published.
+    scenario["assets_from_bank"] = {{"bank", "bank.sqlite"},
                                     {"max_quality", {{"propagated_texture_fraction", kDemoPropagated}}}};
     WriteJsonFile(staging.path() / "scenario.json", scenario);
     SynthRequest req;
@@ -250,8 +252,8 @@ Runner AddDemoCommand(CLI::App& app) {
     req.options.samples_per_pixel = *spp;
     const SynthSummary s = RunSynth(req);
     staging.Commit();
-    // The bank references asset folders by absolute path, and the scenario names the bank: both named the staging
-    // folder, so they are written again for the published one (the bank under a temporary name, then renamed).
+    // The bank references asset folders by absolute path, which named the staging folder, so it is written again
+    // for the published one (under a temporary name, then renamed).
     {
       const fs::path final_bank = staging.final_path() / "bank.sqlite";
       const fs::path fresh = TemporarySibling(final_bank);
@@ -261,8 +263,6 @@ Runner AddDemoCommand(CLI::App& app) {
       for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(final_bank.string() + suffix);
       fs::rename(fresh, final_bank);
       for (const char* suffix : {"-wal", "-shm"}) fs::remove(fresh.string() + suffix);
-      scenario["assets_from_bank"]["bank"] = final_bank.string();
-      WriteJsonFile(staging.final_path() / "scenario.json", scenario);
     }
     const fs::path final_report = staging.final_path() / s.out.filename() / "report.html";
     SD_LOG(Info, "demo: inserted " << s.objects << " objects into " << s.frames << " frame(s)");

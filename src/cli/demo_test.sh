@@ -20,6 +20,7 @@ grep -q "report: $SYN/report.html" "$T/stdout" || bad "demo does not print the r
 "$BIN" -q bank list --bank "$OUT/bank.sqlite" > "$T/list" || bad "bank list"
 grep -q traffic_cone "$T/list" || bad "no cone passed the gate: $(cat "$T/list")"
 grep -q "\.tmp-" "$T/list" && bad "the bank names the staging folder"
+grep -q "\.tmp-" "$SYN/synth.json" "$OUT/scenario.json" && bad "synth.json or scenario.json names the staging folder"
 # Inserted objects came from generated assets only: each synth.json asset id is a folder under assets/ whose
 # asset.json has a generate stage and quality figures (the shipped CG meshes are never imported).
 ids=$(grep -o '"asset": "[^"]*"' "$SYN/synth.json" | sort -u | sed 's/.*: "//; s/"//')

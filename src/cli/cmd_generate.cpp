@@ -23,6 +23,7 @@
 #include "core/error.h"
 #include "core/log.h"
 #include "core/shard.h"
+#include "io/batch.h"
 #include "datasets/categories.h"
 #include "datasets/readers.h"
 #include "io/files.h"
@@ -194,11 +195,11 @@ int RunManifest(const Args& a, const fs::path& model_dir) {
   }
   if (fs::exists(a.out) && !fs::is_directory(a.out)) throw InputError(a.out, "exists and is not a folder");
   const bool learned = a.shape == "auto" && SingleImageModelsInstalled(model_dir);
-  // One asset per track: later hits of a track already taken are skipped (not sharded apart, so that two shards
-  // never build the same track).
+  // One asset per track: later hits of a track already taken are left out of the work list before it is
+  // sharded, so that two shards never build the same track.
   std::map<std::string, std::string> track_owner;  // "<log>|<instance>" -> the first hit's id
-  std::vector<size_t> todo;
-  size_t done = 0, same_track = 0;
+  std::vector<size_t> work;                         // indices into entries
+  size_t same_track = 0;
   for (size_t i = 0; i < entries.size(); ++i) {
     const mining::MinedItem& item = entries[i].item;
     if (!learned && item.kind == mining::SourceKind::kLog && !item.instance_token.empty()) {
@@ -208,15 +209,17 @@ int RunManifest(const Args& a, const fs::path& model_dir) {
         continue;
       }
     }
-    if (!shard.Owns(i)) continue;
-    if (fs::exists(fs::path(a.out) / item.id / "asset.json")) ++done;
-    else todo.push_back(i);
+    work.push_back(i);
   }
+  auto asset_dir = [&](size_t w) { return fs::path(a.out) / entries[work[w]].item.id; };
+  size_t owned = 0, complete = 0;
+  for (size_t w = 0; w < work.size(); ++w)
+    if (shard.Owns(w)) ++owned, complete += fs::exists(asset_dir(w) / "asset.json") ? 1 : 0;
   SD_LOG(Info, manifest.string() << ": " << entries.size() << " hits (" << same_track << " more views of a track already"
-                                 << " taken); shard " << shard.ToString() << ": " << todo.size() << " to build, " << done
+                                 << " taken); shard " << shard.ToString() << ": " << owned - complete << " to build, " << complete
                                  << " already built; " << (learned ? "learned multi-view models" : "no learned models: "
                                  "log hits harvested from their logs, image hits by shape priors"));
-  if (todo.empty()) return 0;
+  if (owned == complete) return 0;
   std::optional<ImageFrontEnd> front_end;
   if (learned) front_end.emplace(model_dir, a.segmenter, a.diffusion_steps, a.guidance, a.seed);
   HitAssetOptions hit_options;
@@ -226,67 +229,59 @@ int RunManifest(const Args& a, const fs::path& model_dir) {
   if (a.shape != "auto") hit_options.shape = ParseShapePrior(a.shape);
   HitAssetBuilder builder(hit_options);
   fs::create_directories(a.out);
-  // One line per hit (done / failed with the reason, seconds), appended as it happens, so a killed or failed
-  // shard says what it did; the same shape as synth's run logs.
-  const fs::path log_file = fs::path(a.out) / ("generate-log-" + std::to_string(shard.index) + "-of-" +
-                                               std::to_string(shard.count) + ".jsonl");
-  std::ofstream run_log(log_file, std::ios::app);
-  if (!run_log) throw InputError(log_file, "cannot open for appending");
-  Progress progress("generate", todo.size());
-  size_t failed = 0;
-  for (size_t i : todo) {
+
+  // The batch runner (io/batch.h) keeps the run log <out>/generate-log-K-of-N.jsonl, one line per hit.
+  BatchJob job;
+  job.size = work.size();
+  job.describe = [&](size_t w) { return nlohmann::json{{"hit", work[w] + 1}, {"id", entries[work[w]].item.id}}; };
+  job.name = [&](size_t w) { return manifest.string() + ":" + std::to_string(work[w] + 1); };
+  job.output = asset_dir;
+  job.complete = [&](size_t w) { return fs::exists(asset_dir(w) / "asset.json"); };
+  job.run = [&](size_t w, nlohmann::json*) {
+    const size_t i = work[w];
     const mining::ManifestEntry& e = entries[i];
-    const std::string where = manifest.string() + ":" + std::to_string(i + 1);
-    const auto start = std::chrono::steady_clock::now();
-    nlohmann::json line = {{"hit", i + 1}, {"id", e.item.id}, {"status", "done"}, {"error", ""}};
-    try {
-      const MinedObject object = LoadMinedObject(e);
-      const std::optional<CategoryInfo> category = object.category.empty() ? fallback : FindCategory(object.category);
-      if (!category)
-        throw InputError(where, object.category.empty() ? "hit has no category: pass --category"
-                                                        : "unknown category '" + object.category + "'");
-      std::vector<StageReport> front;
-      GenerateOptions options = a.options;
-      options.refine.show_progress = false;
-      options.canonical.up = "+z";
-      AssetInfo info;
-      info.id = e.item.id;
-      info.name = e.prompt.empty() ? e.item.id : e.prompt + " #" + std::to_string(e.rank);
-      info.category = category->name;
-      info.licence = a.licence;
-      info.source = object.source;
-      info.attribution = a.attribution;
-      const fs::path out = fs::path(a.out) / e.item.id;
-      if (learned) {
-        const MultiViewSet views =
-            front_end->Views(object.image, object.box, object.prior ? &*object.prior : nullptr, &front);
-        if (object.front_in_rig) options.canonical.front_direction = *object.front_in_rig;
-        // Metric scale: the log's 3D box, else --size / --height, else the category's size prior.
-        if (object.size_lwh) options.canonical.target_size = *object.size_lwh;
-        else if (!a.size.empty()) options.canonical.target_size = Eigen::Vector3d(a.size[0], a.size[1], a.size[2]);
-        else options.canonical.target_height = a.height > 0 ? a.height : category->default_size.z();
-        BuildAndSave(views, front, options, info, object.source, out, false);
-      } else {
-        const Eigen::Vector3d size = ObjectSize(a, *category);
-        BuiltAsset built = builder.Build(e, where, *category, size);
-        front.insert(front.end(), built.front.begin(), built.front.end());
-        info.source = built.source;
-        SaveGenerated(std::move(built.mesh), built.views, front, info, built.source, out, false, built.quality);
-      }
-    } catch (const InputError& err) {
-      ++failed;
-      const std::string what = err.what();
-      SD_LOG(Error, (what.rfind(where, 0) == 0 ? what : where + ": " + what));
-      line["status"] = "failed";
-      line["error"] = what;
+    const std::string where = job.name(w);
+    const MinedObject object = LoadMinedObject(e);
+    const std::optional<CategoryInfo> category = object.category.empty() ? fallback : FindCategory(object.category);
+    if (!category)
+      throw InputError(where, object.category.empty() ? "hit has no category: pass --category"
+                                                      : "unknown category '" + object.category + "'");
+    std::vector<StageReport> front;
+    GenerateOptions options = a.options;
+    options.refine.show_progress = false;
+    options.canonical.up = "+z";
+    AssetInfo info;
+    info.id = e.item.id;
+    info.name = e.prompt.empty() ? e.item.id : e.prompt + " #" + std::to_string(e.rank);
+    info.category = category->name;
+    info.licence = a.licence;
+    info.source = object.source;
+    info.attribution = a.attribution;
+    const fs::path out = asset_dir(w);
+    if (learned) {
+      const MultiViewSet views = front_end->Views(object.image, object.box, object.prior ? &*object.prior : nullptr, &front);
+      if (object.front_in_rig) options.canonical.front_direction = *object.front_in_rig;
+      // Metric scale: the log's 3D box, else --size / --height, else the category's size prior.
+      if (object.size_lwh) options.canonical.target_size = *object.size_lwh;
+      else if (!a.size.empty()) options.canonical.target_size = Eigen::Vector3d(a.size[0], a.size[1], a.size[2]);
+      else options.canonical.target_height = a.height > 0 ? a.height : category->default_size.z();
+      BuildAndSave(views, front, options, info, object.source, out, false);
+    } else {
+      const Eigen::Vector3d size = ObjectSize(a, *category);
+      BuiltAsset built = builder.Build(e, where, *category, size);
+      front.insert(front.end(), built.front.begin(), built.front.end());
+      info.source = built.source;
+      SaveGenerated(std::move(built.mesh), built.views, front, info, built.source, out, false, built.quality);
     }
-    line["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    run_log << line.dump() << '\n' << std::flush;
-    progress.Advance();
-  }
-  progress.Finish();
-  SD_LOG(Info, "generate: " << todo.size() - failed << " assets built, " << failed << " failed, " << done
-                            << " already there -> " << a.out << " (run log " << log_file.string() << ")");
+  };
+  BatchOptions batch;
+  batch.label = "generate";
+  batch.shard = shard;
+  batch.run_log = fs::path(a.out) / ("generate-log-" + std::to_string(shard.index) + "-of-" + std::to_string(shard.count) + ".jsonl");
+  const BatchSummary run = RunBatch(job, batch);
+  const size_t failed = run.failures.size();
+  SD_LOG(Info, "generate: " << run.done << " assets built, " << failed << " failed, " << run.skipped
+                            << " already there -> " << a.out << " (run log " << batch.run_log.string() << ")");
   return failed == 0 ? 0 : 1;
 }
 
@@ -311,7 +306,7 @@ Runner AddGenerateCommand(CLI::App& app) {
   app.add_option("--out", a->out, "Asset folder to create (with --manifest: the folder of asset folders)")->required();
   app.add_option("--limit", a->limit, "--manifest: at most this many hits (in manifest order; 0 = all)")
       ->default_val(0)->check(CLI::NonNegativeNumber);
-  app.add_option("--shard", a->shard, "--manifest: build only hits K, K+N, ... (K/N, 0-based)")->default_val("0/1");
+  app.add_option("--shard", a->shard, "--manifest: build only items K, K+N, ... of the work list (one hit per track; K/N, 0-based)")->default_val("0/1");
   app.add_option("--height", a->height, "Real height in metres (default: the category's)")->check(CLI::PositiveNumber);
   app.add_option("--size", a->size, "Real length width height in metres (l w h or l,w,h)")->expected(3)->delimiter(',');
   app.add_option("--front", a->options.canonical.front,

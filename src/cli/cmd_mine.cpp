@@ -112,6 +112,11 @@ void AddIndexCommand(CLI::App& app, std::function<int()>& run) {
     SD_LOG(Info, "mine index: " << r.items << " object images in " << r.chunks_built << " new chunks ("
                                 << r.chunks_skipped << " already done, " << r.failures << " failures) in "
                                 << r.seconds << " s; " << a->out);
+    if (!r.failed_chunks.empty()) {
+      for (const std::string& f : r.failed_chunks) SD_LOG(Error, "mine index: chunk " << f);
+      SD_LOG(Error, "mine index: " << r.failed_chunks.size() << " chunk(s) failed; a rerun builds only those");
+      return 1;
+    }
     return 0;
   };
 }

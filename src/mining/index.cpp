@@ -22,6 +22,7 @@
 #include "core/log.h"
 #include "core/parallel.h"
 #include "datasets/readers.h"
+#include "io/batch.h"
 #include "io/files.h"
 #include "io/image_io.h"
 #include "io/json.h"
@@ -269,16 +270,6 @@ std::vector<Chunk> PlanChunks(const std::vector<SourceState>& sources, int chunk
   return chunks;
 }
 
-// Temporary folders a killed run of this chunk left behind ("<name>.tmp-<pid>-<n>"). Only the shard that owns
-// a chunk ever writes it, so whatever is there is stale.
-void RemoveStaleStaging(const fs::path& shards, const std::string& name) {
-  std::error_code ec;
-  for (const auto& e : fs::directory_iterator(shards, ec)) {
-    const std::string n = e.path().filename().string();
-    if (n.rfind(name + ".tmp-", 0) == 0) fs::remove_all(e.path(), ec);
-  }
-}
-
 ImageU8 DownscaleToFit(const ImageU8& image, int max_px, double& scale) {
   scale = 1;
   const int longer = std::max(image.width(), image.height());
@@ -496,51 +487,50 @@ IndexBuildReport BuildIndex(const fs::path& index_dir, const IndexBuildOptions& 
 
   IndexBuildReport report;
   report.chunks_total = chunks.size();
-  std::vector<const Chunk*> todo;
-  for (size_t i = 0; i < chunks.size(); ++i) {
-    if (!options.shard.Owns(i)) continue;
-    ++report.chunks_owned;
-    if (fs::exists(index_dir / "shards" / chunks[i].name / "chunk.json"))
-      ++report.chunks_skipped;
-    else
-      todo.push_back(&chunks[i]);
-  }
-  SD_LOG(Info, "mine index: " << chunks.size() << " chunks from " << sources.size() << " sources; shard "
-                              << options.shard.ToString() << " owns " << report.chunks_owned << ", "
-                              << report.chunks_skipped << " already done; vectors: descriptor"
-                              << (options.clip ? " + CLIP" : " only (no CLIP model: label and example search)"));
-  std::unique_ptr<Progress> progress;
-  if (options.progress && !todo.empty()) progress = std::make_unique<Progress>("mine index", todo.size());
   const fs::path shards = index_dir / "shards";
-  // One line per chunk built, appended as it happens (the chunk's own chunk.json lists its failed images).
-  const fs::path log_file = index_dir / "logs" / ("index-" + std::to_string(options.shard.index) + "-of-" +
-                                                  std::to_string(options.shard.count) + ".jsonl");
-  std::ofstream run_log;
-  if (!todo.empty()) {
-    fs::create_directories(log_file.parent_path());
-    run_log.open(log_file, std::ios::app);
-    if (!run_log) throw InputError(log_file, "cannot open for appending");
-  }
-  for (const Chunk* chunk : todo) {
-    const auto chunk_start = std::chrono::steady_clock::now();
-    RemoveStaleStaging(shards, chunk->name);
-    StagingDirectory staging(shards / chunk->name, /*overwrite=*/false);
-    const SourceState& s = sources[chunk->source];
-    const ChunkOutput out = BuildChunk(s, *chunk, options, staging.path());
-    WriteChunk(s, *chunk, header, out, staging.path());
+  auto chunk_dir = [&](size_t i) { return shards / chunks[i].name; };
+  BatchJob job;
+  job.size = chunks.size();
+  job.describe = [&](size_t i) {
+    const Chunk& c = chunks[i];
+    return json{{"chunk", c.name}, {"source", sources[c.source].source.path.string()}, {"begin", c.begin}, {"end", c.end}};
+  };
+  job.name = [&](size_t i) { return "chunk " + chunks[i].name; };
+  job.output = chunk_dir;
+  job.complete = [&](size_t i) { return fs::exists(chunk_dir(i) / "chunk.json"); };
+  job.run = [&](size_t i, json* line) {
+    const Chunk& chunk = chunks[i];
+    StagingDirectory staging(chunk_dir(i), /*overwrite=*/false);
+    const SourceState& s = sources[chunk.source];
+    const ChunkOutput out = BuildChunk(s, chunk, options, staging.path());
+    WriteChunk(s, chunk, header, out, staging.path());
     staging.Commit();
-    run_log << json{{"chunk", chunk->name}, {"source", s.source.path.string()}, {"begin", chunk->begin},
-                    {"end", chunk->end}, {"items", out.items.size()}, {"failures", out.failures.size()},
-                    {"seconds", Seconds(chunk_start)}}.dump()
-            << '\n' << std::flush;
-    ++report.chunks_built;
+    // Per-image failures are the chunk's own (its chunk.json lists them); the chunk itself is done.
+    (*line)["items"] = out.items.size();
+    (*line)["failures"] = out.failures.size();
     report.items += out.items.size();
     report.failures += out.failures.size();
     report.crop_seconds += out.crop_seconds;
     report.embed_seconds += out.embed_seconds;
-    if (progress) progress->Advance();
-  }
-  if (progress) progress->Finish();
+  };
+  size_t owned = 0, complete = 0;
+  for (size_t i = 0; i < chunks.size(); ++i)
+    if (options.shard.Owns(i)) ++owned, complete += job.complete(i) ? 1 : 0;
+  SD_LOG(Info, "mine index: " << chunks.size() << " chunks from " << sources.size() << " sources; shard "
+                              << options.shard.ToString() << " owns " << owned << ", " << complete
+                              << " already done; vectors: descriptor"
+                              << (options.clip ? " + CLIP" : " only (no CLIP model: label and example search)"));
+  BatchOptions batch;
+  batch.label = "mine index";
+  batch.shard = options.shard;
+  batch.run_log = index_dir / "logs" / ("index-" + std::to_string(options.shard.index) + "-of-" +
+                                        std::to_string(options.shard.count) + ".jsonl");
+  batch.show_progress = options.progress;
+  const BatchSummary run = RunBatch(job, batch);
+  report.chunks_owned = run.owned;
+  report.chunks_built = run.done;
+  report.chunks_skipped = run.skipped;
+  for (const BatchFailure& f : run.failures) report.failed_chunks.push_back(chunks[f.item].name + ": " + f.error);
   report.seconds = Seconds(t0);
   return report;
 }

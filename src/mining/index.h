@@ -56,13 +56,16 @@ struct IndexBuildReport {
   size_t chunks_skipped = 0;   // already done by an earlier run
   size_t items = 0;            // object images added by this run
   size_t failures = 0;         // images that could not be read or fetched (recorded in chunk.json)
+  std::vector<std::string> failed_chunks;  // "<chunk>: <error>" of chunks that failed as a whole (in the run log)
   double seconds = 0, crop_seconds = 0, embed_seconds = 0;
 };
 
 // Creates `index_dir` (or checks an existing index was built with the same descriptor version and CLIP model:
 // InputError otherwise, since vectors from different models cannot be compared) and builds the owned chunks
-// not yet present. InputError naming the source for a source that cannot be opened (no chunk is written for
-// it); per-image failures inside a source are recorded and the run goes on.
+// not yet present, through the batch runner (io/batch.h: shard, resume, run log logs/index-K-of-N.jsonl).
+// InputError naming the source for a source that cannot be opened (before any chunk is written); per-image
+// failures inside a chunk are recorded in its chunk.json, and a chunk that fails as a whole is reported in
+// `failed_chunks` while the others go on.
 IndexBuildReport BuildIndex(const std::filesystem::path& index_dir, const IndexBuildOptions& options);
 
 enum class VectorKind { kDescriptor, kClip };

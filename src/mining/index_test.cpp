@@ -145,12 +145,14 @@ TEST(MiningIndex, GrowsIncrementallyResumesAndSplitsIntoShards) {
   EXPECT_EQ(add.chunks_built, 3u);
   const std::set<std::string> all = Ids(MiningIndex::Open(tmp / "index"));
   EXPECT_EQ(all.size(), 11u);
-  // The run log has one line per chunk built, over both runs.
-  std::vector<std::string> logged;
+  // The run log has one line per owned chunk and run: 3 built, then 3 skipped and 3 built.
+  std::vector<std::string> built, skipped;
   ForEachJsonLine(tmp / "index" / "logs" / "index-0-of-1.jsonl", [&](const nlohmann::json& j, const std::string&) {
-    logged.push_back(j["chunk"].get<std::string>());
+    (j["status"] == "done" ? built : skipped).push_back(j["chunk"].get<std::string>());
+    EXPECT_TRUE(j["status"] == "done" || j["status"] == "skipped") << j.dump();
   });
-  EXPECT_EQ(logged.size(), 6u);
+  EXPECT_EQ(built.size(), 6u);
+  EXPECT_EQ(skipped.size(), 3u);
 
   // A killed run: one shard missing, a staging folder left behind. The rerun rebuilds just that chunk, and an
   // open index never sees the staging folder.

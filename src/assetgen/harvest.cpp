@@ -14,6 +14,7 @@
 #include "core/stats.h"
 #include "datasets/categories.h"
 #include "datasets/readers.h"
+#include "geometry/box_projection.h"
 #include "geometry/polygon.h"
 #include "mining/log_crops.h"
 #include "models/grabcut.h"
@@ -343,7 +344,7 @@ HarvestedObject HarvestObject(const Log& log, const HarvestTarget& target, const
       c.info.elevation_deg = std::atan2(to_cam.z(), to_cam.head<2>().norm()) / kDeg;
       c.direction = to_cam.normalized();
       // The projected box in crop pixels.
-      c.polygon = mining::ProjectBoxOutline(ann->box, *cam, crop_options.near_m);
+      c.polygon = geometry::ProjectBoxOutline(cam->intrinsics, cam->T_ego_cam.Inverse(), ann->box, crop_options.near_m);
       for (Eigen::Vector2d& p : c.polygon)
         p = (p - Eigen::Vector2d(crop.item.crop_rect.x1, crop.item.crop_rect.y1)) * crop.item.crop_scale;
       c.view.view = {Msg() << "f" << frame->token << "_" << cam->channel, cam->intrinsics, T_obj_cam};

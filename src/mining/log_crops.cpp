@@ -8,6 +8,7 @@
 
 #include "core/error.h"
 #include "core/parallel.h"
+#include "geometry/box_projection.h"
 #include "geometry/polygon.h"
 #include "datasets/categories.h"
 #include "datasets/readers.h"
@@ -20,12 +21,6 @@ using Vec2 = Eigen::Vector2d;
 using Vec3 = Eigen::Vector3d;
 
 constexpr double kDeg = std::numbers::pi / 180.0;
-
-// Box edges as corner index pairs (Box3::Corners order: bottom face 0..3, top face 4..7).
-constexpr int kEdges[12][2] = {{0, 1}, {1, 2}, {2, 3}, {3, 0}, {4, 5}, {5, 6},
-                               {6, 7}, {7, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
-// Points per edge: with lens distortion a straight edge projects to a curve, whose hull the samples follow.
-constexpr int kEdgeSamples = 8;
 
 // Angular spacing of the LiDAR's returns (radians). The sweep file does not say which sensor made it, so it is
 // taken from the channel name: KITTI's "velodyne" is an HDL-64E (64 beams over 26.9 deg: ~0.4 deg vertical,
@@ -188,20 +183,13 @@ std::vector<ObjectCrop> CropCamera(const Frame& frame, const CameraSensor& cam_i
       }
       if (!keep || a.category.empty()) continue;
     }
-    std::vector<Vec2> poly = ProjectBoxOutline(a.box, cam, options.near_m);
-    if (poly.size() < 3) continue;
-    Box2 full{std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
-              -std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity()};
-    for (const Vec2& p : poly) {
-      full.x1 = std::min(full.x1, p.x()), full.y1 = std::min(full.y1, p.y());
-      full.x2 = std::max(full.x2, p.x()), full.y2 = std::max(full.y2, p.y());
-    }
-    const Box2 clipped{std::max(full.x1, 0.0), std::max(full.y1, 0.0), std::min(full.x2, double(W)), std::min(full.y2, double(H))};
-    if (clipped.Empty() || full.Area() <= 0) continue;
-    const double truncation = std::clamp(1.0 - clipped.Area() / full.Area(), 0.0, 1.0);
+    std::optional<geometry::BoxInImage> in_image = geometry::ProjectBoxToImage(cam.intrinsics, T_cam_ego, a.box, options.near_m);
+    if (!in_image || in_image->clipped.Empty()) continue;
+    const Box2 clipped = in_image->clipped;
+    const double truncation = in_image->truncation;
     if (truncation > options.max_truncation) continue;
     if (std::min(clipped.x2 - clipped.x1, clipped.y2 - clipped.y1) < options.min_box_px) continue;
-    candidates.push_back({i, std::move(poly), clipped, truncation});
+    candidates.push_back({i, std::move(in_image->outline), clipped, truncation});
   }
   if (candidates.empty()) return {};
   load();
@@ -349,30 +337,6 @@ std::vector<ObjectCrop> CropCamera(const Frame& frame, const CameraSensor& cam_i
 }
 
 }  // namespace
-
-std::vector<Eigen::Vector2d> ProjectBoxOutline(const Box3& box_ego, const CameraSensor& camera, double near_m) {
-  const Rigid3d T_cam_ego = camera.T_ego_cam.Inverse();
-  const auto corners = box_ego.Corners();
-  std::array<Vec3, 8> c;
-  for (int i = 0; i < 8; ++i) c[i] = T_cam_ego * corners[i];
-  std::vector<Vec2> pts;
-  // Project with a depth floor just under the near plane so points clipped exactly onto it are kept.
-  const double min_depth = near_m * (1 - 1e-9);
-  for (const auto& e : kEdges) {
-    Vec3 a = c[e[0]], b = c[e[1]];
-    if (a.z() < near_m && b.z() < near_m) continue;
-    // Clip the edge to z >= near: the part behind it would project through infinity.
-    if (a.z() < near_m) a = a + (b - a) * ((near_m - a.z()) / (b.z() - a.z()));
-    else if (b.z() < near_m) b = b + (a - b) * ((near_m - b.z()) / (a.z() - b.z()));
-    const int n = camera.intrinsics.distortion.IsZero() ? 1 : kEdgeSamples;
-    for (int s = 0; s <= n; ++s) {
-      const Vec3 p = a + (b - a) * (static_cast<double>(s) / n);
-      if (auto uv = camera.intrinsics.Project(p, min_depth)) pts.push_back(*uv);
-    }
-  }
-  if (pts.empty()) return {};
-  return geometry::ConvexHull2D(std::move(pts));
-}
 
 std::vector<Eigen::Vector3d> SweepInEgo(const Frame& frame) {
   if (!frame.lidar) return {};

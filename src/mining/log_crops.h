@@ -55,8 +55,4 @@ std::vector<ObjectCrop> CropFrameObjects(const Frame& frame, const std::vector<E
 // The frame's sweep in the ego frame (ReadLidar + T_ego_lidar); empty when the frame has no LiDAR.
 std::vector<Eigen::Vector3d> SweepInEgo(const Frame& frame);
 
-// The projected outline of a 3D box in a camera (convex polygon of its visible projection, near-plane
-// clipped), in pixel coordinates; empty when the box lies entirely behind the near plane.
-std::vector<Eigen::Vector2d> ProjectBoxOutline(const Box3& box_ego, const CameraSensor& camera, double near_m);
-
 }  // namespace sd::mining

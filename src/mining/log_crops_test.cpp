@@ -10,6 +10,7 @@
 
 #include "core/error.h"
 #include "datasets/readers.h"
+#include "geometry/box_projection.h"
 #include "io/image_io.h"
 #include "testing/testing.h"
 
@@ -224,7 +225,7 @@ TEST(LogCrops, BoxStraddlingTheCameraPlaneIsClippedAtTheNearPlane) {
   a.category = "truck";
   a.box = AxisBox({0.5, 1.5, 0}, {6, 1, 2});
   f.annotations.push_back(a);
-  const std::vector<Vec2> poly = ProjectBoxOutline(a.box, f.cameras[0], 0.5);
+  const std::vector<Vec2> poly = geometry::ProjectBoxOutline(f.cameras[0].intrinsics, f.cameras[0].T_ego_cam.Inverse(), a.box, 0.5);
   ASSERT_GE(poly.size(), 3u);
   for (const Vec2& p : poly) EXPECT_TRUE(std::isfinite(p.x()) && std::isfinite(p.y()));
   // Without clipping its rear corners would project mirrored; with it the outline reaches the left side only:
@@ -244,7 +245,7 @@ TEST(LogCrops, BoxStraddlingTheCameraPlaneIsClippedAtTheNearPlane) {
   EXPECT_GT(it.truncation, 0.5);
   EXPECT_LT(it.truncation, 1);
   // Entirely behind the near plane: no outline, no crop.
-  EXPECT_TRUE(ProjectBoxOutline(AxisBox({-3, 0, 0}, {1, 1, 1}), f.cameras[0], 0.5).empty());
+  EXPECT_TRUE(geometry::ProjectBoxOutline(f.cameras[0].intrinsics, f.cameras[0].T_ego_cam.Inverse(), AxisBox({-3, 0, 0}, {1, 1, 1}), 0.5).empty());
 }
 
 // A 2 x 2 m board 10 m ahead, its left half (ego y > 0) behind a wall 5 m ahead. The sweep holds, for every

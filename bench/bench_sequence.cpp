@@ -29,7 +29,7 @@
 #include "datasets/readers.h"
 #include "io/files.h"
 #include "io/image_io.h"
-#include "synth/pipeline.h"
+#include "synth/batch.h"
 #include "synth/scenario.h"
 
 namespace fs = std::filesystem;

@@ -30,7 +30,7 @@
 #include "datasets/readers.h"
 #include "io/mesh_io.h"
 #include "synth/ground.h"
-#include "synth/pipeline.h"
+#include "synth/batch.h"
 #include "synth/placement.h"
 #include "synth/scenario.h"
 
@@ -221,7 +221,8 @@ void BM_GroundAndPlacement(benchmark::State& state) {
     state.SkipWithError("frame 0 has no LiDAR sweep");
     return;
   }
-  sd::Scenario frame_scenario = in.scenario;  // frame 0: the pipeline's per-frame seed is scenario.seed + 0
+  sd::Scenario frame_scenario = in.scenario;
+  frame_scenario.seed = sd::FrameSeedsOf(in.scenario.seed, 0).placement;  // SynthesizeFrame's placement stream
   size_t placed_count = 0;
   for (auto _ : state) {
     const sd::GroundModel ground = sd::GroundModel::Estimate(s->input.points_ego, s->input.real_boxes, s->ground_options);

@@ -20,7 +20,7 @@
 #include "io/json.h"
 #include "mining/index.h"
 #include "mining/query.h"
-#include "synth/pipeline.h"
+#include "synth/batch.h"
 
 namespace sd::cli {
 namespace fs = std::filesystem;

@@ -7,7 +7,7 @@
 #include "core/log.h"
 #include "core/shard.h"
 #include "datasets/format.h"
-#include "synth/pipeline.h"
+#include "synth/batch.h"
 
 namespace sd::cli {
 

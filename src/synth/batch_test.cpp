@@ -20,7 +20,7 @@
 #include "io/files.h"
 #include "io/json.h"
 #include "io/mesh_io.h"
-#include "synth/pipeline.h"
+#include "synth/batch.h"
 #include "synth/report.h"
 #include "synth/test_assets.h"
 #include "testing/testing.h"

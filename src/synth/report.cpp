@@ -11,7 +11,8 @@
 
 #include "io/files.h"
 #include "io/image_io.h"
-#include "synth/pipeline.h"
+#include "synth/outcome.h"
+#include "synth/synth_plan.h"
 #include "synth/report_assets.h"
 
 namespace sd {

@@ -14,7 +14,7 @@
 #include "io/files.h"
 #include "io/image_io.h"
 #include "io/json.h"
-#include "synth/pipeline.h"
+#include "synth/outcome.h"
 
 namespace sd {
 namespace fs = std::filesystem;

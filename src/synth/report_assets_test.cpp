@@ -9,7 +9,7 @@
 #include "io/files.h"
 #include "io/image_io.h"
 #include "io/json.h"
-#include "synth/pipeline.h"
+#include "synth/outcome.h"
 #include "synth/report.h"
 #include "synth/test_assets.h"
 #include "testing/testing.h"

@@ -109,9 +109,9 @@ struct Scenario {
   std::vector<ObjectRequest> objects;
   std::vector<Arrangement> arrangements;  // sequence planning only (synth/sequence_plan.h)
   // "world_fixed": true plans plain objects once per sequence too (as arrangements always are): each is placed
-  // once in the world frame and appears at that place in every frame (synth/pipeline.h PlanSynthesis).
+  // once in the world frame and appears at that place in every frame (synth/synth_plan.h PlanSynthesis).
   bool world_fixed = false;
-  std::vector<nlohmann::json> bank_queries;  // "assets_from_bank", resolved by the pipeline (synth/pipeline.h)
+  std::vector<nlohmann::json> bank_queries;  // "assets_from_bank", resolved with the request (synth/request.h)
 };
 
 // InputError naming the file for malformed JSON, unknown fields' bad values, count < 1, empty ranges, neither

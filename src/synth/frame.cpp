@@ -1,0 +1,435 @@
+#include "synth/frame.h"
+
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <optional>
+#include <tuple>
+
+#include "core/log.h"
+#include "datasets/categories.h"
+#include "datasets/readers.h"
+#include "io/image_io.h"
+#include "models/harmonization.h"
+#include "synth/frame_stages.h"
+#include "synth/lidar_sim.h"
+#include "synth/lighting.h"
+#include "synth/object_light.h"
+
+namespace sd {
+namespace fs = std::filesystem;
+namespace frame_stages {
+
+const ImageU8& FrameInputs::Image(size_t k) const {
+  if (images[k].empty()) {
+    const CameraSensor& cam = frame->cameras[k];
+    images[k] = ReadImage(cam.image_path, 3);
+    if (images[k].width() != cam.intrinsics.width || images[k].height() != cam.intrinsics.height)
+      throw InputError(cam.image_path, Msg() << "image is " << images[k].width() << "x" << images[k].height()
+                                             << " but the calibration says " << cam.intrinsics.width << "x"
+                                             << cam.intrinsics.height);
+  }
+  return images[k];
+}
+
+FrameInputs ReadFrameInputs(const Log& log, size_t frame_index, const Scenario& scenario, FrameOutcome* out) {
+  const Frame& frame = log.frames.at(frame_index);
+  if (!frame.lidar) throw InputError(log.source, "frame " + frame.token + " has no LiDAR sweep; synth needs one");
+  FrameInputs in;
+  in.log = &log;
+  in.frame = &frame;
+  in.index = frame_index;
+  in.seeds = FrameSeedsOf(scenario.seed, frame_index);
+  out->sweep_before = ReadLidar(*frame.lidar);
+  in.sweep = &out->sweep_before;
+  in.points_ego = PointsInEgo(frame, out->sweep_before);
+  for (const auto& a : frame.annotations) {
+    in.real_boxes.push_back(a.box);
+    in.annotated.push_back({a.category, a.box});
+  }
+  out->ground = EstimateFrameGround(frame, in.points_ego, scenario);
+  in.ground = &out->ground;
+  in.is_ground.assign(in.points_ego.size(), 0);
+  for (int i : out->ground.ground_indices()) in.is_ground[i] = 1;
+  in.images.resize(frame.cameras.size());
+  return in;
+}
+
+std::vector<Eigen::Vector3d> RoadPointsNear(const GroundModel& ground, const std::vector<PlacedObject>& objects, double margin_m) {
+  std::vector<Eigen::Vector3d> out;
+  for (const auto& p : ground.ground_points()) {
+    for (const auto& o : objects) {
+      const double d = (p.head<2>() - o.box.center().head<2>()).norm();
+      if (d < 0.5 * o.box.size.head<2>().norm() + margin_m && ground.IsDrivable(p.x(), p.y())) {
+        out.push_back(p);
+        break;
+      }
+    }
+  }
+  return out;
+}
+
+namespace {
+
+// The plan's world-fixed objects a frame renders: those within the plan's range gate, at their ego-frame pose.
+std::vector<PlacedObject> PlacedFromPlan(const SequencePlan& plan, size_t frame_index, const std::vector<Asset>& assets,
+                                         std::vector<int>* plan_index) {
+  const PlannedFrame* pf = nullptr;
+  for (const PlannedFrame& f : plan.frames)
+    if (f.frame_index == frame_index) pf = &f;
+  SD_CHECK(pf != nullptr, << "frame " << frame_index << " is not in the plan [" << plan.frame_begin << ", " << plan.frame_end << ")");
+  std::vector<PlacedObject> placed;
+  for (size_t i = 0; i < plan.objects.size(); ++i) {
+    const PlannedView& v = pf->objects[i];
+    if (!v.in_range) continue;
+    const Asset* asset = nullptr;
+    for (const Asset& a : assets)
+      if (a.info.id == plan.objects[i].asset_id) asset = &a;
+    SD_CHECK(asset != nullptr, << "planned object " << i << " has no asset '" << plan.objects[i].asset_id << "'");
+    placed.push_back(PlacedObject{asset, plan.objects[i].request, v.T_ego_object, v.box_ego, v.T_ego_object.translation.z()});
+    plan_index->push_back(static_cast<int>(i));
+  }
+  return placed;
+}
+
+// Placement: the plan's objects in range, or the scenario's objects placed for this frame alone.
+std::vector<PlacedObject> PlaceFrameObjects(const FrameInputs& in, const std::vector<Asset>& assets, const Scenario& scenario,
+                                            const SequencePlan* plan, std::vector<int>* plan_index) {
+  if (plan) return PlacedFromPlan(*plan, in.index, assets, plan_index);
+  PlacementInput pin;
+  pin.ground = in.ground;
+  pin.points_ego = in.points_ego;
+  pin.real_boxes = in.real_boxes;
+  for (const auto& c : in.frame->cameras) pin.cameras.push_back(&c);
+  Scenario frame_scenario = scenario;
+  frame_scenario.seed = in.seeds.placement;
+  return PlaceObjects(frame_scenario, assets, pin);
+}
+
+// `sun_source`: where the frame's sun came from (SunDirectionEgo's note, or the camera that sees it).
+std::string EnvironmentSummary(const EnvironmentMap& env, const std::string& sun_source) {
+  Msg m;
+  m << "environment map " << env.width() << "x" << env.height() << ": sun " << sun_source;
+  if (env.shadow_objects > 0)
+    m << " (checked against the real shadows of " << env.shadow_objects << " object(s): agreement " << Fixed(env.shadow_agreement, 2) << ")";
+  m << ", " << (env.sun_road_contrast > 0 ? "sun/sky from real shadows (road contrast " + Fixed(env.sun_road_contrast, 2) + ")"
+                                          : std::string("default sun/sky split"));
+  if (env.overlap_pixels > 0)
+    m << ", seam error " << Fixed(env.seam_error_before, 2) << " -> " << Fixed(env.seam_error_after, 2);
+  return m;
+}
+
+// The frame's light: the sun (the scenario's, the images' or the ephemeris'), the environment map it is checked
+// against, and the sun's visibility per object (a building's shade can cover one cone of a closure and not the
+// next); objects whose road no camera shows enough of take the verdict over all objects' road.
+FrameLight LightFrame(const FrameInputs& in, const Scenario& scenario, const SynthOptions& options,
+                      const std::vector<PlacedObject>& placed, FrameOutcome* out) {
+  const Frame& frame = *in.frame;
+  FrameLight light;
+  std::string sun_source;
+  light.sun_dir = SunDirectionEgo(frame, scenario.location ? scenario.location : in.log->location, scenario.sun, &sun_source);
+  if (options.light == SynthOptions::Light::kEnvironment && !placed.empty()) {
+    for (size_t k = 0; k < frame.cameras.size(); ++k) in.Image(k);
+    EnvironmentOptions eo;
+    eo.ephemeris_sun_ego = light.sun_dir;
+    eo.detect_sun_in_images = !scenario.sun;  // a scenario's sun is the user's word
+    light.env = BuildEnvironmentMap(frame, in.images, eo);
+    if (light.env->sun_source != "ephemeris") {
+      light.sun_dir = light.env->sun_direction;
+      sun_source = light.env->sun_source;
+    }
+    out->light = EnvironmentSummary(*light.env, sun_source);
+  } else {
+    out->light = options.light == SynthOptions::Light::kRoad ? "road calibration per camera" : "no objects";
+  }
+  out->sun_source = sun_source;
+
+  const GroundModel& ground = *in.ground;
+  light.road_points = RoadPointsNear(ground, placed);
+  light.road_points_of.resize(placed.size());
+  light.sun_at_object.resize(placed.size());
+  light.own_verdict.assign(placed.size(), false);
+  if (!light.env) return light;
+  std::vector<const ImageU8*> rig;
+  for (size_t k = 0; k < frame.cameras.size(); ++k) rig.push_back(&in.Image(k));
+  const SunVerdict all = SunVisibilityAt(*light.env, frame, rig, light.road_points);
+  if (all.road_samples > 0) light.sun_at_objects = all.sun_visibility;
+  for (size_t k = 0; k < placed.size(); ++k) {
+    for (double margin : kOwnRoadMargins) {
+      light.road_points_of[k] = RoadPointsNear(ground, {placed[k]}, margin);
+      const SunVerdict own = SunVisibilityAt(*light.env, frame, rig, light.road_points_of[k]);
+      light.own_verdict[k] = own.road_samples > 0;
+      light.sun_at_object[k] = light.own_verdict[k] ? std::optional<double>(own.sun_visibility) : light.sun_at_objects;
+      if (light.own_verdict[k]) break;
+    }
+  }
+  return light;
+}
+
+// A flat square of road under an object, large enough to catch its shadow, on the object's local plane.
+void AddReceiverPatch(const PlacedObject& o, const Eigen::Vector3d& sun_dir, TriangleMesh* receiver) {
+  const double h = o.box.size.z();
+  const double sun_el = std::asin(std::clamp(sun_dir.z(), 0.26, 1.0));  // >= 15 deg keeps patches bounded
+  const double half = 0.5 * o.box.size.head<2>().norm() + h / std::tan(sun_el) + 1.0;
+  const int n = std::clamp(static_cast<int>(2 * half / 0.25), 4, 160);
+  const int base = static_cast<int>(receiver->positions.size());
+  for (int j = 0; j <= n; ++j)
+    for (int i = 0; i <= n; ++i) {
+      const double u = -half + 2 * half * i / n, v = -half + 2 * half * j / n;
+      // In the asset frame (origin on the ground, z along the local normal), lifted 1 mm so shadow rays
+      // from the receiver do not start inside the object's base.
+      receiver->positions.push_back((o.T_ego_asset * Eigen::Vector3d(u, v, 0.001)).cast<float>());
+    }
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const int a = base + j * (n + 1) + i;
+      receiver->faces.push_back({a, a + 1, a + n + 2});
+      receiver->faces.push_back({a, a + n + 2, a + n + 1});
+    }
+}
+
+// The scene in the ego frame: the objects, then one receiver mesh for their shadows.
+ObjectScene BuildObjectScene(const std::vector<PlacedObject>& placed, const Eigen::Vector3d& sun_dir) {
+  ObjectScene s;
+  s.receiver = std::make_shared<TriangleMesh>();
+  for (const auto& o : placed) {
+    auto mesh = std::make_shared<TriangleMesh>(o.asset->mesh);
+    mesh->Transform(o.T_ego_asset);
+    if (mesh->normals.empty()) mesh->ComputeVertexNormals();
+    s.scene.AddMesh(mesh);
+    AddReceiverPatch(o, sun_dir, s.receiver.get());
+    s.receiver_faces_end.push_back(s.receiver->faces.size());
+  }
+  s.receiver_id = s.scene.AddMesh(s.receiver);
+  s.scene.Commit();
+  for (const auto& o : placed)
+    for (const auto& c : o.box.Corners()) s.extent_points.push_back(c);
+  for (const auto& p : s.receiver->positions) s.extent_points.push_back(p.cast<double>());
+  return s;
+}
+
+// Each object's label as far as placement decides it: category in the log's vocabulary, 3D box, track.
+std::vector<ObjectOutcome> LabelObjects(const Log& log, const std::vector<PlacedObject>& placed, const SequencePlan* plan,
+                                        const std::vector<int>& plan_index) {
+  std::vector<ObjectOutcome> objects(placed.size());
+  for (size_t k = 0; k < placed.size(); ++k) {
+    auto& oc = objects[k];
+    oc.placement = placed[k];
+    if (plan) {
+      oc.plan_object = plan_index[k];
+      // One track per planned object, the same in every frame that shows it (formats with track ids use it).
+      oc.label.annotation.instance_token = Msg() << "synthdrive-plan:" << log.frames[plan->frame_begin].token << ":"
+                                                 << plan_index[k] << ":" << placed[k].asset->info.id;
+    }
+    const auto cat = FindCategory(placed[k].asset->info.category);
+    if (!cat) throw InputError(placed[k].asset->dir, "unknown category '" + placed[k].asset->info.category + "'");
+    oc.label.category = cat->name;
+    oc.label.asset_id = placed[k].asset->info.id;
+    oc.label.annotation.category = DatasetCategoryName(*cat, log.format);
+    oc.label.annotation.box = placed[k].box;
+    oc.label.annotation.velocity = Eigen::Vector2d::Zero();
+  }
+  return objects;
+}
+
+// The classical harmoniser as synth uses it: colour cast and a little chroma, no lightness transfer (see
+// SynthOptions::harmonizer).
+models::HarmonizeOptions SynthHarmonizeOptions() {
+  models::HarmonizeOptions o;
+  o.lightness_strength = 0.0f;
+  return o;
+}
+
+// The LiDAR model of a frame's own sweep (docs/lidar.md), or nullopt where none applies: a sweep of several
+// merged lidars (Argoverse 2) or one too small to fit (the caller falls back to the ideal sensor, which is not
+// worth failing the frame for).
+std::optional<LidarModel> FitFrameLidarModel(const Frame& frame, const PointCloud& sweep) {
+  if (!frame.lidar->one_beam_pattern) return std::nullopt;
+  LidarFitOptions fit;
+  const Rigid3d T_lidar_ego = frame.lidar->T_ego_lidar.Inverse();
+  for (const auto& a : frame.annotations)
+    if (!a.category.empty()) fit.annotated.push_back({a.category, a.box.Transformed(T_lidar_ego)});
+  // The record order, where the reader knows it (KITTI: azimuth order, clockwise, starting behind).
+  fit.spin_direction = frame.lidar->spin_direction;
+  if (std::isfinite(frame.lidar->start_azimuth)) fit.start_azimuth = frame.lidar->start_azimuth;
+  try {
+    return FitLidarModel(sweep, fit);
+  } catch (const InputError& e) {
+    SD_LOG(Warn, "frame " << frame.token << ": no LiDAR model (" << e.what() << "); inserting with the ideal sensor");
+    return std::nullopt;
+  }
+}
+
+// Ego poses at the sweep's start and end (reference = the frame's ego pose, `reference_time` s after the sweep
+// start) from the ego motion between the previous and next log frames of the same sequence (or the frame and
+// its one neighbour); nullopt without one (KITTI object frames have no world pose, nor a sequence).
+std::optional<std::pair<Rigid3d, Rigid3d>> NeighbourSweepPoses(const Log& log, size_t frame_index, double period,
+                                                               double reference_time) {
+  if (!log.sequential) return std::nullopt;
+  const double max_gap = SequencePlanOptions{}.max_frame_gap_s;
+  const Frame& f = log.frames[frame_index];
+  auto near = [&](size_t k) {
+    const double gap = std::abs(log.frames[k].timestamp - f.timestamp);
+    return gap > 0 && gap <= max_gap;
+  };
+  const Frame* a = &f;
+  const Frame* b = &f;
+  if (frame_index > 0 && near(frame_index - 1)) a = &log.frames[frame_index - 1];
+  if (frame_index + 1 < log.frames.size() && near(frame_index + 1)) b = &log.frames[frame_index + 1];
+  if (a == b || a->timestamp == b->timestamp) return std::nullopt;
+  return SweepPosesFromEgoPoses(f.T_world_ego, a->T_world_ego, a->timestamp, b->T_world_ego, b->timestamp, period,
+                                reference_time);
+}
+
+// The LiDAR: blocked returns move onto the objects, with the noise, dropout, intensity and ego motion of the
+// model fitted to the frame's own sweep.
+void SimulateFrameLidar(const FrameInputs& in, const std::vector<PlacedObject>& placed, const SynthOptions& options,
+                        FrameOutcome* out) {
+  const Frame& frame = *in.frame;
+  const PointCloud& sweep = *in.sweep;
+  std::vector<const PlacedObject*> ptrs;
+  for (const auto& o : placed) ptrs.push_back(&o);
+  LidarSimInput lin;
+  lin.sweep = &sweep;
+  lin.T_ego_lidar = frame.lidar->T_ego_lidar;
+  if (!frame.lidar->sensor_feature.empty()) {
+    lin.sensor_feature = sweep.FeatureIndex(frame.lidar->sensor_feature);
+    lin.T_lidar_sensors = frame.lidar->T_lidar_sensors;
+  }
+  lin.objects = ptrs;
+  lin.reference_intensity = ReferenceIntensities(sweep, in.points_ego, in.ground->ground_indices(), in.annotated, ptrs);
+  if (options.lidar_realism) out->lidar_model_fit = FitFrameLidarModel(frame, sweep);
+  if (out->lidar_model_fit) {
+    const LidarModel& model = *out->lidar_model_fit;
+    out->lidar_model = model.Summary();
+    LidarRealism& re = lin.realism;
+    re.model = &model;
+    re.noise = re.dropout = re.intensity = true;
+    re.seed = in.seeds.lidar;
+    // nuScenes (tables and mmdet3d infos) de-skew their sweeps and stamp them at the end of the turn.
+    re.motion_compensated_output = frame.lidar->motion_compensated;
+    if (const auto poses = NeighbourSweepPoses(*in.log, in.index, model.SweepPeriod(), model.SweepPeriod())) {
+      re.ego_motion = out->lidar_ego_motion = true;
+      std::tie(re.T_ref_ego_start, re.T_ref_ego_end) = *poses;
+    }
+  }
+  LidarSimResult lidar = SimulateLidar(lin);
+  out->lidar_object_points = lidar.object_points;
+  for (size_t k = 0; k < placed.size(); ++k) {
+    out->objects[k].lidar_points = lidar.points_on_object[k];
+    out->objects[k].label.annotation.num_lidar_pts = lidar.points_on_object[k];
+  }
+  out->edit.points = std::move(lidar.cloud);
+}
+
+int NuScenesVisibility(double fraction) {
+  if (fraction < 0.4) return 1;
+  if (fraction < 0.6) return 2;
+  if (fraction < 0.8) return 3;
+  return 4;
+}
+
+// The labels once cameras and LiDAR have counted: visibility from the visible share of the rendered pixels.
+void FinishLabels(FrameOutcome* out) {
+  for (auto& oc : out->objects) {
+    const double frac = oc.rendered_pixels > 0 ? oc.visible_pixels / oc.rendered_pixels : 0.0;
+    oc.label.annotation.visibility = NuScenesVisibility(frac);
+    out->edit.added.push_back(oc.label);
+  }
+}
+
+// Drops the objects a frame does not observe (no LiDAR point, no labelable camera box): a world-fixed object
+// far behind or hidden has no label in that frame. Indices in cameras and LiDAR bookkeeping follow.
+void DropUnobserved(FrameOutcome* out) {
+  std::vector<int> new_index(out->objects.size(), -1);
+  std::vector<ObjectOutcome> kept;
+  for (size_t k = 0; k < out->objects.size(); ++k) {
+    if (out->objects[k].label.camera_boxes.empty() && out->objects[k].lidar_points == 0) continue;
+    new_index[k] = static_cast<int>(kept.size());
+    kept.push_back(std::move(out->objects[k]));
+  }
+  out->objects = std::move(kept);
+  out->edit.added.clear();
+  for (const auto& o : out->objects) out->edit.added.push_back(o.label);
+  for (auto& co : out->cameras) {
+    std::vector<int> objects;
+    for (int k : co.objects)
+      if (new_index[static_cast<size_t>(k)] >= 0) objects.push_back(new_index[static_cast<size_t>(k)]);
+    co.objects = std::move(objects);
+  }
+  std::vector<std::pair<int, int>> points;
+  for (const auto& [i, k] : out->lidar_object_points)
+    if (new_index[static_cast<size_t>(k)] >= 0) points.push_back({i, new_index[static_cast<size_t>(k)]});
+  out->lidar_object_points = std::move(points);
+}
+
+}  // namespace
+}  // namespace frame_stages
+
+models::Harmonizer ResolveSynthHarmonizer(const std::string& choice) {
+  if (choice == "classical") return models::Harmonizer::Classical(frame_stages::SynthHarmonizeOptions());
+  if (choice != "auto" && !fs::exists(choice))
+    throw InputError(choice, "no such harmoniser: give none, classical, auto or a TorchScript file (docs/models.md)");
+  return models::Harmonizer::Resolve(choice, {}, frame_stages::SynthHarmonizeOptions());
+}
+
+FrameSeeds FrameSeedsOf(uint32_t scenario_seed, size_t frame_index) {
+  FrameSeeds s;
+  // Placement and rendering keep the offsets every recorded figure was made with: distinct per frame and
+  // reproducible. 7919 (a prime) keeps a frame's placement stream away from its neighbours' render streams.
+  s.placement = scenario_seed + static_cast<uint32_t>(frame_index) * 7919u;
+  s.render = scenario_seed + static_cast<uint32_t>(frame_index);
+  // The LiDAR stream through the splitmix64 finaliser: nearby seeds, unrelated streams.
+  uint64_t z = (static_cast<uint64_t>(scenario_seed) << 32) ^ (static_cast<uint64_t>(frame_index) + 0x9E3779B97F4A7C15ull);
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  s.lidar = z ^ (z >> 31);
+  return s;
+}
+
+std::vector<Eigen::Vector3d> PointsInEgo(const Frame& frame, const PointCloud& sweep) {
+  std::vector<Eigen::Vector3d> points_ego(sweep.size());
+  for (size_t i = 0; i < sweep.size(); ++i) points_ego[i] = frame.lidar->T_ego_lidar * sweep.xyz(i).cast<double>();
+  return points_ego;
+}
+
+GroundModel EstimateFrameGround(const Frame& frame, const std::vector<Eigen::Vector3d>& points_ego, const Scenario& scenario) {
+  std::vector<Box3> real_boxes;
+  for (const auto& a : frame.annotations) real_boxes.push_back(a.box);
+  GroundOptions gopt;
+  gopt.seed = scenario.seed;
+  gopt.sensor_xy = frame.lidar->T_ego_lidar.translation.head<2>();
+  return GroundModel::Estimate(points_ego, real_boxes, gopt);
+}
+
+FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vector<Asset>& assets,
+                             const Scenario& scenario, const SynthOptions& options, const SequencePlan* plan) {
+  using namespace frame_stages;
+  FrameOutcome out;
+  out.frame_index = frame_index;
+  out.edit.frame_index = frame_index;
+  const FrameInputs in = ReadFrameInputs(log, frame_index, scenario, &out);
+  std::vector<int> plan_index;
+  const std::vector<PlacedObject> placed = PlaceFrameObjects(in, assets, scenario, plan, &plan_index);
+  const FrameLight light = LightFrame(in, scenario, options, placed, &out);
+  const ObjectScene scene = BuildObjectScene(placed, light.sun_dir);
+  out.objects = LabelObjects(log, placed, plan, plan_index);
+
+  std::shared_ptr<const models::Harmonizer> harmonizer = options.harmonizer_model;
+  if (!harmonizer && options.harmonizer != "none" && !placed.empty())
+    harmonizer = std::make_shared<const models::Harmonizer>(ResolveSynthHarmonizer(options.harmonizer));
+  const CameraStageInput stage{&in, &placed, &light, &scene, harmonizer.get(), &options};
+  for (size_t cam_index = 0; cam_index < in.frame->cameras.size(); ++cam_index) {
+    std::optional<CameraOutcome> camera = SynthesizeCamera(stage, cam_index, &out.objects);
+    if (!camera) continue;
+    out.edit.images[camera->channel] = camera->after;
+    out.cameras.push_back(std::move(*camera));
+  }
+
+  SimulateFrameLidar(in, placed, options, &out);
+  FinishLabels(&out);
+  if (plan) DropUnobserved(&out);
+  return out;
+}
+
+}  // namespace sd

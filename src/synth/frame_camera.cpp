@@ -1,0 +1,295 @@
+// The per-camera stage of SynthesizeFrame (synth/frame_stages.h): light, render, receiver depth, occlusion,
+// composite, harmonisation, 2D boxes.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "core/log.h"
+#include "geometry/box_projection.h"
+#include "models/harmonization.h"
+#include "render/camera_render.h"
+#include "synth/frame_stages.h"
+#include "synth/lighting.h"
+#include "synth/object_light.h"
+#include "synth/occlusion.h"
+#include "synth/surface.h"
+
+namespace sd {
+namespace frame_stages {
+namespace {
+
+// Pixels of dense depth around the rendered rectangle: DenseVisibility reads the scene depth up to twice its
+// guide radius (2) beyond an object's box.
+constexpr int kDepthMargin = 8;
+
+// Shadow rays over the sun's disk per road pixel: soft edges without visible noise at 4 samples per pixel.
+constexpr int kShadowSunRays = 8;
+
+// The pixel rectangle a camera redraws: [x0, x1) x [y0, y1).
+struct Rect {
+  int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+};
+
+// The light at the objects in one camera. With the environment map, each object under its own sun verdict,
+// its level from its road in this view, else from all objects' road; without, one calibration from the road.
+struct CameraLight {
+  Lighting lighting;
+  std::optional<ObjectLight> object_light;  // the map's light at all objects (kEnvironment)
+  std::vector<ObjectLight> of_object;       // per object (kEnvironment)
+};
+CameraLight LightOfCamera(const CameraStageInput& st, size_t cam_index, const ImageF& linear) {
+  const CameraSensor& cam = st.in->frame->cameras[cam_index];
+  const FrameLight& fl = *st.light;
+  const std::vector<PlacedObject>& placed = *st.placed;
+  CameraLight cl;
+  if (!fl.env) {
+    cl.lighting = CalibrateLighting(linear, cam, fl.road_points, fl.sun_dir);
+    return cl;
+  }
+  const EnvironmentMap& env = *fl.env;
+  cl.object_light = LightAtObjects(env, cam_index, cam, linear, fl.road_points, {}, fl.sun_at_objects);
+  cl.lighting = cl.object_light->lighting;
+  for (size_t k = 0; k < placed.size(); ++k) {
+    // The level from the object's nearest road this camera sees (the rings of kOwnRoadMargins), else all.
+    ObjectLight own = LightAtObjects(env, cam_index, cam, linear, fl.road_points_of[k], {}, fl.sun_at_object[k]);
+    for (double margin : kOwnRoadMargins) {
+      if (own.road_samples > 0) break;
+      own = LightAtObjects(env, cam_index, cam, linear, RoadPointsNear(*st.in->ground, {placed[k]}, margin), {}, fl.sun_at_object[k]);
+    }
+    if (own.road_samples == 0) own = LightAtObjects(env, cam_index, cam, linear, fl.road_points, {}, fl.sun_at_object[k]);
+    cl.of_object.push_back(own);
+  }
+  return cl;
+}
+
+// The objects' render (colour, coverage, depth, ids) and the shadow ratio on their road. The renderer's hard,
+// one-ray shadow is the road light's; the map's light has a sun disk and a sky with bright and dark sides.
+struct ObjectRender {
+  CameraRender render;
+  ImageF shadow;
+};
+ObjectRender RenderObjects(const CameraStageInput& st, const CameraSensor& cam, const CameraLight& cl, const Rect& rect) {
+  const ObjectScene& s = *st.scene;
+  CameraRenderOptions ropt;
+  ropt.samples_per_pixel = st.options->samples_per_pixel;
+  ropt.ao_samples = st.options->ao_samples;
+  ropt.receiver_mesh = s.receiver_id;
+  ropt.receiver_shadow = !cl.object_light;  // the map's light shades the road below (ReceiverShadowImage)
+  for (const ObjectLight& l : cl.of_object) ropt.mesh_lighting.push_back(l.lighting);  // mesh k = object k
+  ropt.x0 = rect.x0;
+  ropt.y0 = rect.y0;
+  ropt.x1 = rect.x1;
+  ropt.y1 = rect.y1;
+  ropt.seed = st.in->seeds.render;
+  ObjectRender r;
+  r.render = RenderCamera(s.scene, cam.intrinsics, cam.T_ego_cam, cl.lighting, ropt);
+  r.shadow = r.render.shadow;
+  if (cl.object_light) {
+    EnvShadingOptions so;
+    so.sun_rays = kShadowSunRays;
+    so.sky_rays = st.options->ao_samples;
+    so.seed = ropt.seed;
+    so.skip_mesh = s.receiver_id;
+    std::vector<const EnvironmentLight*> light_of_face(s.receiver->faces.size());
+    for (size_t k = 0, f = 0; k < st.placed->size(); ++k)
+      for (; f < s.receiver_faces_end[k]; ++f) light_of_face[f] = &cl.of_object[k].shading;
+    r.shadow = ReceiverShadowImage(s.scene, cam.intrinsics, cam.T_ego_cam, s.receiver_id, light_of_face, so, rect.x0, rect.y0,
+                                   rect.x1, rect.y1);
+  }
+  return r;
+}
+
+// The camera depth of the road under the shadows (the ground plane), so the real scene can hide it too: the
+// ground under a shadow must not be hidden by a real object, nor shown through one.
+ImageF ReceiverDepth(const CameraSensor& cam, const GroundPlane& plane, const ObjectRender& r, const Rect& rect) {
+  ImageF depth(r.render.depth.width(), r.render.depth.height(), 1, std::numeric_limits<float>::infinity());
+  for (int y = rect.y0; y < rect.y1; ++y)
+    for (int x = rect.x0; x < rect.x1; ++x) {
+      if (r.shadow.at(x, y) >= 0.999f) continue;
+      const Eigen::Vector3d d_cam = cam.intrinsics.RayDirection(Eigen::Vector2d(x + 0.5, y + 0.5));
+      const Eigen::Vector3d o = cam.T_ego_cam.translation, d = cam.T_ego_cam.rotation * d_cam;
+      const double denom = plane.normal.dot(d);
+      if (std::abs(denom) < 1e-6) continue;
+      const double t = -(plane.normal.dot(o) + plane.d) / denom;
+      if (t > 0) depth.at(x, y) = static_cast<float>(t * d_cam.z());
+    }
+  return depth;
+}
+
+// Occlusion by the real scene, of the objects and of the road their shadows fall on.
+struct OcclusionMasks {
+  ImageF objects, receiver;  // visibility in [0, 1]
+};
+OcclusionMasks OccludeByScene(const CameraStageInput& st, const CameraSensor& cam, const ImageU8& original,
+                              const ObjectRender& r, const ImageF& receiver_depth, const Rect& rect) {
+  const FrameInputs& in = *st.in;
+  const Rigid3d T_cam_ego = cam.T_ego_cam.Inverse();
+  const auto projected = ProjectPoints(in.points_ego, in.is_ground, cam.intrinsics, T_cam_ego);
+  OcclusionMasks m;
+  if (!st.options->dense_occlusion) {
+    m.objects = ComputeVisibility(projected, r.render.depth);
+    m.receiver = ComputeVisibility(projected, receiver_depth);
+    return m;
+  }
+  const GroundPlane& gp = in.ground->seed_plane();
+  const PlaneSurface ground_plane(gp.normal, gp.d);
+  DepthPriors priors;
+  priors.boxes_ego = in.real_boxes;
+  priors.surface = &ground_plane;  // ego frame: T_world_ego stays identity
+  // Only where objects or their shadows are, plus the band the visibility mattes from (guide radius 2).
+  DenseDepthOptions dopt;
+  dopt.x0 = rect.x0 - kDepthMargin, dopt.y0 = rect.y0 - kDepthMargin;
+  dopt.x1 = rect.x1 + kDepthMargin, dopt.y1 = rect.y1 + kDepthMargin;
+  const DepthMap scene_depth = DenseDepth(projected, original, cam.intrinsics, T_cam_ego, priors, dopt);
+  m.objects = DenseVisibility(scene_depth, original, r.render.depth);
+  m.receiver = DenseVisibility(scene_depth, original, receiver_depth);
+  return m;
+}
+
+// The composite in linear light: objects over the photo; what their shadows take from it is kept apart, to be
+// applied after harmonisation. Counts each object's rendered and visible pixels and its visible box.
+struct Composite {
+  bool changed = false;
+  ImageF object_alpha;      // coverage x visibility
+  ImageF shadow_only_loss;  // what the shadows take from the photo
+  std::vector<double> rendered, visible;
+  std::vector<Box2> boxes;
+};
+Composite CompositeObjects(const ObjectRender& r, const OcclusionMasks& occ, size_t n_objects, const Rect& rect, ImageF* linear) {
+  Composite c;
+  c.object_alpha = ImageF(linear->width(), linear->height(), 1, 0.0f);
+  c.shadow_only_loss = ImageF(linear->width(), linear->height(), 3, 0.0f);
+  c.rendered.assign(n_objects, 0);
+  c.visible.assign(n_objects, 0);
+  c.boxes.assign(n_objects, Box2{1e9, 1e9, -1e9, -1e9});
+  for (int y = rect.y0; y < rect.y1; ++y)
+    for (int x = rect.x0; x < rect.x1; ++x) {
+      const float a = r.render.coverage.at(x, y);
+      const float vis = occ.objects.at(x, y);
+      const float shade = occ.receiver.at(x, y) > 0.5f ? r.shadow.at(x, y) : 1.0f;
+      if (a <= 0 && shade >= 1.0f) continue;
+      const float av = a * vis;
+      c.object_alpha.at(x, y) = av;
+      float* px = linear->pixel(x, y);
+      for (int ch = 0; ch < 3; ++ch) {
+        c.shadow_only_loss.at(x, y, ch) = px[ch] * (1 - av) * (1 - shade);
+        px[ch] = r.render.color.at(x, y, ch) * vis + px[ch] * (1 - av);  // shadows are taken away below
+      }
+      c.changed = true;
+      const int id = r.render.object.at(x, y);
+      if (id >= 0 && id < static_cast<int>(n_objects) && a >= 0.5f) {
+        c.rendered[id] += 1;
+        if (vis > 0.5f) {
+          c.visible[id] += 1;
+          Box2& b = c.boxes[id];
+          b.x1 = std::min<double>(b.x1, x);
+          b.y1 = std::min<double>(b.y1, y);
+          b.x2 = std::max<double>(b.x2, x + 1);
+          b.y2 = std::max<double>(b.y2, y + 1);
+        }
+      }
+    }
+  return c;
+}
+
+// Harmonisation sees the objects over the unshadowed photo (their own shadow would otherwise count as the
+// surroundings they are matched to), one object at a time. Returns how many objects it harmonised.
+int HarmonizeObjects(const models::Harmonizer& harmonizer, const ObjectRender& r, const Composite& c, size_t n_objects,
+                     const Rect& rect, ImageF* linear) {
+  // On a crop: the objects' rectangle grown by the widest background ring the classical transfer reads
+  // (0.25 sqrt(object pixels), HarmonizeOptions::ring_px), so the whole photograph is not converted per camera.
+  const int margin = 2 + static_cast<int>(std::ceil(0.25 * std::sqrt(double(rect.x1 - rect.x0) * (rect.y1 - rect.y0))));
+  const int cx0 = std::max(0, rect.x0 - margin), cy0 = std::max(0, rect.y0 - margin);
+  const int cx1 = std::min(linear->width(), rect.x1 + margin), cy1 = std::min(linear->height(), rect.y1 + margin);
+  ImageF composite(cx1 - cx0, cy1 - cy0, 3);
+  for (int y = cy0; y < cy1; ++y)
+    for (int x = cx0; x < cx1; ++x)
+      for (int ch = 0; ch < 3; ++ch) composite.at(x - cx0, y - cy0, ch) = LinearToSrgb(std::clamp(linear->at(x, y, ch), 0.0f, 1.0f));
+  int harmonized = 0;
+  for (size_t k = 0; k < n_objects; ++k) {
+    if (c.visible[k] < 4) continue;
+    ImageF mask(composite.width(), composite.height(), 1, 0.0f);
+    for (int y = rect.y0; y < rect.y1; ++y)
+      for (int x = rect.x0; x < rect.x1; ++x)
+        if (r.render.object.at(x, y) == static_cast<int>(k)) mask.at(x - cx0, y - cy0) = c.object_alpha.at(x, y);
+    composite = harmonizer.Harmonize(composite, mask);
+    ++harmonized;
+  }
+  // Back to linear only where an object is: elsewhere the harmoniser returned the composite bit for bit, and the
+  // round trip through sRGB would not be.
+  for (int y = rect.y0; y < rect.y1; ++y)
+    for (int x = rect.x0; x < rect.x1; ++x)
+      if (c.object_alpha.at(x, y) > 0)
+        for (int ch = 0; ch < 3; ++ch) linear->at(x, y, ch) = SrgbToLinear(composite.at(x - cx0, y - cy0, ch));
+  return harmonized;
+}
+
+// For people: the light at the objects in this camera.
+std::string DescribeCameraLight(const CameraLight& cl, const Composite& c, const FrameLight& fl) {
+  if (!cl.object_light) return "road calibration";
+  const ObjectLight& ol = *cl.object_light;
+  std::string text = Msg() << "sun visibility " << Fixed(ol.sun_visibility, 2) << ", scale " << Fixed(ol.scale, 2) << " ("
+                           << ol.road_samples << " road pixels)";
+  std::string own;
+  for (size_t k = 0; k < cl.of_object.size(); ++k)
+    if (fl.own_verdict[k] && c.visible[k] >= 4)
+      own += Msg() << (own.empty() ? "" : ", ") << "#" << k << " " << Fixed(cl.of_object[k].sun_visibility, 2) << " x"
+                   << Fixed(cl.of_object[k].scale, 2);
+  if (!own.empty()) text += "; per object (sun visibility x scale): " + own;
+  return text;
+}
+
+// The near plane of a label's box projection: a box reaching behind the camera is clipped there (its truncation
+// is then the share of the clipped outline's rectangle outside the image), as mining's crops are.
+constexpr double kLabelNearM = 0.1;
+
+}  // namespace
+
+std::optional<CameraOutcome> SynthesizeCamera(const CameraStageInput& st, size_t cam_index, std::vector<ObjectOutcome>* objects) {
+  const CameraSensor& cam = st.in->frame->cameras[cam_index];
+  const std::vector<PlacedObject>& placed = *st.placed;
+  const auto projected_rect = ProjectedRect(cam.intrinsics, cam.T_ego_cam.Inverse(), st.scene->extent_points, 2);
+  if (!projected_rect) return std::nullopt;
+  const Rect rect{(*projected_rect)[0], (*projected_rect)[1], (*projected_rect)[2], (*projected_rect)[3]};
+
+  const ImageU8& original = st.in->Image(cam_index);
+  ImageF linear = ToLinear(original);
+  const CameraLight cl = LightOfCamera(st, cam_index, linear);
+  const ObjectRender r = RenderObjects(st, cam, cl, rect);
+  const ImageF receiver_depth = ReceiverDepth(cam, st.in->ground->seed_plane(), r, rect);
+  const OcclusionMasks occ = OccludeByScene(st, cam, original, r, receiver_depth, rect);
+  const Composite c = CompositeObjects(r, occ, placed.size(), rect, &linear);
+  if (!c.changed) return std::nullopt;
+  std::string harmonized;
+  if (st.harmonizer) {
+    const int n = HarmonizeObjects(*st.harmonizer, r, c, placed.size(), rect, &linear);
+    harmonized = Msg() << "; harmonised: " << n << " object(s) (" << (st.harmonizer->learned() ? "learned" : "classical") << ")";
+  }
+  for (int y = rect.y0; y < rect.y1; ++y)
+    for (int x = rect.x0; x < rect.x1; ++x)
+      for (int ch = 0; ch < 3; ++ch) linear.at(x, y, ch) = std::max(0.0f, linear.at(x, y, ch) - c.shadow_only_loss.at(x, y, ch));
+
+  CameraOutcome co;
+  co.channel = cam.channel;
+  co.before = original;
+  co.after = ToSrgb8(linear);
+  co.light = DescribeCameraLight(cl, c, *st.light) + harmonized;
+  for (size_t k = 0; k < placed.size(); ++k) {
+    ObjectOutcome& oc = (*objects)[k];
+    oc.rendered_pixels += c.rendered[k];
+    oc.visible_pixels += c.visible[k];
+    if (c.visible[k] < 4) continue;  // a few pixels are not a labelable object
+    CameraBox cb;
+    cb.channel = cam.channel;
+    cb.box = c.boxes[k];
+    cb.visible_fraction = c.rendered[k] > 0 ? c.visible[k] / c.rendered[k] : 0;
+    const auto in_image = geometry::ProjectBoxToImage(cam.intrinsics, cam.T_ego_cam.Inverse(), placed[k].box, kLabelNearM);
+    cb.truncation = in_image ? in_image->truncation : 1.0;
+    oc.label.camera_boxes.push_back(cb);
+    co.objects.push_back(static_cast<int>(k));
+  }
+  return co;
+}
+
+}  // namespace frame_stages
+}  // namespace sd

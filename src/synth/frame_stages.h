@@ -1,0 +1,92 @@
+#pragma once
+// The stages of SynthesizeFrame (synth/frame.h) and what they hand each other; internal to synth/frame.cpp and
+// synth/frame_camera.cpp. The data flow is the one of docs/architecture.md: inputs -> placement -> the frame's
+// light -> the object scene -> each camera -> the LiDAR.
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/image.h"
+#include "datasets/log.h"
+#include "render/ray_scene.h"
+#include "synth/environment.h"
+#include "synth/frame.h"
+#include "synth/outcome.h"
+#include "synth/placement.h"
+
+namespace sd {
+namespace models {
+class Harmonizer;
+}
+namespace frame_stages {
+
+// What the frame brings: its sweep in the ego frame, the annotated boxes, the ground (the sweep and the ground
+// are kept in the FrameOutcome), and the camera images, each read on first use.
+struct FrameInputs {
+  const Log* log = nullptr;
+  const Frame* frame = nullptr;
+  size_t index = 0;
+  FrameSeeds seeds;
+  const PointCloud* sweep = nullptr;  // sensor frame
+  const GroundModel* ground = nullptr;
+  std::vector<Eigen::Vector3d> points_ego;
+  std::vector<uint8_t> is_ground;  // parallel to points_ego
+  std::vector<Box3> real_boxes;
+  std::vector<std::pair<std::string, Box3>> annotated;  // (category, box), for the LiDAR's reference intensities
+  // Camera k's photograph (sRGB), read and checked against its calibration the first time it is asked for.
+  const ImageU8& Image(size_t k) const;
+  mutable std::vector<ImageU8> images;  // empty until read
+};
+FrameInputs ReadFrameInputs(const Log& log, size_t frame_index, const Scenario& scenario, FrameOutcome* out);
+
+// The frame's light: the sun, the environment map (kEnvironment with objects to light), and the sun's
+// visibility at each object, decided once from every camera that sees its road.
+struct FrameLight {
+  Eigen::Vector3d sun_dir = Eigen::Vector3d::UnitZ();
+  std::optional<EnvironmentMap> env;
+  std::vector<Eigen::Vector3d> road_points;                  // drivable ground near all objects
+  std::vector<std::vector<Eigen::Vector3d>> road_points_of;  // each object's own road (kOwnRoadMargins)
+  std::optional<double> sun_at_objects;                      // over all objects' road
+  std::vector<std::optional<double>> sun_at_object;          // each object's verdict, else sun_at_objects
+  std::vector<bool> own_verdict;                             // the object's own road gave its verdict
+};
+
+// The objects in the ego frame with one receiver mesh for their shadows.
+struct ObjectScene {
+  RayScene scene;                          // meshes 0..n-1: the objects; then the receiver
+  std::shared_ptr<TriangleMesh> receiver;  // a square of road under each object
+  std::vector<size_t> receiver_faces_end;  // object k's patch: faces [end of k - 1, end of k) of the receiver
+  int receiver_id = -1;
+  std::vector<Eigen::Vector3d> extent_points;  // everything a camera may need to redraw: boxes and receivers
+};
+
+// What every camera shares.
+struct CameraStageInput {
+  const FrameInputs* in = nullptr;
+  const std::vector<PlacedObject>* placed = nullptr;
+  const FrameLight* light = nullptr;
+  const ObjectScene* scene = nullptr;
+  const models::Harmonizer* harmonizer = nullptr;  // null: no harmonisation
+  const SynthOptions* options = nullptr;
+};
+
+// One camera: its light at the objects, the render and the soft shadows, the receiver's depth, occlusion by the
+// real scene, the composite in linear light, harmonisation, and the objects' 2D boxes. Adds the camera's pixels
+// and boxes to `objects`; nullopt when the objects do not touch the camera's image.
+std::optional<CameraOutcome> SynthesizeCamera(const CameraStageInput& stage, size_t cam_index, std::vector<ObjectOutcome>* objects);
+
+// Drivable ground points within `margin_m` of the objects' footprints (their bounding circles).
+std::vector<Eigen::Vector3d> RoadPointsNear(const GroundModel& ground, const std::vector<PlacedObject>& objects, double margin_m = 6.0);
+
+// The road that decides whether an object stands in the sun: within 1.5 m of its footprint. Shade boundaries
+// are sharp; the 6 m the level of the light is read from would mix a shaded spot with the sunlit road beside it.
+// Where no camera shows road that close (a cone whose near road its neighbours and the parked cars hide), the
+// nearest wider ring that has road, before the road of all objects: over a sequence the closest road comes and
+// goes as the view changes, and jumping to the frame-wide level made a cone's brightness change by 70 % from one
+// frame to the next (PandaSet 002, bench_sequence).
+constexpr double kOwnRoadMargins[] = {1.5, 3.0, 6.0};
+
+}  // namespace frame_stages
+}  // namespace sd

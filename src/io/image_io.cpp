@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cmath>
 #include <limits>
 
 #include <stb/stb_image.h>
@@ -43,6 +44,44 @@ ImageU8 DecodeImage(std::string_view bytes, const std::string& what, int channel
 
 ImageU8 ReadImage(const std::filesystem::path& path, int channels) {
   return DecodeImage(ReadFileToString(path), path.string(), channels);
+}
+
+std::optional<int> EstimateJpegQuality(std::string_view bytes) {
+  // The IJG standard luminance table (ITU-T T.81 Annex K); the order does not matter for its sum.
+  static constexpr int kStandardLuma[64] = {16, 11, 10, 16, 24,  40,  51,  61,  12, 12, 14, 19, 26,  58,  60,  55,
+                                            14, 13, 16, 24, 40,  57,  69,  56,  14, 17, 22, 29, 51,  87,  80,  62,
+                                            18, 22, 37, 56, 68,  109, 103, 77,  24, 35, 55, 64, 81,  104, 113, 92,
+                                            49, 64, 78, 87, 103, 121, 120, 101, 72, 92, 95, 98, 112, 100, 103, 99};
+  const auto u8 = [&](size_t i) { return static_cast<unsigned char>(bytes[i]); };
+  if (bytes.size() < 4 || u8(0) != 0xFF || u8(1) != 0xD8) return std::nullopt;
+  size_t i = 2;
+  while (i + 4 <= bytes.size()) {
+    if (u8(i) != 0xFF) return std::nullopt;
+    const int marker = u8(i + 1);
+    if (marker == 0xD9 || marker == 0xDA) return std::nullopt;  // end of image, or scan data: no table before it
+    const size_t length = (static_cast<size_t>(u8(i + 2)) << 8) | u8(i + 3);
+    if (length < 2 || i + 2 + length > bytes.size()) return std::nullopt;
+    if (marker == 0xDB) {
+      // One or more tables: Pq/Tq byte, then 64 entries of 1 (Pq = 0) or 2 bytes.
+      size_t t = i + 4;
+      const size_t end = i + 2 + length;
+      while (t < end) {
+        const int precision = u8(t) >> 4, id = u8(t) & 15;
+        const size_t entry = precision == 0 ? 1 : 2;
+        if (t + 1 + 64 * entry > end) return std::nullopt;
+        if (id == 0 && precision == 0) {
+          double sum = 0, standard = 0;
+          for (int k = 0; k < 64; ++k) sum += u8(t + 1 + k), standard += kStandardLuma[k];
+          const double scale = 100.0 * sum / standard;  // libjpeg: scale = q < 50 ? 5000 / q : 200 - 2 q
+          const double q = scale <= 100 ? (200 - scale) / 2 : 5000 / scale;
+          return std::clamp(static_cast<int>(std::lround(q)), 1, 100);
+        }
+        t += 1 + 64 * entry;
+      }
+    }
+    i += 2 + length;
+  }
+  return std::nullopt;
 }
 
 std::string EncodeImage(const ImageU8& image, const std::string& format, int jpeg_quality) {

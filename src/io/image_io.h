@@ -1,6 +1,7 @@
 #pragma once
 // PNG and JPEG files <-> ImageU8 (sRGB). Format chosen by extension on write (.png, .jpg/.jpeg).
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <string_view>
 
@@ -16,6 +17,10 @@ ImageU8 ReadImage(const std::filesystem::path& path, int channels = 0);
 ImageU8 DecodeImage(std::string_view bytes, const std::string& what, int channels = 0);
 // Writes atomically. JPEG quality 1..100 (95 keeps re-encoded dataset images visually lossless).
 void WriteImage(const std::filesystem::path& path, const ImageU8& image, int jpeg_quality = 95);
+// The quality a JPEG was saved at, on the IJG scale (1..100) that libjpeg, stb and most cameras' encoders use:
+// estimated from its luminance quantisation table (DQT) as the scaling of the standard table that gives the
+// same sum. nullopt when the bytes are not a baseline/progressive JPEG with an 8-bit luminance table.
+std::optional<int> EstimateJpegQuality(std::string_view bytes);
 // Encodes to memory ("png" or "jpg"), for reports that embed images.
 std::string EncodeImage(const ImageU8& image, const std::string& format, int jpeg_quality = 90);
 

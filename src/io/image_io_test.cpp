@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <iostream>
 
 #include "core/error.h"
 #include "io/files.h"
@@ -122,6 +123,27 @@ TEST(ImageIo, DecodesFromMemoryAndNamesTheSource) {
     } catch (const InputError& e) {
       EXPECT_EQ(std::string(e.what()).rfind(url + ": cannot decode image", 0), 0u) << e.what();
     }
+  }
+}
+
+// The quality a JPEG was written at, read back from its quantisation table: our own encoder's (stb, IJG scaling)
+// and the repo's nuScenes keyframe (what synth matches inserted pixels to).
+TEST(ImageIo, EstimatesTheJpegQualityFromItsQuantisationTable) {
+  const ImageU8 img = Pattern(32, 24, 3);
+  for (int q : {30, 50, 75, 85, 90, 95}) {
+    const auto estimate = EstimateJpegQuality(EncodeImage(img, "jpg", q));
+    ASSERT_TRUE(estimate.has_value()) << q;
+    EXPECT_NEAR(*estimate, q, 1) << q;
+  }
+  EXPECT_FALSE(EstimateJpegQuality(EncodeImage(img, "png")).has_value());
+  EXPECT_FALSE(EstimateJpegQuality("").has_value());
+  EXPECT_FALSE(EstimateJpegQuality(EncodeImage(img, "jpg", 90).substr(0, 30)).has_value());  // cut inside the tables
+  const fs::path front = testing::RepoData("driving/nuscenes-scene0061-kf0/samples/CAM_FRONT");
+  for (const auto& e : fs::directory_iterator(front)) {
+    const auto q = EstimateJpegQuality(ReadFileToString(e.path()));
+    ASSERT_TRUE(q.has_value()) << e.path();
+    EXPECT_GE(*q, 70) << e.path();  // nuScenes' cameras: a high quality, not a re-encoded thumbnail
+    std::cout << e.path().filename().string() << ": JPEG quality " << *q << "\n";
   }
 }
 

@@ -108,6 +108,18 @@ BENCHMARK(BM_SynthesizeKeyframe)
     ->UseRealTime()
     ->MeasureProcessCPUTime();
 
+// The same frame at spp 4 with the camera's look off (synth/camera_look.h: no blur, noise or JPEG on the inserts):
+// what the look costs, against BM_SynthesizeKeyframe/spp:4.
+void BM_SynthesizeKeyframeCameraLookOff(benchmark::State& state) {
+  const Inputs& in = GetInputs();
+  sd::SynthOptions options;
+  options.samples_per_pixel = 4;
+  options.ao_samples = 16;
+  options.camera_look = sd::CameraLookOptions{false, false, false};
+  TimeSynthesis(state, in, in.scenario, options);
+}
+BENCHMARK(BM_SynthesizeKeyframeCameraLookOff)->Unit(benchmark::kMillisecond)->UseRealTime()->MeasureProcessCPUTime();
+
 // Scenarios with 1, 5 and 20 inserted objects, built in code from the demo's requests (issue 8): 1 = the demo's
 // car alone; 5 = data/scenarios/demo.json as is; 20 = 12 cones + 4 barriers + 4 cars over a wider area (5..45 m
 // ahead, +-12 m lateral) so that 20 fit. Where placement cannot fit all of them, the cone count is lowered

@@ -98,6 +98,9 @@ SynthSummary WriteSynthOutput(const SynthInputs& in, const SynthRequest& request
     jf["light"] = o.light;
     jf["camera_light"] = nlohmann::json::object();
     for (const auto& co : o.cameras) jf["camera_light"][co.channel] = co.light;
+    jf["camera_look"] = nlohmann::json::object();  // per camera: the look estimated from its image and applied
+    for (const auto& co : o.cameras)
+      if (!co.look.is_null()) jf["camera_look"][co.channel] = co.look;
     jf["lidar_model"] = o.lidar_model;  // LidarModel::Summary() of the frame's sweep, or "off"
     jf["lidar_ego_motion"] = o.lidar_ego_motion;
     jf["objects"] = nlohmann::json::array();

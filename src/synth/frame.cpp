@@ -9,6 +9,7 @@
 #include "core/log.h"
 #include "datasets/categories.h"
 #include "datasets/readers.h"
+#include "io/files.h"
 #include "io/image_io.h"
 #include "models/harmonization.h"
 #include "synth/frame_stages.h"
@@ -31,6 +32,8 @@ const ImageU8& FrameInputs::Image(size_t k) const {
   }
   return images[k];
 }
+
+std::optional<int> FrameInputs::JpegQuality(size_t k) const { return EstimateJpegQuality(ReadFileToString(frame->cameras[k].image_path)); }
 
 FrameInputs ReadFrameInputs(const Log& log, size_t frame_index, const Scenario& scenario, FrameOutcome* out) {
   const Frame& frame = log.frames.at(frame_index);
@@ -384,6 +387,11 @@ FrameSeeds FrameSeedsOf(uint32_t scenario_seed, size_t frame_index) {
   z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
   z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
   s.lidar = z ^ (z >> 31);
+  // The sensor noise stream: the same finaliser on another offset of the LiDAR's input.
+  z = (static_cast<uint64_t>(scenario_seed) << 32) ^ (static_cast<uint64_t>(frame_index) + 0xD1B54A32D192ED03ull);
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  s.sensor = z ^ (z >> 31);
   return s;
 }
 

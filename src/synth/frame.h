@@ -15,6 +15,7 @@
 #include "assetgen/asset.h"
 #include "datasets/log.h"
 #include "datasets/writers.h"
+#include "synth/camera_look.h"
 #include "synth/ground.h"
 #include "synth/outcome.h"
 #include "synth/scenario.h"
@@ -56,6 +57,10 @@ struct SynthOptions {
   // The resolved harmoniser (RunSynth resolves `harmonizer` once per run, so a model loads once). Null: the
   // frame resolves `harmonizer` itself.
   std::shared_ptr<const models::Harmonizer> harmonizer_model;
+  // The camera's own look given to inserted pixels (synth/camera_look.h, docs/camera_look.md): the image's edge
+  // rise (blur), noise and JPEG quality, estimated per camera and recorded in synth.json. All off: the render
+  // composited as it is, as synth wrote before.
+  CameraLookOptions camera_look;
   // Tests only: called while a part is half written (its images and sweep are in the staging folder, its
   // part.json is not), so a test can kill the process mid-part.
   std::function<void(size_t frame_index, const std::filesystem::path& staging)> part_written_hook;
@@ -78,12 +83,13 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
 // moves the colour cast and a little chroma, never the lightness. InputError naming a file that does not exist.
 models::Harmonizer ResolveSynthHarmonizer(const std::string& choice);
 
-// The seeds of a frame's three random streams, from the scenario seed and the frame index alone (never the
+// The seeds of a frame's random streams, from the scenario seed and the frame index alone (never the
 // shard, the process or the time).
 struct FrameSeeds {
   uint32_t placement = 0;  // candidate positions and yaws (synth/placement.h), per-frame scenarios only
   uint32_t render = 0;     // anti-aliasing jitter, AO and soft-shadow rays (render/camera_render.h)
   uint64_t lidar = 0;      // range noise and dropout (synth/lidar_sim.h)
+  uint64_t sensor = 0;     // camera noise on inserted pixels (synth/camera_look.h), mixed with the camera index
 };
 FrameSeeds FrameSeedsOf(uint32_t scenario_seed, size_t frame_index);
 

@@ -8,10 +8,12 @@
 #include "geometry/box_projection.h"
 #include "models/harmonization.h"
 #include "render/camera_render.h"
+#include "synth/camera_look.h"
 #include "synth/frame_stages.h"
 #include "synth/lighting.h"
 #include "synth/object_light.h"
 #include "synth/occlusion.h"
+#include "synth/realism.h"
 #include "synth/surface.h"
 
 namespace sd {
@@ -147,35 +149,32 @@ OcclusionMasks OccludeByScene(const CameraStageInput& st, const CameraSensor& ca
 }
 
 // The composite in linear light: objects over the photo; what their shadows take from it is kept apart, to be
-// applied after harmonisation. Counts each object's rendered and visible pixels and its visible box.
+// applied after harmonisation. The visible layer (colour and coverage, both times visibility) is blurred by
+// `blur_sigma` first, so the objects' edges rise as the photograph's do (synth/camera_look.h). Counts each
+// object's rendered and visible pixels and its visible box from the sharp render, so labels do not move.
 struct Composite {
   bool changed = false;
-  ImageF object_alpha;      // coverage x visibility
+  ImageF object_alpha;      // coverage x visibility, blurred as composited
   ImageF shadow_only_loss;  // what the shadows take from the photo
   std::vector<double> rendered, visible;
   std::vector<Box2> boxes;
 };
-Composite CompositeObjects(const ObjectRender& r, const OcclusionMasks& occ, size_t n_objects, const Rect& rect, ImageF* linear) {
+Composite CompositeObjects(const ObjectRender& r, const OcclusionMasks& occ, size_t n_objects, const Rect& rect,
+                           double blur_sigma, ImageF* linear) {
   Composite c;
   c.object_alpha = ImageF(linear->width(), linear->height(), 1, 0.0f);
   c.shadow_only_loss = ImageF(linear->width(), linear->height(), 3, 0.0f);
   c.rendered.assign(n_objects, 0);
   c.visible.assign(n_objects, 0);
   c.boxes.assign(n_objects, Box2{1e9, 1e9, -1e9, -1e9});
+  ImageF layer(rect.x1 - rect.x0, rect.y1 - rect.y0, 4, 0.0f);  // premultiplied colour, alpha; rect coordinates
   for (int y = rect.y0; y < rect.y1; ++y)
     for (int x = rect.x0; x < rect.x1; ++x) {
       const float a = r.render.coverage.at(x, y);
+      if (a <= 0) continue;
       const float vis = occ.objects.at(x, y);
-      const float shade = occ.receiver.at(x, y) > 0.5f ? r.shadow.at(x, y) : 1.0f;
-      if (a <= 0 && shade >= 1.0f) continue;
-      const float av = a * vis;
-      c.object_alpha.at(x, y) = av;
-      float* px = linear->pixel(x, y);
-      for (int ch = 0; ch < 3; ++ch) {
-        c.shadow_only_loss.at(x, y, ch) = px[ch] * (1 - av) * (1 - shade);
-        px[ch] = r.render.color.at(x, y, ch) * vis + px[ch] * (1 - av);  // shadows are taken away below
-      }
-      c.changed = true;
+      for (int ch = 0; ch < 3; ++ch) layer.at(x - rect.x0, y - rect.y0, ch) = r.render.color.at(x, y, ch) * vis;
+      layer.at(x - rect.x0, y - rect.y0, 3) = a * vis;
       const int id = r.render.object.at(x, y);
       if (id >= 0 && id < static_cast<int>(n_objects) && a >= 0.5f) {
         c.rendered[id] += 1;
@@ -189,7 +188,34 @@ Composite CompositeObjects(const ObjectRender& r, const OcclusionMasks& occ, siz
         }
       }
     }
+  GaussianBlurRegion(&layer, blur_sigma, 0, 0, layer.width(), layer.height());
+  for (int y = rect.y0; y < rect.y1; ++y)
+    for (int x = rect.x0; x < rect.x1; ++x) {
+      const float* l = layer.pixel(x - rect.x0, y - rect.y0);
+      const float av = l[3];
+      const float shade = occ.receiver.at(x, y) > 0.5f ? r.shadow.at(x, y) : 1.0f;
+      // A camera whose objects are all hidden still counts as drawn (changed): its image is written, unchanged.
+      if (av <= 0 && r.render.coverage.at(x, y) <= 0 && shade >= 1.0f) continue;
+      c.object_alpha.at(x, y) = av;
+      float* px = linear->pixel(x, y);
+      for (int ch = 0; ch < 3; ++ch) {
+        c.shadow_only_loss.at(x, y, ch) = px[ch] * (1 - av) * (1 - shade);
+        px[ch] = l[ch] + px[ch] * (1 - av);  // shadows are taken away below
+      }
+      c.changed = true;
+    }
   return c;
+}
+
+// The 10-90 % rise of the render's own silhouette edges (its anti-aliasing), median over the edges of its coverage;
+// a pixel's box filter (0.8 px) when the objects are too small to show one.
+double RenderEdgeRise(const ObjectRender& r, const Rect& rect) {
+  ImageU8 coverage(rect.x1 - rect.x0, rect.y1 - rect.y0, 1);
+  for (int y = rect.y0; y < rect.y1; ++y)
+    for (int x = rect.x0; x < rect.x1; ++x)
+      coverage.at(x - rect.x0, y - rect.y0) = static_cast<uint8_t>(std::lround(255 * std::clamp(r.render.coverage.at(x, y), 0.0f, 1.0f)));
+  const std::vector<double> widths = EdgeRiseWidths(coverage);
+  return widths.size() >= 5 ? widths[widths.size() / 2] : 0.8;
 }
 
 // Harmonisation sees the objects over the unshadowed photo (their own shadow would otherwise count as the
@@ -239,6 +265,9 @@ std::string DescribeCameraLight(const CameraLight& cl, const Composite& c, const
   return text;
 }
 
+// Real objects whose edges say how soft an object of this image is: those covering at least this many pixels.
+constexpr int kMinRealObjectPixels = 400;
+
 // The near plane of a label's box projection: a box reaching behind the camera is clipped there (its truncation
 // is then the share of the clipped outline's rectangle outside the image), as mining's crops are.
 constexpr double kLabelNearM = 0.1;
@@ -258,7 +287,16 @@ std::optional<CameraOutcome> SynthesizeCamera(const CameraStageInput& st, size_t
   const ObjectRender r = RenderObjects(st, cam, cl, rect);
   const ImageF receiver_depth = ReceiverDepth(cam, st.in->ground->seed_plane(), r, rect);
   const OcclusionMasks occ = OccludeByScene(st, cam, original, r, receiver_depth, rect);
-  const Composite c = CompositeObjects(r, occ, placed.size(), rect, &linear);
+  const CameraLookOptions& look_options = st.options->camera_look;
+  const bool any_look = look_options.blur || look_options.noise || look_options.jpeg;
+  CameraLook look;
+  if (any_look) {
+    const ImageF real_objects = ObjectOutlinesMask(cam, st.in->real_boxes, kMinRealObjectPixels);
+    look = EstimateCameraLook(original, st.in->JpegQuality(cam_index), &real_objects);
+  }
+  const double render_rise = look_options.blur ? RenderEdgeRise(r, rect) : 0;
+  const double blur = look_options.blur ? ExtraBlurSigma(render_rise, look.TargetEdgeRise()) : 0;
+  const Composite c = CompositeObjects(r, occ, placed.size(), rect, blur, &linear);
   if (!c.changed) return std::nullopt;
   std::string harmonized;
   if (st.harmonizer) {
@@ -273,7 +311,16 @@ std::optional<CameraOutcome> SynthesizeCamera(const CameraStageInput& st, size_t
   co.channel = cam.channel;
   co.before = original;
   co.after = ToSrgb8(linear);
+  // The sensor's last steps, on the inserted pixels only: its noise, then its compression.
+  const uint64_t sensor_seed = st.in->seeds.sensor ^ (0x9E3779B97F4A7C15ull * (cam_index + 1));
+  ApplySensorToInserts(&co.after, c.object_alpha, rect.x0, rect.y0, rect.x1, rect.y1, look, look_options, sensor_seed);
   co.light = DescribeCameraLight(cl, c, *st.light) + harmonized;
+  if (any_look) {
+    co.look = look.ToJson();
+    co.look["render_edge_rise_px"] = render_rise;
+    co.look["blur_sigma_px"] = blur;
+    co.look["applied"] = {{"blur", look_options.blur}, {"noise", look_options.noise}, {"jpeg", look_options.jpeg}};
+  }
   for (size_t k = 0; k < placed.size(); ++k) {
     ObjectOutcome& oc = (*objects)[k];
     oc.rendered_pixels += c.rendered[k];

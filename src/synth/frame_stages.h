@@ -37,6 +37,8 @@ struct FrameInputs {
   std::vector<std::pair<std::string, Box3>> annotated;  // (category, box), for the LiDAR's reference intensities
   // Camera k's photograph (sRGB), read and checked against its calibration the first time it is asked for.
   const ImageU8& Image(size_t k) const;
+  // Camera k's JPEG quality, from its file's quantisation table; nullopt for other formats.
+  std::optional<int> JpegQuality(size_t k) const;
   mutable std::vector<ImageU8> images;  // empty until read
 };
 FrameInputs ReadFrameInputs(const Log& log, size_t frame_index, const Scenario& scenario, FrameOutcome* out);

@@ -8,6 +8,8 @@
 #include <utility>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "core/image.h"
 #include "core/pointcloud.h"
 #include "datasets/writers.h"
@@ -31,6 +33,9 @@ struct CameraOutcome {
   std::string light;  // for people: the light at the objects in this camera (sun visibility, scale), harmoniser
   ImageU8 before, after;  // only for cameras the objects touch
   std::vector<int> objects;  // indices into FrameOutcome::objects drawn in this camera
+  // The camera's look as estimated from its image and applied (CameraLook::ToJson + the blur applied); null when
+  // SynthOptions::camera_look is all off.
+  nlohmann::json look;
 };
 
 struct FrameOutcome {

@@ -131,6 +131,8 @@ json RequestFingerprint(const SynthRequest& request, const SynthInputs& in) {
   j["light"] = request.options.light == SynthOptions::Light::kEnvironment ? "environment" : "road";
   j["dense_occlusion"] = request.options.dense_occlusion;
   j["harmonizer"] = request.options.harmonizer;
+  const CameraLookOptions& look = request.options.camera_look;
+  j["camera_look"] = {{"blur", look.blur}, {"noise", look.noise}, {"jpeg", look.jpeg}};
   // "auto" is learned on a machine with the model installed and classical on one without: parts made on both
   // are of different requests.
   if (in.harmonizer) j["harmonizer_path"] = in.harmonizer->learned() ? "learned" : "classical";
@@ -157,7 +159,7 @@ void WritePart(const fs::path& dir, const FrameOutcome& o, const SynthInputs& in
     SD_CHECK(it != o.edit.images.end(), << co.channel);
     const std::string file = "images/" + std::to_string(c) + ".png";
     WriteImage(dir / file, it->second);
-    cameras.push_back({{"channel", co.channel}, {"image", file}, {"objects", co.objects}, {"light", co.light}});
+    cameras.push_back({{"channel", co.channel}, {"image", file}, {"objects", co.objects}, {"light", co.light}, {"look", co.look}});
   }
   json sweep = nullptr;
   if (o.edit.points) {
@@ -249,6 +251,7 @@ FrameOutcome ReadPart(const fs::path& dir, size_t frame_index, const SynthInputs
     CameraOutcome co;
     co.channel = rc["channel"].String();
     co.light = rc["light"].String();
+    co.look = rc.Has("look") ? rc["look"].raw() : nlohmann::json();
     const CameraSensor* cam = frame.FindCamera(co.channel);
     if (!cam) rc["channel"].Fail("the log's frame has no such camera");
     co.after = ReadImage(dir / rc["image"].String(), 3);

@@ -68,8 +68,13 @@ class PipelineTest : public ::testing::Test {
     SynthOptions unharmonised;
     unharmonised.harmonizer = "none";
     unharmonised_ = new FrameOutcome(SynthesizeFrame(*log_, 0, *assets_, *scenario_, unharmonised));
+    // The render composited as it is: what the camera's look (blur, noise, JPEG) changed.
+    SynthOptions bare;
+    bare.camera_look = CameraLookOptions{false, false, false};
+    no_look_ = new FrameOutcome(SynthesizeFrame(*log_, 0, *assets_, *scenario_, bare));
   }
   static void TearDownTestSuite() {
+    delete no_look_;
     delete unharmonised_;
     delete ideal_;
     delete outcome_;
@@ -85,6 +90,7 @@ class PipelineTest : public ::testing::Test {
   static FrameOutcome* outcome_;
   static FrameOutcome* ideal_;
   static FrameOutcome* unharmonised_;
+  static FrameOutcome* no_look_;
 };
 testing::TempDir* PipelineTest::dir_ = nullptr;
 Log* PipelineTest::log_ = nullptr;
@@ -93,6 +99,7 @@ Scenario* PipelineTest::scenario_ = nullptr;
 FrameOutcome* PipelineTest::outcome_ = nullptr;
 FrameOutcome* PipelineTest::ideal_ = nullptr;
 FrameOutcome* PipelineTest::unharmonised_ = nullptr;
+FrameOutcome* PipelineTest::no_look_ = nullptr;
 
 // Distance from a point (ego frame) to an outcome's object mesh k.
 double DistanceToObject(const FrameOutcome& o, int k, const Eigen::Vector3d& p) {
@@ -125,20 +132,68 @@ TEST(FrameSeeds, DependOnTheScenarioSeedAndTheFrameAlone) {
   EXPECT_EQ(a.render, again.render);
   EXPECT_EQ(a.lidar, again.lidar);
   std::set<uint32_t> placement, render;
-  std::set<uint64_t> lidar;
+  std::set<uint64_t> lidar, sensor;
   for (uint32_t seed : {0u, 7u, 8u})
     for (size_t frame = 0; frame < 50; ++frame) {
       const FrameSeeds s = FrameSeedsOf(seed, frame);
       placement.insert(s.placement);
       render.insert(s.render);
       lidar.insert(s.lidar);
+      sensor.insert(s.sensor);
       if (frame > 0) {
         EXPECT_NE(s.placement, s.render);
       }
     }
   EXPECT_EQ(lidar.size(), 150u);
+  EXPECT_EQ(sensor.size(), 150u);
+  EXPECT_EQ(lidar.count(FrameSeedsOf(7, 3).sensor), 0u);
   EXPECT_EQ(placement.size(), 150u);
   EXPECT_GE(render.size(), 52u);  // seed + frame: neighbouring scenario seeds overlap (kept: every recorded figure was made with it)
+}
+
+// The camera's look (synth/camera_look.h) changes the inserted pixels and their blurred rim only, never the labels,
+// and is recorded per camera: the keyframe is a JPEG of quality 80.
+TEST_F(PipelineTest, TheCameraLookTouchesTheInsertsOnlyAndIsRecorded) {
+  ASSERT_EQ(outcome_->cameras.size(), no_look_->cameras.size());
+  ASSERT_EQ(outcome_->objects.size(), no_look_->objects.size());
+  for (size_t k = 0; k < outcome_->objects.size(); ++k) {
+    const auto& a = outcome_->objects[k].label.camera_boxes;
+    const auto& b = no_look_->objects[k].label.camera_boxes;
+    ASSERT_EQ(a.size(), b.size());
+    for (size_t i = 0; i < a.size(); ++i) {
+      EXPECT_EQ(a[i].box.x1, b[i].box.x1);
+      EXPECT_EQ(a[i].box.y2, b[i].box.y2);
+      EXPECT_EQ(a[i].visible_fraction, b[i].visible_fraction);
+    }
+  }
+  for (size_t c = 0; c < outcome_->cameras.size(); ++c) {
+    const CameraOutcome& on = outcome_->cameras[c];
+    const CameraOutcome& off = no_look_->cameras[c];
+    ASSERT_EQ(on.channel, off.channel);
+    ASSERT_FALSE(on.look.is_null()) << on.channel;
+    EXPECT_EQ(on.look["jpeg_quality"], 80) << on.channel;
+    EXPECT_GT(on.look["blur_sigma_px"].get<double>(), 0.5) << on.channel;  // 2-4 px edges against a 1 px render
+    EXPECT_TRUE(off.look.is_null());
+    // Every changed pixel lies within 8 px of an inserted object's box in this camera.
+    std::vector<Box2> boxes;
+    for (const ObjectOutcome& o : outcome_->objects)
+      for (const CameraBox& cb : o.label.camera_boxes)
+        if (cb.channel == on.channel) boxes.push_back(cb.box);
+    size_t changed = 0;
+    for (int y = 0; y < on.after.height(); ++y)
+      for (int x = 0; x < on.after.width(); ++x) {
+        bool differs = false;
+        for (int ch = 0; ch < 3; ++ch) differs = differs || on.after.at(x, y, ch) != off.after.at(x, y, ch);
+        if (!differs) continue;
+        ++changed;
+        bool near = false;
+        for (const Box2& b : boxes) near = near || (x >= b.x1 - 8 && x < b.x2 + 8 && y >= b.y1 - 8 && y < b.y2 + 8);
+        ASSERT_TRUE(near) << on.channel << " pixel " << x << "," << y << " changed away from every object";
+      }
+    if (!on.objects.empty()) {  // a camera with only shadows of objects keeps them as they were
+      EXPECT_GT(changed, 100u) << on.channel;
+    }
+  }
 }
 
 TEST_F(PipelineTest, PlacesEveryRequestedObjectWithoutTouchingRealOnes) {

@@ -1,0 +1,144 @@
+// bench_camera_look: do inserted objects measure like the real objects of the same image? Synthesises frames of
+// the repo's nuScenes keyframe and KITTI frames, and of PandaSet (../shared, a lane closure, world-fixed), with
+// the camera's look off and on (synth/camera_look.h), and measures every real annotated object and every
+// inserted one the same way (synth/realism.h): noise relative to the image's own model, 10-90 % edge rise,
+// saturation. Prints a table per log and writes bench/results/camera_look.json. A plain program.
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "bench_demo.h"
+#include "io/files.h"
+#include "io/json.h"
+#include "synth/batch.h"
+#include "synth/camera_look.h"
+#include "synth/realism.h"
+
+namespace {
+namespace fs = std::filesystem;
+
+// Real objects worth measuring: at least 24 px tall and mostly inside the image.
+bool Measurable(const sd::ObjectLook& o) { return o.pixels >= 24 * 12; }
+
+struct Run {
+  std::string log, mode;
+  std::vector<sd::ObjectLook> objects;
+  double seconds = 0;
+};
+
+Run Measure(const std::string& name, const sd::Log& log, const std::vector<size_t>& frames, const std::vector<sd::Asset>& assets,
+            const sd::Scenario& scenario, const sd::SynthPlan* plan, const sd::CameraLookOptions& look_options,
+            const std::string& mode) {
+  Run run{name, mode, {}, 0};
+  sd::SynthOptions options;
+  options.camera_look = look_options;
+  for (size_t fi : frames) {
+    const auto t0 = std::chrono::steady_clock::now();
+    sd::FrameOutcome out;
+    try {
+      out = sd::SynthesizeFrame(log, fi, assets, scenario, options, plan ? plan->ForFrame(fi) : nullptr);
+    } catch (const sd::InputError& e) {
+      std::printf("(%s frame %zu: %s; skipped)\n", name.c_str(), fi, e.what());
+      continue;
+    }
+    run.seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const sd::Frame& frame = log.frames[fi];
+    for (const sd::CameraOutcome& co : out.cameras) {
+      const sd::CameraSensor* cam = frame.FindCamera(co.channel);
+      // The image's own look, from the photograph before insertion.
+      const sd::CameraLook look = sd::EstimateCameraLook(co.before, std::nullopt);  // its noise model
+      for (const sd::Annotation& a : frame.annotations) {
+        sd::ObjectLook o = sd::MeasureObjectLook(co.after, *cam, a.box, look);
+        o.category = a.category;
+        if (Measurable(o)) run.objects.push_back(o);
+      }
+      for (int k : co.objects) {
+        sd::ObjectLook o = sd::MeasureObjectLook(co.after, *cam, out.objects[static_cast<size_t>(k)].placement.box, look);
+        o.category = out.objects[static_cast<size_t>(k)].label.category;
+        o.inserted = true;
+        if (o.pixels > 0) run.objects.push_back(o);
+      }
+    }
+  }
+  return run;
+}
+
+nlohmann::json Row(const Run& r) {
+  const sd::LookComparison c = sd::CompareLooks(r.objects);
+  std::printf("| %-22s | %-15s | %3d | %3d | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %6.1f |\n", r.log.c_str(),
+              r.mode.c_str(), c.real, c.inserted, c.real_noise, c.inserted_noise,
+              c.real_noise > 0 ? c.inserted_noise / c.real_noise : 0.0, c.real_edge_rise, c.inserted_edge_rise,
+              c.real_edge_rise > 0 ? c.inserted_edge_rise / c.real_edge_rise : 0.0, c.real_saturation, c.inserted_saturation,
+              r.seconds);
+  return {{"log", r.log},
+          {"mode", r.mode},
+          {"real_objects", c.real},
+          {"inserted_objects", c.inserted},
+          {"noise", {{"real", c.real_noise}, {"inserted", c.inserted_noise}}},
+          {"edge_rise_px", {{"real", c.real_edge_rise}, {"inserted", c.inserted_edge_rise}}},
+          {"saturation", {{"real", c.real_saturation}, {"inserted", c.inserted_saturation}}},
+          {"seconds", r.seconds}};
+}
+
+}  // namespace
+
+int main() {
+  const auto root = sd::bench::FindRepoRoot();
+  if (!root) {
+    std::fprintf(stderr, "bench_camera_look: cannot find the repo's data/ (set SYNTHDRIVE_SOURCE_DIR)\n");
+    return 2;
+  }
+  const fs::path data = *root / "data";
+  const fs::path tmp = fs::temp_directory_path() / ("bench_camera_look_" + std::to_string(::getpid()));
+  std::vector<sd::Asset> assets;
+  for (const sd::bench::DemoMesh& m : sd::bench::DemoMeshes())
+    assets.push_back(sd::bench::ImportDemoAsset(data, m, tmp / "assets" / m.id));
+  const sd::CameraLookOptions off{false, false, false}, on{};
+  std::printf("| log | camera look | real | ins | noise real | noise ins | ratio | rise real px | rise ins px | ratio | sat real | sat ins | s |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+  nlohmann::json rows = nlohmann::json::array();
+
+  {
+    const sd::Log log = sd::OpenLog(data / "driving/nuscenes-scene0061-kf0/mmdet3d_info/n015-2018-07-24-11-22-45+0800.json");
+    const sd::Scenario scenario = sd::ReadScenario(data / "scenarios/demo.json");
+    for (const auto& [look, mode] : {std::pair{off, "off"}, std::pair{on, "blur+noise+jpeg"}})
+      rows.push_back(Row(Measure("nuScenes keyframe", log, {0}, assets, scenario, nullptr, look, mode)));
+  }
+  {
+    const sd::Log log = sd::OpenLog(data / "driving/kitti-object");
+    // KITTI's frames are narrow city streets: the demo's cones and barrier only, nearer.
+    sd::Scenario scenario = sd::ReadScenario(data / "scenarios/demo.json");
+    scenario.objects.resize(2);
+    for (sd::ObjectRequest& r : scenario.objects) r.distance_min = 6, r.distance_max = 20, r.lateral_min = -4, r.lateral_max = 4;
+    std::vector<size_t> frames;
+    for (size_t i = 0; i < log.frames.size(); ++i) frames.push_back(i);
+    for (const auto& [look, mode] : {std::pair{off, "off"}, std::pair{on, "blur+noise+jpeg"}})
+      rows.push_back(Row(Measure("KITTI (3 frames)", log, frames, assets, scenario, nullptr, look, mode)));
+  }
+  const fs::path seq = *root / ".." / "shared" / "data" / "driving" / "pandaset-002-f44-55";
+  if (fs::is_directory(seq)) {
+    const sd::Log log = sd::OpenLog(seq);
+    const fs::path scenario_file = data / "scenarios" / "pandaset_closure.json";
+    const sd::Scenario scenario = sd::ReadScenario(scenario_file);
+    const std::vector<size_t> frames = {0, 4, 8, 11};
+    std::vector<size_t> all;
+    for (size_t i = 0; i < log.frames.size(); ++i) all.push_back(i);
+    const sd::SynthPlan plan = sd::PlanSynthesis(log, all, scenario, assets, scenario_file, true);
+    for (const auto& [look, mode] : {std::pair{off, "off"}, std::pair{on, "blur+noise+jpeg"}})
+      rows.push_back(Row(Measure("PandaSet 002 (4 frames)", log, frames, assets, scenario, &plan, look, mode)));
+  } else {
+    std::printf("(PandaSet: %s not present; skipped)\n", seq.string().c_str());
+  }
+  std::error_code ec;
+  fs::remove_all(tmp, ec);
+  const fs::path out = *root / "bench" / "results" / "camera_look.json";
+  sd::WriteJsonFile(out, {{"tool", "bench_camera_look"}, {"rows", rows}});
+  std::printf("-> %s\n", out.string().c_str());
+  return 0;
+}

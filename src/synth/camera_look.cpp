@@ -1,0 +1,319 @@
+#include "synth/camera_look.h"
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "core/error.h"
+#include "core/log.h"
+#include "io/image_io.h"
+
+namespace sd {
+namespace {
+
+constexpr int kBlock = 8;     // the JPEG grid
+constexpr int kBins = 16;     // intensity bins of the noise fit
+constexpr int kMinBinBlocks = 12;
+constexpr double kFlatPercentile = 0.2;
+// The 20th percentile of the 36-sample block estimates of white noise lies at 0.811 of its sigma (measured over
+// 10^4 blocks; camera_look_test checks the recovered sigma): the fit divides it out.
+constexpr double kPercentileBias = 0.811;
+// A Gaussian edge's 10-90 % rise in sigmas: 2 * 1.2816.
+constexpr double kRisePerSigma = 2.5631;
+
+double Percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0;
+  const size_t k = std::min(v.size() - 1, static_cast<size_t>(p * static_cast<double>(v.size())));
+  std::nth_element(v.begin(), v.begin() + static_cast<long>(k), v.end());
+  return v[k];
+}
+
+double Luma(const ImageU8& im, int x, int y) {
+  if (im.channels() < 3) return im.at(x, y, 0);
+  return 0.299 * im.at(x, y, 0) + 0.587 * im.at(x, y, 1) + 0.114 * im.at(x, y, 2);
+}
+
+double BlockMean(const ImageU8& image, int bx, int by, int c) {
+  double sum = 0;
+  for (int y = 0; y < kBlock; ++y)
+    for (int x = 0; x < kBlock; ++x) sum += image.at(bx * kBlock + x, by * kBlock + y, c);
+  return sum / (kBlock * kBlock);
+}
+
+// The noise fit of one channel: per intensity bin the kFlatPercentile of the blocks' sigma, then the weighted
+// least-squares line of variance over value.
+void FitChannel(const ImageU8& image, int c, NoiseModel* model) {
+  const int nbx = image.width() / kBlock, nby = image.height() / kBlock;
+  std::vector<std::vector<double>> bins(kBins);
+  for (int by = 0; by < nby; ++by)
+    for (int bx = 0; bx < nbx; ++bx) {
+      const double mean = BlockMean(image, bx, by, c);
+      if (mean < 8 || mean > 247) continue;  // clipped: no noise to see
+      bins[static_cast<size_t>(std::min(kBins - 1, static_cast<int>(mean * kBins / 256.0)))].push_back(BlockNoiseSigma(image, bx, by, c));
+    }
+  double sw = 0, sx = 0, sy = 0, sxx = 0, sxy = 0;
+  int used = 0;
+  for (int k = 0; k < kBins; ++k) {
+    if (static_cast<int>(bins[k].size()) < kMinBinBlocks) continue;
+    const double sigma = Percentile(bins[k], kFlatPercentile) / kPercentileBias;
+    const double v = (k + 0.5) * 256.0 / kBins, var = sigma * sigma, w = std::sqrt(static_cast<double>(bins[k].size()));
+    sw += w, sx += w * v, sy += w * var, sxx += w * v * v, sxy += w * v * var;
+    used += static_cast<int>(bins[k].size());
+  }
+  if (used == 0) return;
+  const double det = sw * sxx - sx * sx;
+  double a = sy / sw, b = 0;
+  if (det > 1e-9 * sw * sxx) {
+    b = (sw * sxy - sx * sy) / det;
+    a = (sy - b * sx) / sw;
+  }
+  // Noise never falls with the signal and is never negative: a negative slope is texture or clipping, so keep
+  // the level only.
+  if (b < 0 || a < 0) {
+    b = std::max(0.0, b);
+    a = std::max(0.0, (sy - b * sx) / sw);
+  }
+  model->a[static_cast<size_t>(c)] = a;
+  model->b[static_cast<size_t>(c)] = b;
+  model->blocks = std::max(model->blocks, used);
+}
+
+// The rise of one edge profile (samples at unit steps across the edge): positions where it crosses 10 % and 90 %
+// of the way from its low plateau to its high one; nullopt when it is no clean step.
+std::optional<double> RiseOfProfile(const std::vector<double>& p) {
+  const int n = static_cast<int>(p.size());
+  const double lo = (p[0] + p[1] + p[2]) / 3, hi = (p[n - 1] + p[n - 2] + p[n - 3]) / 3;
+  const double contrast = hi - lo;
+  if (contrast < 30) return std::nullopt;
+  // Plateaus flat relative to the step: no texture or second edge inside the window.
+  for (int k : {0, 1, 2}) {
+    if (std::abs(p[k] - lo) > 0.1 * contrast) return std::nullopt;
+    if (std::abs(p[n - 1 - k] - hi) > 0.1 * contrast) return std::nullopt;
+  }
+  auto crossing = [&](double level) -> std::optional<double> {
+    for (int k = 0; k + 1 < n; ++k)
+      if (p[k] < level && p[k + 1] >= level) return k + (level - p[k]) / (p[k + 1] - p[k]);
+    return std::nullopt;
+  };
+  const auto x10 = crossing(lo + 0.1 * contrast), x90 = crossing(lo + 0.9 * contrast);
+  if (!x10 || !x90 || *x90 <= *x10) return std::nullopt;
+  return *x90 - *x10;
+}
+
+double Bilinear(const std::vector<double>& luma, int w, int h, double x, double y) {
+  x = std::clamp(x, 0.0, w - 1.001), y = std::clamp(y, 0.0, h - 1.001);
+  const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+  const double fx = x - x0, fy = y - y0;
+  const auto at = [&](int xx, int yy) { return luma[static_cast<size_t>(yy) * w + xx]; };
+  return (1 - fy) * ((1 - fx) * at(x0, y0) + fx * at(x0 + 1, y0)) + fy * ((1 - fx) * at(x0, y0 + 1) + fx * at(x0 + 1, y0 + 1));
+}
+
+// The residual sigma a flat grey patch with white noise of `sigma` measures after a JPEG round trip at
+// `quality` (median over its blocks).
+double SigmaAfterJpeg(int quality, double sigma) {
+  ImageU8 patch(64, 64, 3);
+  std::mt19937_64 rng(12345);
+  std::normal_distribution<double> n(0.0, sigma);
+  for (size_t i = 0; i < patch.size(); ++i) patch.data()[i] = static_cast<uint8_t>(std::clamp(std::lround(128 + n(rng)), 0L, 255L));
+  const ImageU8 back = DecodeImage(EncodeImage(patch, "jpg", quality), "noise patch", 3);
+  std::vector<double> after;
+  for (int by = 0; by < 8; ++by)
+    for (int bx = 0; bx < 8; ++bx) after.push_back(BlockNoiseSigma(back, bx, by, 1));
+  return Percentile(after, 0.5);
+}
+
+// How much stronger noise must be before a JPEG round trip at `quality` to measure `target` after it. JPEG's
+// quantisation is a dead zone: weak noise vanishes entirely and strong noise mostly survives, so the gain is
+// found by bisection on the simulated round trip, not by one ratio.
+double PreCompressionGain(int quality, double target) {
+  if (quality <= 0 || target <= 0.01) return 1.0;
+  double lo = target, hi = 16 * target + 4;
+  if (SigmaAfterJpeg(quality, hi) < target) return hi / target;
+  for (int it = 0; it < 14; ++it) {
+    const double mid = std::sqrt(lo * hi);
+    (SigmaAfterJpeg(quality, mid) < target ? lo : hi) = mid;
+  }
+  return std::sqrt(lo * hi) / target;
+}
+
+}  // namespace
+
+double NoiseModel::Sigma(int channel, double value) const {
+  const size_t c = static_cast<size_t>(channel);
+  return std::sqrt(std::max(0.0, a[c] + b[c] * value));
+}
+
+double BlockNoiseSigma(const ImageU8& image, int bx, int by, int c) {
+  // [1 -2 1; -2 4 -2; 1 -2 1] has sum of squares 36: its response to white noise of sigma s has variance 36 s^2.
+  const int x0 = bx * kBlock, y0 = by * kBlock;
+  double sum = 0;
+  int n = 0;
+  for (int y = 1; y < kBlock - 1; ++y)
+    for (int x = 1; x < kBlock - 1; ++x) {
+      const auto v = [&](int dx, int dy) { return static_cast<double>(image.at(x0 + x + dx, y0 + y + dy, c)); };
+      const double r = v(-1, -1) - 2 * v(0, -1) + v(1, -1) - 2 * v(-1, 0) + 4 * v(0, 0) - 2 * v(1, 0) + v(-1, 1) -
+                       2 * v(0, 1) + v(1, 1);
+      sum += r * r;
+      ++n;
+    }
+  return std::sqrt(sum / (36.0 * n));
+}
+
+std::vector<double> EdgeRiseWidths(const ImageU8& image, const std::array<int, 4>* region, const ImageF* mask) {
+  const int w = image.width(), h = image.height();
+  std::vector<double> luma(static_cast<size_t>(w) * h);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) luma[static_cast<size_t>(y) * w + x] = Luma(image, x, y);
+  const int x0 = region ? std::max(2, (*region)[0]) : 2, y0 = region ? std::max(2, (*region)[1]) : 2;
+  const int x1 = region ? std::min(w - 2, (*region)[2]) : w - 2, y1 = region ? std::min(h - 2, (*region)[3]) : h - 2;
+  constexpr int kHalf = 6;  // profile samples either side of the edge
+  std::vector<double> widths;
+  // Every other pixel: neighbouring edge pixels give the same profile.
+  for (int y = y0; y < y1; y += 2)
+    for (int x = x0; x < x1; x += 2) {
+      if (mask && mask->at(x, y) <= 0.5f) continue;
+      const auto L = [&](int xx, int yy) { return luma[static_cast<size_t>(yy) * w + xx]; };
+      const double gx = (L(x + 1, y - 1) + 2 * L(x + 1, y) + L(x + 1, y + 1) - L(x - 1, y - 1) - 2 * L(x - 1, y) - L(x - 1, y + 1)) / 8;
+      const double gy = (L(x - 1, y + 1) + 2 * L(x, y + 1) + L(x + 1, y + 1) - L(x - 1, y - 1) - 2 * L(x, y - 1) - L(x + 1, y - 1)) / 8;
+      const double g = std::hypot(gx, gy);
+      if (g < 8) continue;  // no strong edge here
+      // A local maximum along the gradient only: the edge's centre.
+      const double ux = gx / g, uy = gy / g;
+      if (Bilinear(luma, w, h, x + ux, y + uy) - Bilinear(luma, w, h, x - ux, y - uy) < 0) continue;
+      const double g_fwd = std::abs(Bilinear(luma, w, h, x + 1.5 * ux, y + 1.5 * uy) - Bilinear(luma, w, h, x + 0.5 * ux, y + 0.5 * uy));
+      const double g_back = std::abs(Bilinear(luma, w, h, x - 0.5 * ux, y - 0.5 * uy) - Bilinear(luma, w, h, x - 1.5 * ux, y - 1.5 * uy));
+      const double g_here = std::abs(Bilinear(luma, w, h, x + 0.5 * ux, y + 0.5 * uy) - Bilinear(luma, w, h, x - 0.5 * ux, y - 0.5 * uy));
+      if (g_here < g_fwd || g_here < g_back) continue;
+      std::vector<double> profile;
+      for (int s = -kHalf; s <= kHalf; ++s) profile.push_back(Bilinear(luma, w, h, x + s * ux, y + s * uy));
+      if (const auto rise = RiseOfProfile(profile)) widths.push_back(*rise);
+    }
+  std::sort(widths.begin(), widths.end());
+  return widths;
+}
+
+CameraLook EstimateCameraLook(const ImageU8& image, std::optional<int> jpeg_quality, const ImageF* objects) {
+  CameraLook look;
+  for (int c = 0; c < std::min(3, image.channels()); ++c) FitChannel(image, c, &look.noise);
+  const std::vector<double> widths = EdgeRiseWidths(image);
+  look.edges = static_cast<int>(widths.size());
+  if (widths.size() >= 50) look.edge_width_px = widths[static_cast<size_t>(0.2 * static_cast<double>(widths.size()))];
+  if (objects) {
+    const std::vector<double> on_objects = EdgeRiseWidths(image, nullptr, objects);
+    look.object_edges = static_cast<int>(on_objects.size());
+    if (on_objects.size() >= 30) look.object_edge_rise_px = on_objects[on_objects.size() / 2];
+  }
+  look.jpeg_quality = jpeg_quality.value_or(0);
+  return look;
+}
+
+nlohmann::json CameraLook::ToJson() const {
+  nlohmann::json j;
+  j["noise_variance_a"] = noise.a;
+  j["noise_variance_b"] = noise.b;
+  j["noise_blocks"] = noise.blocks;
+  j["noise_sigma_at_128"] = {noise.Sigma(0, 128), noise.Sigma(1, 128), noise.Sigma(2, 128)};
+  j["edge_rise_px"] = edge_width_px;
+  j["edges"] = edges;
+  j["object_edge_rise_px"] = object_edge_rise_px;
+  j["object_edges"] = object_edges;
+  j["jpeg_quality"] = jpeg_quality;
+  return j;
+}
+
+std::string CameraLook::Summary() const {
+  Msg m;
+  m << "noise sigma at 128: " << Fixed(noise.Sigma(0, 128), 2) << "/" << Fixed(noise.Sigma(1, 128), 2) << "/"
+    << Fixed(noise.Sigma(2, 128), 2) << " (" << noise.blocks << " flat blocks), edge rise "
+    << (edge_width_px > 0 ? Fixed(edge_width_px, 2) + " px" : std::string("unknown")) << " (" << edges << " edges), on real objects "
+    << (object_edge_rise_px > 0 ? Fixed(object_edge_rise_px, 2) + " px" : std::string("unknown")) << " (" << object_edges << " edges), JPEG "
+    << (jpeg_quality > 0 ? "quality " + std::to_string(jpeg_quality) : std::string("none"));
+  return m;
+}
+
+double ExtraBlurSigma(double from_px, double to_px) {
+  if (to_px <= from_px || to_px <= 0) return 0;
+  const double s_to = to_px / kRisePerSigma, s_from = from_px / kRisePerSigma;
+  return std::sqrt(s_to * s_to - s_from * s_from);
+}
+
+void GaussianBlurRegion(ImageF* image, double sigma, int x0, int y0, int x1, int y1) {
+  if (sigma < 0.05) return;
+  const int w = image->width(), h = image->height(), ch = image->channels();
+  x0 = std::max(0, x0), y0 = std::max(0, y0), x1 = std::min(w, x1), y1 = std::min(h, y1);
+  if (x1 <= x0 || y1 <= y0) return;
+  const int r = std::max(1, static_cast<int>(std::ceil(3 * sigma)));
+  std::vector<double> k(static_cast<size_t>(2 * r + 1));
+  double sum = 0;
+  for (int i = -r; i <= r; ++i) sum += k[static_cast<size_t>(i + r)] = std::exp(-0.5 * i * i / (sigma * sigma));
+  for (double& v : k) v /= sum;
+  // Horizontal pass over rows y0..y1 (plus r rows either side, which the vertical pass reads), then vertical.
+  const int ry0 = std::max(0, y0 - r), ry1 = std::min(h, y1 + r);
+  ImageF tmp(w, h, ch, 0.0f);
+  for (int y = ry0; y < ry1; ++y)
+    for (int x = x0; x < x1; ++x)
+      for (int c = 0; c < ch; ++c) {
+        double acc = 0;
+        for (int i = -r; i <= r; ++i) acc += k[static_cast<size_t>(i + r)] * image->at(std::clamp(x + i, 0, w - 1), y, c);
+        tmp.at(x, y, c) = static_cast<float>(acc);
+      }
+  // Rows outside [y0, y1) but within reach keep their own values outside [x0, x1): read those from the image.
+  for (int y = y0; y < y1; ++y)
+    for (int x = x0; x < x1; ++x)
+      for (int c = 0; c < ch; ++c) {
+        double acc = 0;
+        for (int i = -r; i <= r; ++i) {
+          const int yy = std::clamp(y + i, 0, h - 1);
+          acc += k[static_cast<size_t>(i + r)] * (yy >= ry0 && yy < ry1 ? tmp.at(x, yy, c) : image->at(x, yy, c));
+        }
+        image->at(x, y, c) = static_cast<float>(acc);
+      }
+}
+
+void ApplySensorToInserts(ImageU8* image, const ImageF& alpha, int x0, int y0, int x1, int y1, const CameraLook& look,
+                          const CameraLookOptions& options, uint64_t seed) {
+  const int w = image->width(), h = image->height();
+  x0 = std::max(0, x0), y0 = std::max(0, y0), x1 = std::min(w, x1), y1 = std::min(h, y1);
+  if (x1 <= x0 || y1 <= y0) return;
+  const ImageU8 before = *image;
+  const bool jpeg = options.jpeg && look.jpeg_quality > 0;
+  if (options.noise && look.noise.blocks > 0) {
+    // Noise added before the compression is partly removed by it, as the camera's was: add what measures as the
+    // image's noise after it.
+    const double gain = jpeg ? PreCompressionGain(look.jpeg_quality, look.noise.Sigma(1, 128)) : 1.0;
+    std::mt19937_64 rng(seed);
+    std::normal_distribution<double> unit(0.0, 1.0);
+    for (int y = y0; y < y1; ++y)
+      for (int x = x0; x < x1; ++x) {
+        const float a = alpha.at(x, y);
+        if (a <= 0) continue;
+        for (int c = 0; c < std::min(3, image->channels()); ++c) {
+          const double v = image->at(x, y, c);
+          const double n = unit(rng) * look.noise.Sigma(c, v) * gain;
+          image->at(x, y, c) = static_cast<uint8_t>(std::clamp(std::lround(v + a * n), 0L, 255L));
+        }
+      }
+  }
+  if (jpeg) {
+    // On the image's own 8x8 grid (16 x 16 with chroma subsampling), so the blocks fall where the camera's did.
+    const int bx0 = (x0 / 16) * 16, by0 = (y0 / 16) * 16;
+    const int bx1 = std::min(w, ((x1 + 15) / 16) * 16), by1 = std::min(h, ((y1 + 15) / 16) * 16);
+    ImageU8 crop(bx1 - bx0, by1 - by0, 3);
+    for (int y = by0; y < by1; ++y)
+      for (int x = bx0; x < bx1; ++x)
+        for (int c = 0; c < 3; ++c) crop.at(x - bx0, y - by0, c) = image->at(x, y, c);
+    const ImageU8 round_trip = DecodeImage(EncodeImage(crop, "jpg", look.jpeg_quality), "inserted pixels", 3);
+    for (int y = y0; y < y1; ++y)
+      for (int x = x0; x < x1; ++x) {
+        const float a = alpha.at(x, y);
+        if (a <= 0) continue;
+        for (int c = 0; c < 3; ++c) {
+          const double v = a * round_trip.at(x - bx0, y - by0, c) + (1 - a) * before.at(x, y, c);
+          image->at(x, y, c) = static_cast<uint8_t>(std::clamp(std::lround(v), 0L, 255L));
+        }
+      }
+  }
+}
+
+}  // namespace sd

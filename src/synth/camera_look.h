@@ -1,0 +1,83 @@
+#pragma once
+// The camera's own look, estimated from each real image and given to the pixels synth inserts into it
+// (docs/camera_look.md): its noise, its blur and its JPEG compression. A render is noiseless, sharp to the pixel
+// and uncompressed; a photograph is none of these, and a detector learns the difference before the object.
+//
+// Everything is measured on the image as it is stored (after the camera's own processing and compression), in
+// 8-bit sRGB units, and applied so that the inserted pixels measure the same after the same steps.
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "core/image.h"
+
+namespace sd {
+
+// Signal-dependent noise per channel: variance a + b v at 8-bit sRGB value v, as the image's flat regions show
+// it. The residual is the 3x3 Laplacian's response inside each 8x8 block of the JPEG grid (never across a block
+// edge, where compression leaves a step), normalised to a pixel's standard deviation under white noise; per
+// intensity bin the 20th percentile of the blocks is taken, so texture does not count as noise.
+struct NoiseModel {
+  std::array<double, 3> a{}, b{};
+  int blocks = 0;  // flat blocks the fit rests on (0: no estimate)
+  double Sigma(int channel, double value) const;
+};
+
+// The residual noise sigma (8-bit units) of one 8x8-grid block's channel: the estimator the model is fitted with,
+// exposed so a measurement can compare inserted pixels with real ones.
+double BlockNoiseSigma(const ImageU8& image, int bx, int by, int channel);
+
+struct CameraLook {
+  NoiseModel noise;
+  // The 10-90 % rise of the image's sharpest edges (20th percentile of the strong step edges found), pixels;
+  // 0 when too few edges were found to say.
+  double edge_width_px = 0;
+  int edges = 0;
+  // The median rise of the edges inside the image's real objects (their projected boxes), when they show at least
+  // 30: what an object in this image looks like, softened by its distance, motion and the optics. 0: unknown.
+  double object_edge_rise_px = 0;
+  int object_edges = 0;
+  // The rise inserted objects are blurred to: the real objects' where known, else the image's sharpest edges.
+  double TargetEdgeRise() const { return object_edge_rise_px > 0 ? object_edge_rise_px : edge_width_px; }
+  // The file's JPEG quality (io/image_io.h EstimateJpegQuality); 0 when it is not a JPEG.
+  int jpeg_quality = 0;
+
+  nlohmann::json ToJson() const;
+  std::string Summary() const;
+};
+
+// `jpeg_quality`: of the file the image was read from, when it is a JPEG. `objects`: where the image's real
+// objects are (> 0.5), for object_edge_rise_px; null: not known.
+CameraLook EstimateCameraLook(const ImageU8& image, std::optional<int> jpeg_quality, const ImageF* objects = nullptr);
+
+// The 10-90 % edge rise of `image` (one channel, luma of sRGB) at its strong step edges: all widths found, sorted.
+// Restricted to `region` (x0, y0, x1, y1) when given, and to pixels where `mask` (same size) is > 0.5 when given.
+std::vector<double> EdgeRiseWidths(const ImageU8& image, const std::array<int, 4>* region = nullptr,
+                                   const ImageF* mask = nullptr);
+
+// Which of the camera's traits synth gives the inserted pixels (SynthOptions::camera_look).
+struct CameraLookOptions {
+  bool blur = true;   // the rendered layer blurred to the image's edge rise
+  bool noise = true;  // the image's noise added to the inserted pixels, before the compression
+  bool jpeg = true;   // the inserted pixels through the image's own JPEG quality, on its 8x8 grid
+};
+
+// The Gaussian sigma (pixels) that brings an edge of rise `from_px` to `to_px` (a Gaussian's 10-90 % rise is
+// 2.563 sigma; blurs add in quadrature); 0 when it is already as soft.
+double ExtraBlurSigma(double from_px, double to_px);
+
+// Blurs `image` (any channel count) inside [x0, x1) x [y0, y1) by a separable Gaussian of `sigma`, reading
+// clamped pixels outside it.
+void GaussianBlurRegion(ImageF* image, double sigma, int x0, int y0, int x1, int y1);
+
+// The sensor's last steps on the inserted pixels of a final sRGB image: noise of `look` (scaled by each pixel's
+// alpha), then a round trip through JPEG at the image's quality over the 8x8-aligned rectangle around them,
+// blended back by alpha. `alpha` (one channel, image size) says how much of each pixel was inserted; the
+// rectangle [x0, x1) x [y0, y1) bounds it. `seed`: the noise stream (FrameSeeds::sensor).
+void ApplySensorToInserts(ImageU8* image, const ImageF& alpha, int x0, int y0, int x1, int y1, const CameraLook& look,
+                          const CameraLookOptions& options, uint64_t seed);
+
+}  // namespace sd

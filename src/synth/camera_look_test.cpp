@@ -1,0 +1,147 @@
+#include "synth/camera_look.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include "io/files.h"
+#include "io/image_io.h"
+#include "testing/testing.h"
+
+namespace sd {
+namespace {
+namespace fs = std::filesystem;
+
+uint8_t Clamp8(double v) { return static_cast<uint8_t>(std::clamp(std::lround(v), 0L, 255L)); }
+
+// A smooth horizontal ramp 30..220 with Gaussian noise of variance a + b v per pixel: what a camera's flat
+// regions look like before compression.
+ImageU8 NoisyRamp(int w, int h, double a, double b, uint64_t seed) {
+  ImageU8 im(w, h, 3);
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> unit(0.0, 1.0);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const double v = 30 + 190.0 * x / (w - 1);
+      for (int c = 0; c < 3; ++c) im.at(x, y, c) = Clamp8(v + unit(rng) * std::sqrt(a + b * v));
+    }
+  return im;
+}
+
+// Vertical step edges 60 -> 200 every 40 px, blurred by a Gaussian of `sigma`, on an otherwise flat image.
+ImageU8 BlurredSteps(int w, int h, double sigma) {
+  ImageU8 im(w, h, 3);
+  for (int x = 0; x < w; ++x) {
+    const double phase = std::fmod(x + 0.5, 40.0);
+    // Distance to the step at phase 20, as a signed coordinate; the erf profile is the blurred step.
+    const double d = phase - 20;
+    const double v = 60 + 140 * 0.5 * (1 + std::erf(d / (std::sqrt(2.0) * sigma)));
+    for (int y = 0; y < h; ++y)
+      for (int c = 0; c < 3; ++c) im.at(x, y, c) = Clamp8(v);
+  }
+  return im;
+}
+
+TEST(CameraLook, RecoversSignalDependentNoiseFromFlatRegions) {
+  const double a = 1.0, b = 0.02;  // sigma 1.0 at black, 1.9 at 128, 2.4 at 220
+  const CameraLook look = EstimateCameraLook(NoisyRamp(640, 480, a, b, 7), std::nullopt);
+  ASSERT_GT(look.noise.blocks, 1000);
+  for (int c = 0; c < 3; ++c) {
+    // The 20th percentile of the blocks' sigma sits a little below the true one; the fit follows the slope.
+    EXPECT_NEAR(look.noise.Sigma(c, 128), std::sqrt(a + b * 128), 0.25) << c;
+    EXPECT_GT(look.noise.Sigma(c, 220), look.noise.Sigma(c, 50)) << c;
+  }
+  EXPECT_EQ(look.jpeg_quality, 0);
+}
+
+TEST(CameraLook, MeasuresTheEdgeRiseOfBlurredSteps) {
+  for (double sigma : {0.8, 1.5, 2.5}) {
+    const std::vector<double> widths = EdgeRiseWidths(BlurredSteps(400, 120, sigma));
+    ASSERT_GT(widths.size(), 50u) << sigma;
+    const double median = widths[widths.size() / 2];
+    EXPECT_NEAR(median, 2.563 * sigma, 0.2 + 0.08 * 2.563 * sigma) << sigma;
+  }
+}
+
+TEST(CameraLook, ExtraBlurAddsInQuadratureAndABlurredStepRisesAsAsked) {
+  EXPECT_DOUBLE_EQ(ExtraBlurSigma(3.0, 2.0), 0.0);  // already softer
+  EXPECT_NEAR(ExtraBlurSigma(0.0, 2.563), 1.0, 1e-3);
+  const double s = ExtraBlurSigma(1.0, 3.0);
+  EXPECT_NEAR(std::hypot(1.0 / 2.5631, s), 3.0 / 2.5631, 1e-9);
+  // A sharp step blurred to a rise of 3 px measures 3 px.
+  ImageF step(200, 60, 1, 0.0f);
+  for (int y = 0; y < 60; ++y)
+    for (int x = 0; x < 200; ++x) step.at(x, y) = std::fmod(x, 40.0) < 20 ? 60.0f : 200.0f;
+  GaussianBlurRegion(&step, ExtraBlurSigma(0.0, 3.0), 0, 0, 200, 60);
+  ImageU8 u8(200, 60, 3);
+  for (int y = 0; y < 60; ++y)
+    for (int x = 0; x < 200; ++x)
+      for (int c = 0; c < 3; ++c) u8.at(x, y, c) = Clamp8(step.at(x, y));
+  const std::vector<double> widths = EdgeRiseWidths(u8);
+  ASSERT_FALSE(widths.empty());
+  EXPECT_NEAR(widths[widths.size() / 2], 3.0, 0.35);
+}
+
+// A camera image (noisy, then JPEG at 85) and a noiseless flat patch pasted into it: after the sensor's steps
+// the patch's noise measures like the image's own flat regions, pixels outside the patch are untouched, and the
+// patch's 8x8 blocks carry the image's compression.
+TEST(CameraLook, InsertedPixelsGetTheImagesNoiseThroughItsCompression) {
+  const ImageU8 raw = NoisyRamp(320, 240, 2.0, 0.03, 11);
+  const std::string jpeg = EncodeImage(raw, "jpg", 85);
+  const ImageU8 photo = DecodeImage(jpeg, "photo", 3);
+  const CameraLook look = EstimateCameraLook(photo, EstimateJpegQuality(jpeg));
+  ASSERT_EQ(look.jpeg_quality, 85);
+  ASSERT_GT(look.noise.blocks, 100);
+
+  ImageU8 composite = photo;
+  ImageF alpha(320, 240, 1, 0.0f);
+  for (int y = 64; y < 160; ++y)
+    for (int x = 96; x < 224; ++x) {
+      const double v = 30 + 190.0 * x / 319;  // the ramp, without noise
+      for (int c = 0; c < 3; ++c) composite.at(x, y, c) = Clamp8(v);
+      alpha.at(x, y) = 1;
+    }
+  ImageU8 out = composite;
+  ApplySensorToInserts(&out, alpha, 96, 64, 224, 160, look, CameraLookOptions{}, 3);
+  for (int y = 0; y < 240; ++y)
+    for (int x = 0; x < 320; ++x)
+      if (alpha.at(x, y) == 0) {
+        for (int c = 0; c < 3; ++c) ASSERT_EQ(out.at(x, y, c), composite.at(x, y, c)) << x << "," << y;
+      }
+  // Noise of the patch's blocks against the photo's blocks over the same columns (same levels).
+  auto sigma_over = [](const ImageU8& im, int by0, int by1) {
+    std::vector<double> s;
+    for (int by = by0; by < by1; ++by)
+      for (int bx = 96 / 8; bx < 224 / 8; ++bx) s.push_back(BlockNoiseSigma(im, bx, by, 1));
+    std::sort(s.begin(), s.end());
+    return s[s.size() / 2];
+  };
+  const double real = sigma_over(photo, 64 / 8, 160 / 8), inserted = sigma_over(out, 64 / 8, 160 / 8);
+  const double bare = sigma_over(composite, 64 / 8, 160 / 8);
+  EXPECT_LT(bare, 0.2 * real);  // the pasted patch had no noise
+  EXPECT_GT(inserted / real, 0.7) << inserted << " vs " << real;
+  EXPECT_LT(inserted / real, 1.4) << inserted << " vs " << real;
+  // Off: nothing changes.
+  ImageU8 untouched = composite;
+  ApplySensorToInserts(&untouched, alpha, 96, 64, 224, 160, look, CameraLookOptions{false, false, false}, 3);
+  EXPECT_EQ(untouched.vector(), composite.vector());
+}
+
+TEST(CameraLook, TheRepoKeyframeIsAQuality80JpegWithSoftEdges) {
+  const fs::path file = testing::RepoData(
+      "driving/nuscenes-scene0061-kf0/samples/CAM_FRONT/n015-2018-07-24-11-22-45+0800__CAM_FRONT__1532402927612460.jpg");
+  const CameraLook look = EstimateCameraLook(ReadImage(file, 3), EstimateJpegQuality(ReadFileToString(file)));
+  EXPECT_EQ(look.jpeg_quality, 80);
+  // Its sharpest edges rise over 2-4 px (a 1600 px wide automotive camera behind a windscreen, JPEG 80); a render's
+  // anti-aliased edge rises over about 1 px.
+  EXPECT_GT(look.edge_width_px, 2.0);
+  EXPECT_LT(look.edge_width_px, 4.0);
+  EXPECT_GT(look.edges, 500);
+  const nlohmann::json j = look.ToJson();
+  EXPECT_EQ(j["jpeg_quality"], 80);
+  EXPECT_TRUE(j.contains("noise_variance_a"));
+}
+
+}  // namespace
+}  // namespace sd

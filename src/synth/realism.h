@@ -1,0 +1,47 @@
+#pragma once
+// How an inserted object measures against the real objects of the same image: the statistics a detector could
+// tell them apart by. Each object, real or inserted, is measured the same way over its projected 3D box (the
+// near-plane-clipped outline of geometry/box_projection) in the final image:
+//  - noise: the 20th percentile, over the 8x8 JPEG-grid blocks inside the outline, of each block's residual
+//    sigma (synth/camera_look.h BlockNoiseSigma, green) over the image's own noise model at the block's level;
+//    1 is the image's flat-region noise, more is grain or texture;
+//  - edge rise: the median 10-90 % rise of the strong step edges inside the outline (EdgeRiseWidths);
+//  - saturation: the mean HSV saturation of the outline's pixels.
+#include <string>
+#include <vector>
+
+#include "core/box3.h"
+#include "core/image.h"
+#include "datasets/log.h"
+#include "synth/camera_look.h"
+
+namespace sd {
+
+struct ObjectLook {
+  std::string category;
+  bool inserted = false;
+  double noise_ratio = 0;  // NaN-free: 0 with no block inside the outline (noise_blocks 0)
+  int noise_blocks = 0;
+  double edge_rise_px = 0;  // 0 with no edge found (edges 0)
+  int edges = 0;
+  double saturation = 0;
+  int pixels = 0;  // inside the outline and the image
+};
+
+// Measures `box_ego` (ego frame) in `image` of `camera`, against the image's `look` (its noise model).
+ObjectLook MeasureObjectLook(const ImageU8& image, const CameraSensor& camera, const Box3& box_ego, const CameraLook& look);
+
+// The projected outlines of `boxes_ego` in `camera`'s image as a mask (1 inside), skipping outlines of fewer
+// than `min_pixels` pixels inside the image: where the real objects of an image are.
+ImageF ObjectOutlinesMask(const CameraSensor& camera, const std::vector<Box3>& boxes_ego, int min_pixels);
+
+// Mean and spread of a statistic over objects, for the ratio inserted / real.
+struct LookComparison {
+  int real = 0, inserted = 0;
+  double real_noise = 0, inserted_noise = 0;            // medians over objects with noise blocks
+  double real_edge_rise = 0, inserted_edge_rise = 0;    // medians over objects with edges
+  double real_saturation = 0, inserted_saturation = 0;  // medians
+};
+LookComparison CompareLooks(const std::vector<ObjectLook>& objects);
+
+}  // namespace sd

@@ -254,6 +254,12 @@ expect_error "bank add: malformed gate" "--gate 'watertight=1'" "" -- "$BIN" -q 
 # shard logs its frames; a bad --shard and a merge with a missing part are refused, creating nothing.
 SY=(--log "$DATA/driving/kitti-object" --asset "$T/cone" --scenario "$T/one_cone.json" --spp 1 --ao-samples 2)
 synth "${SY[@]}" --out "$T/k_plain" && [ ! -e "$T/k_plain.parts" ] && ok || bad "synth kitti plain run"
+# eval realism on that output: the inserted cone measured against the frames' real objects; a folder that is no
+# synth output is refused in one line, writing nothing.
+"$BIN" -q eval realism --synth "$T/k_plain" --out "$T/k_realism.json" > "$T/realism.txt" \
+  && grep -q '"inserted_objects"' "$T/k_realism.json" && grep -q "^traffic_cone" "$T/realism.txt" \
+  && [ "$(grep -o '"inserted": true' "$T/k_realism.json" | wc -l)" -ge 1 ] && ok || bad "eval realism on a synth output"
+expect_error "eval realism: not a synth output" "no synth.json" "$T/nr.json" -- "$BIN" -q eval realism --synth "$T/cone" --out "$T/nr.json"
 synth "${SY[@]}" --out "$T/k_sh" --shard 0/2 && synth "${SY[@]}" --out "$T/k_sh" --shard 0/2 \
   && [ "$(grep -c '"status":"skipped"' "$T/k_sh.parts/log-0-of-2.jsonl")" -eq 2 ] \
   && ok || bad "synth shard rerun skips its finished frames"

@@ -1,5 +1,6 @@
 // `synthdrive eval <what>`: quality figures against ground truth. `geometry` compares two meshes' shapes,
-// `texture` their appearance at held-out views.
+// `texture` their appearance at held-out views, `realism` a synth output's inserted objects with the real objects
+// of the same images.
 #include <cstdio>
 #include <filesystem>
 
@@ -13,6 +14,7 @@
 #include "geometry/metrics.h"
 #include "io/files.h"
 #include "io/json.h"
+#include "synth/realism.h"
 
 namespace sd::cli {
 
@@ -50,7 +52,46 @@ Runner AddEvalCommand(CLI::App& app) {
   tex->add_option("--size", t->size, "Image size of the held-out views")->default_val(320)->check(CLI::Range(32, 4096));
   tex->add_flag("--overwrite", t->overwrite, "Replace an existing metrics file");
 
-  return [a, t, tex]() {
+  struct RealismArgs {
+    std::string synth, out;
+    bool overwrite = false;
+  };
+  auto rz = std::make_shared<RealismArgs>();
+  CLI::App* realism = app.add_subcommand(
+      "realism", "Inserted objects against the real objects of the same images: noise, edge rise, saturation (synth/realism.h)");
+  realism->add_option("--synth", rz->synth, "A `synthdrive synth` output folder (its synth.json names the original log)")->required();
+  realism->add_option("--out", rz->out, "Figures JSON to write (default: <synth>.realism.json beside the folder)");
+  realism->add_flag("--overwrite", rz->overwrite, "Replace an existing figures file");
+
+  return [a, t, tex, rz, realism]() {
+    if (realism->parsed()) {
+      std::filesystem::path dir = std::filesystem::absolute(rz->synth).lexically_normal();
+      if (dir.filename().empty()) dir = dir.parent_path();
+      std::filesystem::path out = rz->out.empty() ? dir.parent_path() / (dir.filename().string() + ".realism.json")
+                                                  : std::filesystem::path(rz->out);
+      RefuseOutputOverInputs(out, {dir});
+      RefuseExisting(out, rz->overwrite);
+      const RealismReport report = EvaluateRealism(dir);
+      std::printf("%-14s %5s %5s | %-22s | %-22s | %-22s\n", "category", "real", "ins", "noise real/ins (ratio)",
+                  "edge rise px (ratio)", "saturation (ratio)");
+      auto cell = [](double real, double ins) {
+        char buf[64];
+        if (real > 0 && ins > 0) std::snprintf(buf, sizeof buf, "%5.2f/%5.2f (%4.2f)", real, ins, ins / real);
+        else std::snprintf(buf, sizeof buf, "%5.2f/%5.2f (  - )", real, ins);
+        return std::string(buf);
+      };
+      for (const RealismSummary& s : report.summaries) {
+        const LookComparison& c = s.comparison;
+        std::printf("%-14s %5d %5d | %-22s | %-22s | %-22s\n", s.category.empty() ? "all" : s.category.c_str(), c.real, c.inserted,
+                    cell(c.real_noise, c.inserted_noise).c_str(), cell(c.real_edge_rise, c.inserted_edge_rise).c_str(),
+                    cell(c.real_saturation, c.inserted_saturation).c_str());
+      }
+      nlohmann::json j = report.ToJson();
+      j["synth"] = dir.string();
+      WriteJsonFile(out, j);
+      SD_LOG(Info, "wrote " << out.string());
+      return 0;
+    }
     if (tex->parsed()) {
       std::filesystem::path out = t->out;
       if (out.empty()) out = std::filesystem::path(t->pred).replace_extension(".texture.json");

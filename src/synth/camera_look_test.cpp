@@ -7,6 +7,7 @@
 
 #include "io/files.h"
 #include "io/image_io.h"
+#include "synth/realism.h"
 #include "testing/testing.h"
 
 namespace sd {
@@ -141,6 +142,38 @@ TEST(CameraLook, TheRepoKeyframeIsAQuality80JpegWithSoftEdges) {
   const nlohmann::json j = look.ToJson();
   EXPECT_EQ(j["jpeg_quality"], 80);
   EXPECT_TRUE(j.contains("noise_variance_a"));
+}
+
+// synth/realism.h measures an object over its projected box: on a noisy photograph its noise is the image's own
+// (ratio about 1); a noiseless orange patch pasted over the same box measures no noise and a high saturation.
+TEST(Realism, AnObjectsNoiseAndSaturationOverItsProjectedBox) {
+  CameraSensor cam;
+  cam.channel = "CAM";
+  cam.intrinsics.width = 640, cam.intrinsics.height = 480;
+  cam.intrinsics.fx = cam.intrinsics.fy = 500, cam.intrinsics.cx = 320, cam.intrinsics.cy = 240;
+  // Camera looking along ego +x: camera z = ego x, camera x = -ego y, camera y = -ego z.
+  Eigen::Matrix3d R;
+  R << 0, 0, 1, -1, 0, 0, 0, -1, 0;
+  cam.T_ego_cam = Rigid3d(R, Eigen::Vector3d::Zero());
+  Box3 box;
+  box.T_frame_box.translation = Eigen::Vector3d(10, 0, 0);
+  box.size = Eigen::Vector3d(1, 2, 2);  // about 100 x 100 px
+  const ImageU8 photo = NoisyRamp(640, 480, 2.0, 0.02, 5);
+  const CameraLook look = EstimateCameraLook(photo, std::nullopt);
+  const ObjectLook real = MeasureObjectLook(photo, cam, box, look);
+  EXPECT_GT(real.pixels, 80 * 80);
+  EXPECT_GT(real.noise_blocks, 50);
+  EXPECT_NEAR(real.noise_ratio, 1.0, 0.25);
+  EXPECT_LT(real.saturation, 0.1);
+  ImageU8 pasted = photo;
+  for (int y = 140; y < 340; ++y)
+    for (int x = 220; x < 420; ++x) pasted.at(x, y, 0) = 230, pasted.at(x, y, 1) = 90, pasted.at(x, y, 2) = 20;
+  const ObjectLook fake = MeasureObjectLook(pasted, cam, box, look);
+  EXPECT_LT(fake.noise_ratio, 0.2);
+  EXPECT_GT(fake.saturation, 0.8);
+  // Behind the camera: nothing to measure.
+  box.T_frame_box.translation = Eigen::Vector3d(-10, 0, 0);
+  EXPECT_EQ(MeasureObjectLook(photo, cam, box, look).pixels, 0);
 }
 
 }  // namespace

@@ -2,14 +2,22 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 
+#include "core/error.h"
+#include "datasets/categories.h"
+#include "datasets/readers.h"
 #include "geometry/box_projection.h"
 #include "geometry/polygon.h"
+#include "io/image_io.h"
+#include "io/json.h"
 
 namespace sd {
 namespace {
 
 constexpr double kNearM = 0.5;
+// Real objects worth measuring: a projected box of at least 24 x 12 pixels.
+constexpr int kMinRealPixels = 24 * 12;
 
 double Median(std::vector<double> v) {
   if (v.empty()) return 0;
@@ -104,6 +112,111 @@ LookComparison CompareLooks(const std::vector<ObjectLook>& objects) {
   c.real_edge_rise = Median(edges[0]), c.inserted_edge_rise = Median(edges[1]);
   c.real_saturation = Median(saturation[0]), c.inserted_saturation = Median(saturation[1]);
   return c;
+}
+
+namespace {
+
+nlohmann::json ComparisonJson(const LookComparison& c) {
+  auto ratio = [](double ins, double real) { return real > 0 && ins > 0 ? nlohmann::json(ins / real) : nlohmann::json(nullptr); };
+  return {{"real_objects", c.real},
+          {"inserted_objects", c.inserted},
+          {"noise", {{"real", c.real_noise}, {"inserted", c.inserted_noise}, {"ratio", ratio(c.inserted_noise, c.real_noise)}}},
+          {"edge_rise_px",
+           {{"real", c.real_edge_rise}, {"inserted", c.inserted_edge_rise}, {"ratio", ratio(c.inserted_edge_rise, c.real_edge_rise)}}},
+          {"saturation",
+           {{"real", c.real_saturation}, {"inserted", c.inserted_saturation}, {"ratio", ratio(c.inserted_saturation, c.real_saturation)}}}};
+}
+
+}  // namespace
+
+nlohmann::json RealismReport::ToJson() const {
+  nlohmann::json j;
+  j["protocol"] = "synth/realism.h: over each object's projected 3D box in the output image; noise = 20th percentile of "
+                  "its 8x8 blocks' residual sigma over the original image's noise model; edge rise = median 10-90 % rise "
+                  "of its step edges; saturation = mean HSV saturation";
+  j["summaries"] = nlohmann::json::array();
+  for (const RealismSummary& s : summaries) {
+    nlohmann::json c = ComparisonJson(s.comparison);
+    c["category"] = s.category.empty() ? nlohmann::json("all") : nlohmann::json(s.category);
+    j["summaries"].push_back(c);
+  }
+  j["objects"] = nlohmann::json::array();
+  for (const RealismRow& r : rows)
+    j["objects"].push_back({{"frame", r.frame},
+                            {"camera", r.channel},
+                            {"category", r.look.category},
+                            {"inserted", r.look.inserted},
+                            {"noise", r.look.noise_blocks > 0 ? nlohmann::json(r.look.noise_ratio) : nlohmann::json(nullptr)},
+                            {"noise_blocks", r.look.noise_blocks},
+                            {"edge_rise_px", r.look.edges > 0 ? nlohmann::json(r.look.edge_rise_px) : nlohmann::json(nullptr)},
+                            {"edges", r.look.edges},
+                            {"saturation", r.look.saturation},
+                            {"pixels", r.look.pixels}});
+  return j;
+}
+
+RealismReport EvaluateRealism(const std::filesystem::path& synth_out) {
+  namespace fs = std::filesystem;
+  const fs::path synth_json = synth_out / "synth.json";
+  if (!fs::is_regular_file(synth_json))
+    throw InputError(synth_out, "no synth.json: not the output of `synthdrive synth`");
+  const nlohmann::json j = ReadJsonFile(synth_json);
+  const JsonReader r(j, synth_json);
+  const fs::path log_path = r["log"].String();
+  if (!fs::exists(log_path)) r["log"].Fail("the original log " + log_path.string() + " is gone: its real objects and images are needed");
+  const Log log = OpenLog(log_path);
+  RealismReport report;
+  std::map<std::string, std::vector<ObjectLook>> by_category;
+  std::vector<ObjectLook> all;
+  for (size_t f = 0; f < r["frames"].Size(); ++f) {
+    const JsonReader rf = r["frames"][f];
+    const std::string token = rf["token"].String();
+    const Frame* frame = nullptr;
+    for (const Frame& fr : log.frames)
+      if (fr.token == token) frame = &fr;
+    if (!frame) rf["token"].Fail("the original log has no such frame");
+    std::vector<std::pair<std::string, Box3>> inserted;
+    for (size_t k = 0; k < rf["objects"].Size(); ++k) {
+      const JsonReader o = rf["objects"][k];
+      Box3 b;
+      b.T_frame_box = Rigid3d(Eigen::Quaterniond(Eigen::AngleAxisd(o["yaw_ego_rad"].Number(), Eigen::Vector3d::UnitZ())),
+                              Eigen::Vector3d(o["center_ego_m"][0].Number(), o["center_ego_m"][1].Number(), o["center_ego_m"][2].Number()));
+      b.size = Eigen::Vector3d(o["size_m"][0].Number(), o["size_m"][1].Number(), o["size_m"][2].Number());
+      inserted.push_back({o["category"].String(), b});
+    }
+    for (const auto& [channel, light] : rf["camera_light"].raw().items()) {
+      const CameraSensor* cam = frame->FindCamera(channel);
+      if (!cam) rf["camera_light"].Fail("the original log's frame has no camera " + channel);
+      const fs::path rel = cam->image_path.lexically_relative(log.data_root);
+      const fs::path output_image = synth_out / rel;
+      if (rel.empty() || *rel.begin() == "..") throw InputError(cam->image_path, "lies outside the log's data root");
+      const ImageU8 after = ReadImage(output_image, 3);
+      const CameraLook look = EstimateCameraLook(ReadImage(cam->image_path, 3), std::nullopt);
+      auto add = [&](ObjectLook o) {
+        report.rows.push_back({token, channel, o});
+        all.push_back(o);
+        by_category[o.category].push_back(o);
+      };
+      for (const Annotation& a : frame->annotations) {
+        ObjectLook o = MeasureObjectLook(after, *cam, a.box, look);
+        const auto cat = FindCategory(a.category);
+        o.category = cat ? cat->name : a.category;
+        if (o.pixels >= kMinRealPixels) add(o);
+      }
+      for (const auto& [category, box] : inserted) {
+        ObjectLook o = MeasureObjectLook(after, *cam, box, look);
+        o.category = category;
+        o.inserted = true;
+        if (o.pixels > 0) add(o);
+      }
+    }
+  }
+  report.summaries.push_back({"", CompareLooks(all)});
+  for (const auto& [category, objects] : by_category) {
+    const LookComparison c = CompareLooks(objects);
+    if (c.inserted > 0) report.summaries.push_back({category, c});
+  }
+  return report;
 }
 
 }  // namespace sd

@@ -7,8 +7,11 @@
 //    1 is the image's flat-region noise, more is grain or texture;
 //  - edge rise: the median 10-90 % rise of the strong step edges inside the outline (EdgeRiseWidths);
 //  - saturation: the mean HSV saturation of the outline's pixels.
+#include <filesystem>
 #include <string>
 #include <vector>
+
+#include <nlohmann/json.hpp>
 
 #include "core/box3.h"
 #include "core/image.h"
@@ -43,5 +46,24 @@ struct LookComparison {
   double real_saturation = 0, inserted_saturation = 0;  // medians
 };
 LookComparison CompareLooks(const std::vector<ObjectLook>& objects);
+
+// `synthdrive eval realism`: every frame and camera of a synth output, its inserted objects (synth.json) and the
+// real annotated objects of the original log (synth.json "log") measured in the output images, the noise model
+// from the original image. InputError naming the file for a folder without synth.json, an original log that is
+// gone, or an output image that is missing.
+struct RealismRow {
+  std::string frame, channel;
+  ObjectLook look;
+};
+struct RealismSummary {
+  std::string category;  // "" = all objects
+  LookComparison comparison;
+};
+struct RealismReport {
+  std::vector<RealismRow> rows;
+  std::vector<RealismSummary> summaries;  // all objects first, then per category with inserted objects
+  nlohmann::json ToJson() const;
+};
+RealismReport EvaluateRealism(const std::filesystem::path& synth_out);
 
 }  // namespace sd

@@ -4,7 +4,9 @@
 // bird's-eye view of the LiDAR (real points grey by height, points on inserted objects red, real boxes
 // blue, inserted boxes red), and at the end a card per inserted asset (synth/report_assets.h: its real
 // views, turntable, 3D view, quality figures and stages, linked both ways with the frames and cameras that show
-// it). Images are written as JPEG / PNG files beside the HTML under report/.
+// it), and per camera each inserted object at full resolution (before and after, zoomed 3x) with its figures against
+// the real objects of the same image (synth/realism.h). Images are written as JPEG / PNG files beside the HTML
+// under report/.
 #include <filesystem>
 #include <vector>
 

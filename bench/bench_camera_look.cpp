@@ -5,6 +5,7 @@
 // saturation. Prints a table per log and writes bench/results/camera_look.json. A plain program.
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -29,13 +30,36 @@ bool Measurable(const sd::ObjectLook& o) { return o.pixels >= 24 * 12; }
 struct Run {
   std::string log, mode;
   std::vector<sd::ObjectLook> objects;
+  std::vector<double> shadow_grain;  // per shadowed road block: its residual sigma after / before
   double seconds = 0;
 };
+
+// The grain the inserted shadows add to the road: over the 8x8 blocks that the insertion changed entirely and that
+// lie outside every inserted object's outline (shadow on real road), the block's residual sigma after over before
+// (green). A clean shadow scales the road's own grain by its shade (< 1); sampling noise raises it.
+void ShadowGrain(const sd::CameraOutcome& co, const sd::CameraSensor& cam, const std::vector<sd::Box3>& inserted,
+                 std::vector<double>* out) {
+  const sd::ImageF objects = sd::ObjectOutlinesMask(cam, inserted, 0);
+  for (int by = 0; by + 1 < co.after.height() / 8; ++by)
+    for (int bx = 0; bx + 1 < co.after.width() / 8; ++bx) {
+      int changed = 0;
+      bool on_object = false;
+      for (int y = by * 8; y < by * 8 + 8; ++y)
+        for (int x = bx * 8; x < bx * 8 + 8; ++x) {
+          on_object = on_object || objects.at(x, y) > 0;
+          changed += co.after.at(x, y, 1) != co.before.at(x, y, 1) ? 1 : 0;
+        }
+      if (on_object || changed < 60) continue;
+      const double before = sd::BlockNoiseSigma(co.before, bx, by, 1);
+      if (before < 0.3) continue;  // a block the camera's JPEG flattened: no grain to compare with
+      out->push_back(sd::BlockNoiseSigma(co.after, bx, by, 1) / before);
+    }
+}
 
 Run Measure(const std::string& name, const sd::Log& log, const std::vector<size_t>& frames, const std::vector<sd::Asset>& assets,
             const sd::Scenario& scenario, const sd::SynthPlan* plan, const sd::CameraLookOptions& look_options,
             const std::string& mode) {
-  Run run{name, mode, {}, 0};
+  Run run{name, mode, {}, {}, 0};
   sd::SynthOptions options;
   options.camera_look = look_options;
   for (size_t fi : frames) {
@@ -58,6 +82,9 @@ Run Measure(const std::string& name, const sd::Log& log, const std::vector<size_
         o.category = a.category;
         if (Measurable(o)) run.objects.push_back(o);
       }
+      std::vector<sd::Box3> inserted_boxes;
+      for (const sd::ObjectOutcome& ob : out.objects) inserted_boxes.push_back(ob.placement.box);
+      ShadowGrain(co, *cam, inserted_boxes, &run.shadow_grain);
       for (int k : co.objects) {
         sd::ObjectLook o = sd::MeasureObjectLook(co.after, *cam, out.objects[static_cast<size_t>(k)].placement.box, look);
         o.category = out.objects[static_cast<size_t>(k)].label.category;
@@ -71,11 +98,14 @@ Run Measure(const std::string& name, const sd::Log& log, const std::vector<size_
 
 nlohmann::json Row(const Run& r) {
   const sd::LookComparison c = sd::CompareLooks(r.objects);
-  std::printf("| %-22s | %-15s | %3d | %3d | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %6.1f |\n", r.log.c_str(),
+  std::vector<double> grain = r.shadow_grain;
+  std::sort(grain.begin(), grain.end());
+  const double grain_median = grain.empty() ? 0.0 : grain[grain.size() / 2];
+  std::printf("| %-22s | %-15s | %3d | %3d | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f (%zu) | %6.1f |\n", r.log.c_str(),
               r.mode.c_str(), c.real, c.inserted, c.real_noise, c.inserted_noise,
               c.real_noise > 0 ? c.inserted_noise / c.real_noise : 0.0, c.real_edge_rise, c.inserted_edge_rise,
               c.real_edge_rise > 0 ? c.inserted_edge_rise / c.real_edge_rise : 0.0, c.real_saturation, c.inserted_saturation,
-              r.seconds);
+              grain_median, grain.size(), r.seconds);
   return {{"log", r.log},
           {"mode", r.mode},
           {"real_objects", c.real},
@@ -83,6 +113,7 @@ nlohmann::json Row(const Run& r) {
           {"noise", {{"real", c.real_noise}, {"inserted", c.inserted_noise}}},
           {"edge_rise_px", {{"real", c.real_edge_rise}, {"inserted", c.inserted_edge_rise}}},
           {"saturation", {{"real", c.real_saturation}, {"inserted", c.inserted_saturation}}},
+          {"shadow_grain", {{"median", grain_median}, {"blocks", grain.size()}}},
           {"seconds", r.seconds}};
 }
 
@@ -100,8 +131,8 @@ int main() {
   for (const sd::bench::DemoMesh& m : sd::bench::DemoMeshes())
     assets.push_back(sd::bench::ImportDemoAsset(data, m, tmp / "assets" / m.id));
   const sd::CameraLookOptions off{false, false, false}, on{};
-  std::printf("| log | camera look | real | ins | noise real | noise ins | ratio | rise real px | rise ins px | ratio | sat real | sat ins | s |\n");
-  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+  std::printf("| log | camera look | real | ins | noise real | noise ins | ratio | rise real px | rise ins px | ratio | sat real | sat ins | shadow grain (blocks) | s |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   nlohmann::json rows = nlohmann::json::array();
 
   {

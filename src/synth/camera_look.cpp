@@ -271,8 +271,8 @@ void GaussianBlurRegion(ImageF* image, double sigma, int x0, int y0, int x1, int
       }
 }
 
-void ApplySensorToInserts(ImageU8* image, const ImageF& alpha, int x0, int y0, int x1, int y1, const CameraLook& look,
-                          const CameraLookOptions& options, uint64_t seed) {
+void ApplySensorToInserts(ImageU8* image, const ImageF& alpha, const ImageF* shadow_noise, int x0, int y0, int x1, int y1,
+                          const CameraLook& look, const CameraLookOptions& options, uint64_t seed) {
   const int w = image->width(), h = image->height();
   x0 = std::max(0, x0), y0 = std::max(0, y0), x1 = std::min(w, x1), y1 = std::min(h, y1);
   if (x1 <= x0 || y1 <= y0) return;
@@ -311,6 +311,19 @@ void ApplySensorToInserts(ImageU8* image, const ImageF& alpha, int x0, int y0, i
         for (int c = 0; c < 3; ++c) {
           const double v = a * round_trip.at(x - bx0, y - by0, c) + (1 - a) * before.at(x, y, c);
           image->at(x, y, c) = static_cast<uint8_t>(std::clamp(std::lround(v), 0L, 255L));
+        }
+      }
+  }
+  if (options.noise && shadow_noise && look.noise.blocks > 0) {
+    std::mt19937_64 rng(seed ^ 0x5DEECE66Dull);
+    std::normal_distribution<double> unit(0.0, 1.0);
+    for (int y = y0; y < y1; ++y)
+      for (int x = x0; x < x1; ++x) {
+        const float w = shadow_noise->at(x, y);
+        if (w <= 0) continue;
+        for (int c = 0; c < std::min(3, image->channels()); ++c) {
+          const double v = image->at(x, y, c);
+          image->at(x, y, c) = static_cast<uint8_t>(std::clamp(std::lround(v + w * unit(rng) * look.noise.Sigma(c, v)), 0L, 255L));
         }
       }
   }

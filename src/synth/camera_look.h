@@ -76,8 +76,10 @@ void GaussianBlurRegion(ImageF* image, double sigma, int x0, int y0, int x1, int
 // The sensor's last steps on the inserted pixels of a final sRGB image: noise of `look` (scaled by each pixel's
 // alpha), then a round trip through JPEG at the image's quality over the 8x8-aligned rectangle around them,
 // blended back by alpha. `alpha` (one channel, image size) says how much of each pixel was inserted; the
-// rectangle [x0, x1) x [y0, y1) bounds it. `seed`: the noise stream (FrameSeeds::sensor).
-void ApplySensorToInserts(ImageU8* image, const ImageF& alpha, int x0, int y0, int x1, int y1, const CameraLook& look,
-                          const CameraLookOptions& options, uint64_t seed);
+// rectangle [x0, x1) x [y0, y1) bounds it. `shadow_noise` (optional, same size): real pixels an inserted shadow
+// darkened lost that share of their noise (sqrt(1 - shade^2)); it is given back, after the compression (their
+// own is in the image already). `seed`: the noise stream (FrameSeeds::sensor).
+void ApplySensorToInserts(ImageU8* image, const ImageF& alpha, const ImageF* shadow_noise, int x0, int y0, int x1, int y1,
+                          const CameraLook& look, const CameraLookOptions& options, uint64_t seed);
 
 }  // namespace sd

@@ -104,7 +104,7 @@ TEST(CameraLook, InsertedPixelsGetTheImagesNoiseThroughItsCompression) {
       alpha.at(x, y) = 1;
     }
   ImageU8 out = composite;
-  ApplySensorToInserts(&out, alpha, 96, 64, 224, 160, look, CameraLookOptions{}, 3);
+  ApplySensorToInserts(&out, alpha, nullptr, 96, 64, 224, 160, look, CameraLookOptions{}, 3);
   for (int y = 0; y < 240; ++y)
     for (int x = 0; x < 320; ++x)
       if (alpha.at(x, y) == 0) {
@@ -125,7 +125,7 @@ TEST(CameraLook, InsertedPixelsGetTheImagesNoiseThroughItsCompression) {
   EXPECT_LT(inserted / real, 1.4) << inserted << " vs " << real;
   // Off: nothing changes.
   ImageU8 untouched = composite;
-  ApplySensorToInserts(&untouched, alpha, 96, 64, 224, 160, look, CameraLookOptions{false, false, false}, 3);
+  ApplySensorToInserts(&untouched, alpha, nullptr, 96, 64, 224, 160, look, CameraLookOptions{false, false, false}, 3);
   EXPECT_EQ(untouched.vector(), composite.vector());
 }
 

@@ -24,8 +24,12 @@ namespace {
 // guide radius (2) beyond an object's box.
 constexpr int kDepthMargin = 8;
 
-// Shadow rays over the sun's disk per road pixel: soft edges without visible noise at 4 samples per pixel.
+// Shadow rays over the sun's disk per road pixel: soft edges, but grainy (bench_camera_look: the shadowed road's
+// residual 2.8-7.6x its own) until the camera look blurs the shade (kShadeBlurSigma).
 constexpr int kShadowSunRays = 8;
+
+// The least blur of the shade map when the camera look blurs (pixels).
+constexpr double kShadeBlurSigma = 1.5;
 
 // The pixel rectangle a camera redraws: [x0, x1) x [y0, y1).
 struct Rect {
@@ -149,13 +153,14 @@ OcclusionMasks OccludeByScene(const CameraStageInput& st, const CameraSensor& ca
 }
 
 // The composite in linear light: objects over the photo; what their shadows take from it is kept apart, to be
-// applied after harmonisation. The visible layer (colour and coverage, both times visibility) is blurred by
-// `blur_sigma` first, so the objects' edges rise as the photograph's do (synth/camera_look.h). Counts each
+// applied after harmonisation. The visible layer (colour and coverage, both times visibility) and the shade are
+// blurred by `blur_sigma` first, so the objects' edges rise as the photograph's do (synth/camera_look.h). Counts each
 // object's rendered and visible pixels and its visible box from the sharp render, so labels do not move.
 struct Composite {
   bool changed = false;
   ImageF object_alpha;      // coverage x visibility, blurred as composited
   ImageF shadow_only_loss;  // what the shadows take from the photo
+  ImageF shadow_noise;      // the share of a darkened real pixel's noise its shadow took: sqrt(1 - shade^2)
   std::vector<double> rendered, visible;
   std::vector<Box2> boxes;
 };
@@ -164,6 +169,7 @@ Composite CompositeObjects(const ObjectRender& r, const OcclusionMasks& occ, siz
   Composite c;
   c.object_alpha = ImageF(linear->width(), linear->height(), 1, 0.0f);
   c.shadow_only_loss = ImageF(linear->width(), linear->height(), 3, 0.0f);
+  c.shadow_noise = ImageF(linear->width(), linear->height(), 1, 0.0f);
   c.rendered.assign(n_objects, 0);
   c.visible.assign(n_objects, 0);
   c.boxes.assign(n_objects, Box2{1e9, 1e9, -1e9, -1e9});
@@ -188,21 +194,31 @@ Composite CompositeObjects(const ObjectRender& r, const OcclusionMasks& occ, siz
         }
       }
     }
+  // The shade on the real road the camera sees, blurred alike: the camera's optics soften shadow edges too, and
+  // the blur takes the sampling grain of the soft-shadow rays with it.
+  ImageF shade(rect.x1 - rect.x0, rect.y1 - rect.y0, 1, 1.0f);
+  for (int y = rect.y0; y < rect.y1; ++y)
+    for (int x = rect.x0; x < rect.x1; ++x)
+      if (occ.receiver.at(x, y) > 0.5f) shade.at(x - rect.x0, y - rect.y0) = r.shadow.at(x, y);
   GaussianBlurRegion(&layer, blur_sigma, 0, 0, layer.width(), layer.height());
+  // A shade map is smooth but for its penumbra: at least kShadeBlurSigma takes the grain of the 8 sun rays and
+  // the sky rays out of it wherever the look blurs at all.
+  GaussianBlurRegion(&shade, blur_sigma > 0 ? std::max(blur_sigma, kShadeBlurSigma) : 0.0, 0, 0, shade.width(), shade.height());
   for (int y = rect.y0; y < rect.y1; ++y)
     for (int x = rect.x0; x < rect.x1; ++x) {
       const float* l = layer.pixel(x - rect.x0, y - rect.y0);
       const float av = l[3];
-      const float shade = occ.receiver.at(x, y) > 0.5f ? r.shadow.at(x, y) : 1.0f;
+      const float shade_here = std::min(1.0f, shade.at(x - rect.x0, y - rect.y0));
       // A camera whose objects are all hidden still counts as drawn (changed): its image is written, unchanged.
-      if (av <= 0 && r.render.coverage.at(x, y) <= 0 && shade >= 1.0f) continue;
+      if (av <= 0 && r.render.coverage.at(x, y) <= 0 && shade_here >= 1.0f) continue;
       c.object_alpha.at(x, y) = av;
       float* px = linear->pixel(x, y);
       for (int ch = 0; ch < 3; ++ch) {
-        c.shadow_only_loss.at(x, y, ch) = px[ch] * (1 - av) * (1 - shade);
+        c.shadow_only_loss.at(x, y, ch) = px[ch] * (1 - av) * (1 - shade_here);
         px[ch] = l[ch] + px[ch] * (1 - av);  // shadows are taken away below
       }
       c.changed = true;
+      if (shade_here < 1.0f) c.shadow_noise.at(x, y) = (1 - av) * std::sqrt(std::max(0.0f, 1 - shade_here * shade_here));
     }
   return c;
 }
@@ -313,7 +329,8 @@ std::optional<CameraOutcome> SynthesizeCamera(const CameraStageInput& st, size_t
   co.after = ToSrgb8(linear);
   // The sensor's last steps, on the inserted pixels only: its noise, then its compression.
   const uint64_t sensor_seed = st.in->seeds.sensor ^ (0x9E3779B97F4A7C15ull * (cam_index + 1));
-  ApplySensorToInserts(&co.after, c.object_alpha, rect.x0, rect.y0, rect.x1, rect.y1, look, look_options, sensor_seed);
+  ApplySensorToInserts(&co.after, c.object_alpha, &c.shadow_noise, rect.x0, rect.y0, rect.x1, rect.y1, look, look_options,
+                       sensor_seed);
   co.light = DescribeCameraLight(cl, c, *st.light) + harmonized;
   if (any_look) {
     co.look = look.ToJson();

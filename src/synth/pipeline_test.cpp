@@ -151,7 +151,8 @@ TEST(FrameSeeds, DependOnTheScenarioSeedAndTheFrameAlone) {
   EXPECT_GE(render.size(), 52u);  // seed + frame: neighbouring scenario seeds overlap (kept: every recorded figure was made with it)
 }
 
-// The camera's look (synth/camera_look.h) changes the inserted pixels and their blurred rim only, never the labels,
+// The camera's look (synth/camera_look.h) changes the inserted pixels, their shadows and their blurred rims only,
+// never the labels,
 // and is recorded per camera: the keyframe is a JPEG of quality 80.
 TEST_F(PipelineTest, TheCameraLookTouchesTheInsertsOnlyAndIsRecorded) {
   ASSERT_EQ(outcome_->cameras.size(), no_look_->cameras.size());
@@ -188,7 +189,14 @@ TEST_F(PipelineTest, TheCameraLookTouchesTheInsertsOnlyAndIsRecorded) {
         ++changed;
         bool near = false;
         for (const Box2& b : boxes) near = near || (x >= b.x1 - 8 && x < b.x2 + 8 && y >= b.y1 - 8 && y < b.y2 + 8);
-        ASSERT_TRUE(near) << on.channel << " pixel " << x << "," << y << " changed away from every object";
+        // Or at the objects' shadows, which the look blurs too: within 8 px of a pixel the bare composite darkened.
+        for (int dy = -8; dy <= 8 && !near; ++dy)
+          for (int dx = -8; dx <= 8 && !near; ++dx) {
+            const int xx = x + dx, yy = y + dy;
+            if (xx < 0 || yy < 0 || xx >= off.after.width() || yy >= off.after.height()) continue;
+            for (int ch = 0; ch < 3; ++ch) near = near || off.after.at(xx, yy, ch) != off.before.at(xx, yy, ch);
+          }
+        ASSERT_TRUE(near) << on.channel << " pixel " << x << "," << y << " changed away from every object and shadow";
       }
     if (!on.objects.empty()) {  // a camera with only shadows of objects keeps them as they were
       EXPECT_GT(changed, 100u) << on.channel;

@@ -50,7 +50,7 @@ FrameInputs ReadFrameInputs(const Log& log, size_t frame_index, const Scenario& 
     in.real_boxes.push_back(a.box);
     in.annotated.push_back({a.category, a.box});
   }
-  out->ground = EstimateFrameGround(frame, in.points_ego, scenario);
+  out->ground = EstimateFrameGround(frame, out->sweep_before, in.points_ego, scenario);
   in.ground = &out->ground;
   in.is_ground.assign(in.points_ego.size(), 0);
   for (int i : out->ground.ground_indices()) in.is_ground[i] = 1;
@@ -401,13 +401,20 @@ std::vector<Eigen::Vector3d> PointsInEgo(const Frame& frame, const PointCloud& s
   return points_ego;
 }
 
-GroundModel EstimateFrameGround(const Frame& frame, const std::vector<Eigen::Vector3d>& points_ego, const Scenario& scenario) {
+GroundModel EstimateFrameGround(const Frame& frame, const PointCloud& sweep, const std::vector<Eigen::Vector3d>& points_ego,
+                                const Scenario& scenario) {
   std::vector<Box3> real_boxes;
   for (const auto& a : frame.annotations) real_boxes.push_back(a.box);
   GroundOptions gopt;
   gopt.seed = scenario.seed;
   gopt.sensor_xy = frame.lidar->T_ego_lidar.translation.head<2>();
-  return GroundModel::Estimate(points_ego, real_boxes, gopt);
+  std::vector<uint8_t> other_sensor;
+  const int sensor = frame.lidar->sensor_feature.empty() ? -1 : sweep.FeatureIndex(frame.lidar->sensor_feature);
+  if (sensor >= 0) {
+    other_sensor.resize(sweep.size());
+    for (size_t i = 0; i < sweep.size(); ++i) other_sensor[i] = std::lround(sweep.feature(i, sensor)) != 0;
+  }
+  return GroundModel::Estimate(points_ego, real_boxes, gopt, other_sensor);
 }
 
 FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vector<Asset>& assets,

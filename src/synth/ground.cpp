@@ -41,6 +41,87 @@ GroundPlane FitPlane(const std::vector<Eigen::Vector3d>& pts, const std::vector<
 
 double Distance(const GroundPlane& p, const Eigen::Vector3d& x) { return p.normal.dot(x) + p.d; }
 
+// One return of a free-space sector: its range from the sensor and its height above the seed plane.
+struct SectorReturn {
+  float range, height;
+  bool ground;
+};
+
+// The road profile of a sector so far: the height that the accepted returns of the last `window` metres predict
+// at `range`, a least-squares line whose grade is shrunk towards the seed plane's by a prior of `prior_span`
+// metres (returns spanning less than that fix a grade poorly, and extrapolating a noisy grade over the next ring
+// gap would invent kerbs) and bounded by `max_grade`.
+double PredictRoadHeight(const std::vector<SectorReturn>& accepted, double range, double window, double max_grade) {
+  constexpr double kPriorSpan = 1.0;
+  const double from = accepted.back().range - window;
+  double n = 0, sr = 0, sh = 0;
+  for (auto it = accepted.rbegin(); it != accepted.rend() && it->range >= from; ++it) {
+    n += 1;
+    sr += it->range;
+    sh += it->height;
+  }
+  const double mr = sr / n, mh = sh / n;
+  double srr = 0, srh = 0;
+  for (auto it = accepted.rbegin(); it != accepted.rend() && it->range >= from; ++it) {
+    srr += (it->range - mr) * (it->range - mr);
+    srh += (it->range - mr) * (it->height - mh);
+  }
+  const double grade = std::clamp(srh / (srr + n * kPriorSpan * kPriorSpan / 12.0), -max_grade, max_grade);
+  return mh + grade * (range - mr);
+}
+
+// The free range of one sector (ground.h, step 4), its returns sorted by range. Before a return joins the road,
+// the returns from it to `kerb_lookahead` metres beyond (at most 9: three rings of a spinning LiDAR) are compared
+// with the road profile: when their median departs by more than a kerb (`kerb_step`) and by more than a change of
+// grade of `max_bend` since the last road return could explain, a kerb begins there and the road ends at the last
+// return accepted. The median is what makes a 4 cm kerb stand out of a centimetre of noise, of rings biased by
+// their calibration and of returns on the kerb's face; comparing with the profile of the last metres, not with
+// the previous return alone, is what catches a kerb seen across a ring gap, which return by return reads as a
+// gentle slope; the bend allowance is what lets a street tip over a crest. A return departing on its own (noise,
+// a pothole edge) is passed over without joining the profile.
+float WalkSector(const std::vector<SectorReturn>& v, const GroundOptions& o, double kerb_step,
+                 std::vector<float>* accepted_departures) {
+  constexpr size_t kMaxLookahead = 9;
+  std::vector<SectorReturn> accepted;
+  std::vector<double> departures, distances;
+  float free = 0;
+  for (size_t i = 0; i < v.size(); ++i) {
+    const SectorReturn& smp = v[i];
+    if (!smp.ground) break;
+    if (accepted.empty()) {
+      // The first return after the ego body: the road the ego stands on, near the seed plane (which a cambered
+      // road leaves by a few per cent).
+      if (std::abs(smp.height) > o.max_step + o.max_grade * smp.range) break;
+      accepted.push_back(smp);
+      free = smp.range;
+      continue;
+    }
+    const double last = accepted.back().range;
+    const auto departure = [&](const SectorReturn& r) {
+      return r.height - PredictRoadHeight(accepted, r.range, o.profile_window, o.max_grade);
+    };
+    const auto tolerance = [&](double distance) { return std::max(kerb_step, o.max_bend * distance); };
+    departures.clear();
+    distances.clear();
+    for (size_t j = i; j < v.size() && v[j].ground && v[j].range <= smp.range + o.kerb_lookahead &&
+                       departures.size() < kMaxLookahead; ++j) {
+      departures.push_back(departure(v[j]));
+      distances.push_back(v[j].range - last);
+    }
+    const size_t mid = departures.size() / 2;
+    std::nth_element(departures.begin(), departures.begin() + mid, departures.end());
+    std::nth_element(distances.begin(), distances.begin() + mid, distances.end());
+    if (std::abs(departures[mid]) > tolerance(distances[mid])) break;
+    const double own = departure(smp);
+    if (std::abs(own) <= tolerance(smp.range - last)) {
+      if (accepted_departures && accepted.size() >= 3) accepted_departures->push_back(static_cast<float>(std::abs(own)));
+      accepted.push_back(smp);
+      free = smp.range;
+    }
+  }
+  return free;
+}
+
 }  // namespace
 
 int GroundModel::CellIndex(double x, double y) const {
@@ -52,7 +133,9 @@ int GroundModel::CellIndex(double x, double y) const {
 }
 
 GroundModel GroundModel::Estimate(const std::vector<Eigen::Vector3d>& points_ego, const std::vector<Box3>& objects,
-                                  const GroundOptions& options) {
+                                  const GroundOptions& options, const std::vector<uint8_t>& other_sensor) {
+  SD_CHECK(other_sensor.empty() || other_sensor.size() == points_ego.size());
+  const auto own = [&](size_t i) { return other_sensor.empty() || other_sensor[i] == 0; };
   GroundModel g;
   g.options_ = options;
   g.n_ = 2 * static_cast<int>(std::ceil(options.max_range / options.cell));
@@ -62,7 +145,7 @@ GroundModel GroundModel::Estimate(const std::vector<Eigen::Vector3d>& points_ego
   candidates.reserve(points_ego.size());
   for (size_t i = 0; i < points_ego.size(); ++i) {
     const auto& p = points_ego[i];
-    if (p.head<2>().norm() > options.max_range || p.head<2>().norm() < 1.0) continue;
+    if (p.head<2>().norm() > options.max_range || p.head<2>().norm() < 1.0 || !own(i)) continue;
     bool inside = false;
     for (const auto& b : objects) {
       if ((b.center().head<2>() - p.head<2>()).norm() > 0.5 * b.size.norm() + 0.3) continue;
@@ -154,13 +237,12 @@ GroundModel GroundModel::Estimate(const std::vector<Eigen::Vector3d>& points_ego
   {
     std::vector<uint8_t> is_ground(points_ego.size(), 0);
     for (int i : g.ground_indices_) is_ground[i] = 1;
-    struct Sample { float range, height; bool ground; };
-    std::vector<std::vector<Sample>> sectors(options.sectors);
+    std::vector<std::vector<SectorReturn>> sectors(options.sectors);
     for (size_t i = 0; i < points_ego.size(); ++i) {
       const auto& p = points_ego[i];
       const Eigen::Vector2d d = p.head<2>() - options.sensor_xy;
       const double r = d.norm();
-      if (r < 1.0 || r > options.max_range) continue;
+      if (r < 1.0 || r > options.max_range || !own(i)) continue;
       // Returns from the ego vehicle's own body (and zero-range returns at the sensor) are not obstacles.
       if (p.x() > options.ego_body_min.x() && p.x() < options.ego_body_max.x() && p.y() > options.ego_body_min.y() &&
           p.y() < options.ego_body_max.y())
@@ -169,27 +251,28 @@ GroundModel GroundModel::Estimate(const std::vector<Eigen::Vector3d>& points_ego
       const bool ground = is_ground[i];
       if (!ground && (h < 0.25 || h > 3.0)) continue;  // neither road nor obstacle
       const int s = static_cast<int>((std::atan2(d.y(), d.x()) + M_PI) / (2 * M_PI) * options.sectors) % options.sectors;
-      sectors[s].push_back({static_cast<float>(r), static_cast<float>(p.z()), ground});
+      sectors[s].push_back({static_cast<float>(r), static_cast<float>(p.z() - g.seed_.HeightAt(p.x(), p.y())), ground});
     }
+    // The kerb threshold is the sensor's own: a LiDAR whose rings disagree by centimetres (KITTI's HDL-64)
+    // would find a kerb at every ring. A first walk measures how far accepted road returns depart from their
+    // profile (robust sigma); the threshold is 4 sigma when that exceeds `kerb_step`.
+    for (auto& v : sectors)
+      std::sort(v.begin(), v.end(), [](const SectorReturn& a, const SectorReturn& b) { return a.range < b.range; });
+    std::vector<float> departures;
+    for (const auto& v : sectors) WalkSector(v, options, options.kerb_step, &departures);
+    g.road_roughness_ = 0;
+    if (departures.size() >= 50) {
+      std::nth_element(departures.begin(), departures.begin() + departures.size() / 2, departures.end());
+      g.road_roughness_ = 1.4826 * departures[departures.size() / 2];
+    }
+    g.kerb_step_ = std::max(options.kerb_step, 4.0 * g.road_roughness_);
     g.free_range_.assign(options.sectors, 0.0f);
-    for (int s = 0; s < options.sectors; ++s) {
-      auto& v = sectors[s];
-      std::sort(v.begin(), v.end(), [](const Sample& a, const Sample& b) { return a.range < b.range; });
-      float free = 0, prev_r = 0;
-      float prev_h = static_cast<float>(g.seed_.HeightAt(options.sensor_xy.x(), options.sensor_xy.y()));
-      for (const auto& smp : v) {
-        if (!smp.ground) break;
-        if (std::abs(smp.height - prev_h) > options.max_step + options.max_slope * (smp.range - prev_r)) break;
-        free = smp.range;
-        prev_r = smp.range;
-        prev_h = smp.height;
-      }
-      g.free_range_[s] = free;
-    }
+    for (int s = 0; s < options.sectors; ++s) g.free_range_[s] = WalkSector(sectors[s], options, g.kerb_step_, nullptr);
   }
 
   SD_LOG(Debug, "ground: seed plane n=" << g.seed_.normal.transpose() << " d=" << g.seed_.d << ", "
-                                       << g.ground_points_.size() << " ground points");
+                                       << g.ground_points_.size() << " ground points, road roughness "
+                                       << g.road_roughness_ << " m, kerb step " << g.kerb_step_ << " m");
   return g;
 }
 

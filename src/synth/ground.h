@@ -9,12 +9,15 @@
 //     lowest point that lies near the seed plane; cells with too few points stay unobserved.
 //  4. Drivable area (free space): the plane is cut into thin azimuth sectors around the sensor. Walking
 //     outwards along each sector through the points in range order, the free range grows over ground
-//     returns while consecutive ground heights change by less than `max_step` + `max_slope` x distance
-//     (a kerb stops it) and ends at the first obstacle point (0.25..3 m above the ground, annotated or
-//     not) or at the last ground return. This bridges the wide gaps between LiDAR rings at range, where
-//     a cell grid sees only isolated rings.
+//     returns that stay within `kerb_step` (or `max_bend` x gap) of the road profile of the last
+//     `profile_window` metres (a line through the accepted returns, so grades and camber are followed).
+//     Where the median of the next returns (within `kerb_lookahead`) departs, a kerb begins and the walk
+//     ends (a lone departing return is noise and is passed over); so does the first obstacle point (0.25..3 m
+//     above the ground, annotated or not), or the last ground return. This bridges the wide gaps between
+//     LiDAR rings at range, where a cell grid sees only isolated rings.
 //  5. Local surface queries fit a plane to the ground points within `local_radius` (weighted least squares),
 //     so slopes and cambers are followed; far from any data they fall back to the seed plane.
+#include <cstdint>
 #include <optional>
 #include <vector>
 
@@ -32,8 +35,12 @@ struct GroundOptions {
   double seed_cell = 2.0;        // cell size for seed-plane candidates
   double inlier = 0.15;          // RANSAC inlier distance, metres
   double band = 0.08;            // points within this of a cell's lowest point count as its surface
-  double max_step = 0.08;        // height change between consecutive ground returns (kerbs are ~0.1-0.2 m)
-  double max_slope = 0.04;       // plus this much per metre between them (road grade)
+  double max_step = 0.08;        // the first return's height off the seed plane (+ max_grade x range)
+  double kerb_step = 0.025;      // a departure from the sector's road profile this high is a kerb (>= 4 cm kerbs)...
+  double max_bend = 0.04;        // ...unless a change of grade this steep since the last road return explains it
+  double max_grade = 0.08;       // the steepest grade (off the seed plane) the road profile follows
+  double profile_window = 3.0;   // metres of accepted returns the road profile is fitted to
+  double kerb_lookahead = 1.0;   // a kerb: the median of the returns this far ahead departs from the profile
   int sectors = 720;             // azimuth sectors of the free-space walk
   Eigen::Vector2d sensor_xy = Eigen::Vector2d::Zero();  // LiDAR position in the ego xy plane
   // Ego body footprint (ego frame, metres; nuScenes' Renault Zoe around its rear-axle origin): points on
@@ -53,8 +60,11 @@ struct GroundPlane {
 class GroundModel {
  public:
   // `points_ego`: the sweep in the ego frame. `objects`: annotated boxes (ego frame) whose points are not ground.
+  // `other_sensor` (empty, or one flag per point): points of a second LiDAR merged into the sweep (PandaSet's
+  // forward PandarGT), left out: the free-space walk follows rays from the sensor at `sensor_xy`, and two
+  // sensors' calibrations disagree by centimetres on the road (PandaSet: ~10 cm), more than a low kerb.
   static GroundModel Estimate(const std::vector<Eigen::Vector3d>& points_ego, const std::vector<Box3>& objects,
-                              const GroundOptions& options = {});
+                              const GroundOptions& options = {}, const std::vector<uint8_t>& other_sensor = {});
 
   const GroundPlane& seed_plane() const { return seed_; }
   // Local surface at (x, y): height and unit normal from the nearby ground points (see file comment).
@@ -68,6 +78,11 @@ class GroundModel {
   Surface SurfaceAt(double x, double y, double radius = 0) const;
   // Signed height of an ego-frame point above the local ground.
   double HeightAboveGround(const Eigen::Vector3d& p) const;
+
+  // How far the sweep's road returns scatter about their sector's profile (robust sigma, metres), and the
+  // kerb height the free-space walk used: `kerb_step`, or 4 sigma for a sensor noisier than that allows.
+  double road_roughness() const { return road_roughness_; }
+  double kerb_step() const { return kerb_step_; }
 
   bool IsObserved(double x, double y) const;  // the cell holds ground points
   bool IsDrivable(double x, double y) const;  // within the free range of its sector (see file comment)
@@ -86,6 +101,7 @@ class GroundModel {
   int n_ = 0;  // grid is n_ x n_ centred on the ego origin
   std::vector<float> height_;        // NaN where unobserved
   std::vector<float> free_range_;  // per azimuth sector, metres from sensor_xy
+  double road_roughness_ = 0, kerb_step_ = 0;
   std::vector<Eigen::Vector3d> ground_points_;
   std::vector<int> ground_indices_;
   std::vector<std::vector<int>> cell_points_;  // ground point indices per cell, for local fits

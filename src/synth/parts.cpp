@@ -278,7 +278,7 @@ FrameOutcome ReadPart(const fs::path& dir, size_t frame_index, const SynthInputs
   }
   if (for_report && frame.lidar) {
     o.sweep_before = ReadLidar(*frame.lidar);
-    o.ground = EstimateFrameGround(frame, PointsInEgo(frame, o.sweep_before), in.scenario);
+    o.ground = EstimateFrameGround(frame, o.sweep_before, PointsInEgo(frame, o.sweep_before), in.scenario);
   }
   return o;
 }

@@ -2,19 +2,22 @@
 // the repo's nuScenes keyframe and KITTI frames, and of PandaSet (../shared, a lane closure, world-fixed), with
 // the camera's look off and on (synth/camera_look.h), and measures every real annotated object and every
 // inserted one the same way (synth/realism.h): noise relative to the image's own model, 10-90 % edge rise,
-// saturation. Prints a table per log and writes bench/results/camera_look.json. A plain program.
+// saturation (and against real objects of the same category). Prints a table per log and writes
+// bench/results/camera_look.json. A plain program.
 #include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <map>
 #include <string>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
 #include "bench_demo.h"
+#include "datasets/categories.h"
 #include "io/files.h"
 #include "io/json.h"
 #include "synth/batch.h"
@@ -79,7 +82,7 @@ Run Measure(const std::string& name, const sd::Log& log, const std::vector<size_
       const sd::CameraLook look = sd::EstimateCameraLook(co.before, std::nullopt);  // its noise model
       for (const sd::Annotation& a : frame.annotations) {
         sd::ObjectLook o = sd::MeasureObjectLook(co.after, *cam, a.box, look);
-        o.category = a.category;
+        o.category = sd::CanonicalCategory(a.category);
         if (Measurable(o)) run.objects.push_back(o);
       }
       std::vector<sd::Box3> inserted_boxes;
@@ -87,7 +90,7 @@ Run Measure(const std::string& name, const sd::Log& log, const std::vector<size_
       ShadowGrain(co, *cam, inserted_boxes, &run.shadow_grain);
       for (int k : co.objects) {
         sd::ObjectLook o = sd::MeasureObjectLook(co.after, *cam, out.objects[static_cast<size_t>(k)].placement.box, look);
-        o.category = out.objects[static_cast<size_t>(k)].label.category;
+        o.category = sd::CanonicalCategory(out.objects[static_cast<size_t>(k)].label.category);
         o.inserted = true;
         if (o.pixels > 0) run.objects.push_back(o);
       }
@@ -96,12 +99,30 @@ Run Measure(const std::string& name, const sd::Log& log, const std::vector<size_
   return run;
 }
 
+// Saturation against the real objects of the same category (the target: within 1.3x), per category
+// with both real and inserted objects.
+nlohmann::json CategoryRows(const Run& r) {
+  std::map<std::string, std::vector<sd::ObjectLook>> by_category;
+  for (const sd::ObjectLook& o : r.objects) by_category[o.category].push_back(o);
+  nlohmann::json out = nlohmann::json::array();
+  for (const auto& [category, objects] : by_category) {
+    const sd::LookComparison c = sd::CompareLooks(objects);
+    if (c.real == 0 || c.inserted == 0) continue;
+    std::printf("| %-22s | %-22s | %-13s | %3d | %3d | %5.2f | %5.2f | **%4.2f** |\n", r.log.c_str(), r.mode.c_str(),
+                category.c_str(), c.real, c.inserted, c.real_saturation, c.inserted_saturation,
+                c.inserted_saturation / std::max(c.real_saturation, 1e-6));
+    out.push_back({{"log", r.log}, {"mode", r.mode}, {"category", category}, {"real_objects", c.real},
+                   {"inserted_objects", c.inserted}, {"saturation", {{"real", c.real_saturation}, {"inserted", c.inserted_saturation}}}});
+  }
+  return out;
+}
+
 nlohmann::json Row(const Run& r) {
   const sd::LookComparison c = sd::CompareLooks(r.objects);
   std::vector<double> grain = r.shadow_grain;
   std::sort(grain.begin(), grain.end());
   const double grain_median = grain.empty() ? 0.0 : grain[grain.size() / 2];
-  std::printf("| %-22s | %-15s | %3d | %3d | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f (%zu) | %6.1f |\n", r.log.c_str(),
+  std::printf("| %-22s | %-22s | %3d | %3d | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f (%zu) | %6.1f |\n", r.log.c_str(),
               r.mode.c_str(), c.real, c.inserted, c.real_noise, c.inserted_noise,
               c.real_noise > 0 ? c.inserted_noise / c.real_noise : 0.0, c.real_edge_rise, c.inserted_edge_rise,
               c.real_edge_rise > 0 ? c.inserted_edge_rise / c.real_edge_rise : 0.0, c.real_saturation, c.inserted_saturation,
@@ -130,16 +151,21 @@ int main() {
   std::vector<sd::Asset> assets;
   for (const sd::bench::DemoMesh& m : sd::bench::DemoMeshes())
     assets.push_back(sd::bench::ImportDemoAsset(data, m, tmp / "assets" / m.id));
-  const sd::CameraLookOptions off{false, false, false}, on{};
+  const sd::CameraLookOptions off{false, false, false, false}, on{};
   std::printf("| log | camera look | real | ins | noise real | noise ins | ratio | rise real px | rise ins px | ratio | sat real | sat ins | shadow grain (blocks) | s |\n");
   std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   nlohmann::json rows = nlohmann::json::array();
+  std::vector<Run> runs;
+  const auto row = [&](Run r) {
+    rows.push_back(Row(r));
+    runs.push_back(std::move(r));
+  };
 
   {
     const sd::Log log = sd::OpenLog(data / "driving/nuscenes-scene0061-kf0/mmdet3d_info/n015-2018-07-24-11-22-45+0800.json");
     const sd::Scenario scenario = sd::ReadScenario(data / "scenarios/demo.json");
-    for (const auto& [look, mode] : {std::pair{off, "off"}, std::pair{on, "blur+noise+jpeg"}})
-      rows.push_back(Row(Measure("nuScenes keyframe", log, {0}, assets, scenario, nullptr, look, mode)));
+    for (const auto& [look, mode] : {std::pair{off, "off"}, std::pair{on, "blur+noise+jpeg+colour"}})
+      row(Measure("nuScenes keyframe", log, {0}, assets, scenario, nullptr, look, mode));
   }
   {
     const sd::Log log = sd::OpenLog(data / "driving/kitti-object");
@@ -149,8 +175,8 @@ int main() {
     for (sd::ObjectRequest& r : scenario.objects) r.distance_min = 6, r.distance_max = 20, r.lateral_min = -4, r.lateral_max = 4;
     std::vector<size_t> frames;
     for (size_t i = 0; i < log.frames.size(); ++i) frames.push_back(i);
-    for (const auto& [look, mode] : {std::pair{off, "off"}, std::pair{on, "blur+noise+jpeg"}})
-      rows.push_back(Row(Measure("KITTI (3 frames)", log, frames, assets, scenario, nullptr, look, mode)));
+    for (const auto& [look, mode] : {std::pair{off, "off"}, std::pair{on, "blur+noise+jpeg+colour"}})
+      row(Measure("KITTI (3 frames)", log, frames, assets, scenario, nullptr, look, mode));
   }
   const fs::path seq = *root / ".." / "shared" / "data" / "driving" / "pandaset-002-f44-55";
   if (fs::is_directory(seq)) {
@@ -161,15 +187,19 @@ int main() {
     std::vector<size_t> all;
     for (size_t i = 0; i < log.frames.size(); ++i) all.push_back(i);
     const sd::SynthPlan plan = sd::PlanSynthesis(log, all, scenario, assets, scenario_file, true);
-    for (const auto& [look, mode] : {std::pair{off, "off"}, std::pair{on, "blur+noise+jpeg"}})
-      rows.push_back(Row(Measure("PandaSet 002 (4 frames)", log, frames, assets, scenario, &plan, look, mode)));
+    for (const auto& [look, mode] : {std::pair{off, "off"}, std::pair{on, "blur+noise+jpeg+colour"}})
+      row(Measure("PandaSet 002 (4 frames)", log, frames, assets, scenario, &plan, look, mode));
   } else {
     std::printf("(PandaSet: %s not present; skipped)\n", seq.string().c_str());
   }
+  std::printf("\n| log | camera look | category | real | ins | sat real | sat ins | ratio |\n|---|---|---|---|---|---|---|---|\n");
+  nlohmann::json categories = nlohmann::json::array();
+  for (const Run& r : runs)
+    for (const auto& c : CategoryRows(r)) categories.push_back(c);
   std::error_code ec;
   fs::remove_all(tmp, ec);
   const fs::path out = *root / "bench" / "results" / "camera_look.json";
-  sd::WriteJsonFile(out, {{"tool", "bench_camera_look"}, {"rows", rows}});
+  sd::WriteJsonFile(out, {{"tool", "bench_camera_look"}, {"rows", rows}, {"same_category", categories}});
   std::printf("-> %s\n", out.string().c_str());
   return 0;
 }

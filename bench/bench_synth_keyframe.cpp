@@ -115,7 +115,7 @@ void BM_SynthesizeKeyframeCameraLookOff(benchmark::State& state) {
   sd::SynthOptions options;
   options.samples_per_pixel = 4;
   options.ao_samples = 16;
-  options.camera_look = sd::CameraLookOptions{false, false, false};
+  options.camera_look = sd::CameraLookOptions{false, false, false, false};
   TimeSynthesis(state, in, in.scenario, options);
 }
 BENCHMARK(BM_SynthesizeKeyframeCameraLookOff)->Unit(benchmark::kMillisecond)->UseRealTime()->MeasureProcessCPUTime();

@@ -212,8 +212,7 @@ HarvestedObject HarvestObject(const Log& log, const HarvestTarget& target, const
   }
 
   HarvestedObject out;
-  const auto category = FindCategory(a0->category);
-  out.category = category ? category->name : a0->category;
+  out.category = CanonicalCategory(a0->category);
   out.dataset_category = a0->category;
   out.instance_token = a0->instance_token;
   out.frames = static_cast<int>(track.size());

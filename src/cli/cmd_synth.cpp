@@ -23,7 +23,7 @@ Runner AddSynthCommand(CLI::App& app) {
   auto no_lidar_realism = std::make_shared<bool>(false);
   auto light = std::make_shared<std::string>("environment");
   auto occlusion = std::make_shared<std::string>("dense");
-  auto camera_look = std::make_shared<std::string>("blur,noise,jpeg");
+  auto camera_look = std::make_shared<std::string>("blur,noise,jpeg,colour");
   app.add_option("--log", req->log, "Driving log: a dataset root (nuScenes tables, KITTI, a PandaSet sequence) or an info file (mmdet3d .pkl or .json)")
       ->required();
   app.add_option("--asset", req->assets,
@@ -68,20 +68,22 @@ Runner AddSynthCommand(CLI::App& app) {
                  "classical) or a TorchScript file (docs/models.md)");
   app.add_option("--camera-look", *camera_look,
                  "What of each camera's own look the inserted pixels get, estimated from its image (docs/camera_look.md): "
-                 "a comma list of blur (its edge rise), noise (its signal-dependent noise), jpeg (its JPEG quality), or none");
+                 "a comma list of blur (its edge rise), noise (its signal-dependent noise), jpeg (its JPEG quality), "
+                 "colour (no more saturated than its real objects of the category), or none");
   return [=]() {
     SynthRequest r = *req;
     r.options.lidar_realism = !*no_lidar_realism;
     r.options.light = *light == "road" ? SynthOptions::Light::kRoad : SynthOptions::Light::kEnvironment;
     r.options.dense_occlusion = *occlusion == "dense";
-    r.options.camera_look = CameraLookOptions{false, false, false};
+    r.options.camera_look = CameraLookOptions{false, false, false, false};
     if (*camera_look != "none") {
       std::stringstream words(*camera_look);
       for (std::string w; std::getline(words, w, ',');) {
         if (w == "blur") r.options.camera_look.blur = true;
         else if (w == "noise") r.options.camera_look.noise = true;
         else if (w == "jpeg") r.options.camera_look.jpeg = true;
-        else throw InputError({}, "--camera-look: unknown '" + w + "' (give blur, noise, jpeg as a comma list, or none)");
+        else if (w == "colour") r.options.camera_look.colour = true;
+        else throw InputError({}, "--camera-look: unknown '" + w + "' (give blur, noise, jpeg, colour as a comma list, or none)");
       }
     }
     if (!format->empty()) r.log_options.format = LogFormatFromOption(*format);

@@ -85,4 +85,9 @@ std::string DatasetCategoryName(const CategoryInfo& category, LogFormat format) 
   return FormatInfo(format).class_name(category);
 }
 
+std::string CanonicalCategory(const std::string& name) {
+  const auto category = FindCategory(name);
+  return category ? category->name : name;
+}
+
 }  // namespace sd

@@ -23,6 +23,8 @@ struct CategoryInfo {
 const std::vector<CategoryInfo>& Categories();
 // By canonical name or any dataset name (case-insensitive); empty when unknown.
 std::optional<CategoryInfo> FindCategory(const std::string& name);
+// The canonical name of `name` (FindCategory's), or `name` itself when no category knows it.
+std::string CanonicalCategory(const std::string& name);
 // The dataset's own class name for a canonical category.
 std::string DatasetCategoryName(const CategoryInfo& category, LogFormat format);
 

@@ -174,8 +174,7 @@ std::vector<ObjectCrop> CropCamera(const Frame& frame, const CameraSensor& cam_i
     const Annotation& a = frame.annotations[i];
     if (options.select && !options.select(a)) continue;
     if (!options.categories.empty()) {
-      const auto info = FindCategory(a.category);
-      const std::string name = info ? info->name : a.category;
+      const std::string name = CanonicalCategory(a.category);
       bool keep = false;
       for (const std::string& want : options.categories) {
         const auto w = FindCategory(want);
@@ -228,8 +227,7 @@ std::vector<ObjectCrop> CropCamera(const Frame& frame, const CameraSensor& cam_i
     MinedItem& item = crop.item;
     item.kind = SourceKind::kLog;
     item.origin = cam.image_path.string();
-    const auto info = FindCategory(a.category);
-    item.category = info ? info->name : a.category;
+    item.category = CanonicalCategory(a.category);
     item.dataset_category = a.category;
     item.frame_token = frame.token;
     item.camera = cam.channel;

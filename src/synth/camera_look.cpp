@@ -1,6 +1,7 @@
 #include "synth/camera_look.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <random>
 #include <vector>
@@ -327,6 +328,64 @@ void ApplySensorToInserts(ImageU8* image, const ImageF& alpha, const ImageF* sha
         }
       }
   }
+}
+
+
+SaturationCap CapSaturation(ImageF* linear, const ImageF& outline, const ImageF& weight, double ceiling, double min_scale) {
+  SD_CHECK(linear->channels() == 3 && outline.width() == linear->width() && outline.height() == linear->height() &&
+           weight.width() == linear->width() && weight.height() == linear->height());
+  // The outline's pixels, with the insert's share of each; only those change.
+  struct Pixel { int x, y; float w; };
+  std::vector<Pixel> pixels;
+  for (int y = 0; y < linear->height(); ++y)
+    for (int x = 0; x < linear->width(); ++x)
+      if (outline.at(x, y) > 0.5f) pixels.push_back({x, y, std::clamp(weight.at(x, y), 0.0f, 1.0f)});
+  SaturationCap cap;
+  cap.ceiling = ceiling;
+  if (pixels.empty()) return cap;
+  const auto saturation = [](std::array<double, 3> c) {
+    double mx = 0, mn = 1;
+    for (double v : c) {
+      const double e = LinearToSrgb(static_cast<float>(std::clamp(v, 0.0, 1.0)));
+      mx = std::max(mx, e);
+      mn = std::min(mn, e);
+    }
+    return mx > 0 ? (mx - mn) / mx : 0.0;
+  };
+  // The real pixels of the outline measure the same whatever k is: summed once.
+  double fixed = 0;
+  std::vector<Pixel> inserted;
+  for (const Pixel& p : pixels) {
+    if (p.w > 0) inserted.push_back(p);
+    else fixed += saturation({linear->at(p.x, p.y, 0), linear->at(p.x, p.y, 1), linear->at(p.x, p.y, 2)});
+  }
+  const auto saturation_at = [&](double k) {
+    double sum = fixed;
+    for (const Pixel& p : inserted) {
+      std::array<double, 3> c{linear->at(p.x, p.y, 0), linear->at(p.x, p.y, 1), linear->at(p.x, p.y, 2)};
+      const double luminance = 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
+      for (double& v : c) v += p.w * (luminance + k * (v - luminance) - v);
+      sum += saturation(c);
+    }
+    return sum / pixels.size();
+  };
+  cap.before = cap.after = saturation_at(1.0);
+  if (cap.before <= ceiling) return cap;
+  // The outline's saturation falls as k does; bisect for the ceiling.
+  double lo = min_scale, hi = 1.0;
+  if (saturation_at(lo) < ceiling)
+    for (int it = 0; it < 12; ++it) {  // k to 2e-4
+      const double mid = 0.5 * (lo + hi);
+      (saturation_at(mid) > ceiling ? hi : lo) = mid;
+    }
+  cap.scale = lo;
+  for (const Pixel& p : inserted) {
+    float* c = &linear->at(p.x, p.y, 0);
+    const float luminance = 0.2126f * c[0] + 0.7152f * c[1] + 0.0722f * c[2];
+    for (int ch = 0; ch < 3; ++ch) c[ch] += p.w * static_cast<float>(luminance + cap.scale * (c[ch] - luminance) - c[ch]);
+  }
+  cap.after = saturation_at(1.0);
+  return cap;
 }
 
 }  // namespace sd

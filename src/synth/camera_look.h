@@ -1,6 +1,6 @@
 #pragma once
 // The camera's own look, estimated from each real image and given to the pixels synth inserts into it
-// (docs/camera_look.md): its noise, its blur and its JPEG compression. A render is noiseless, sharp to the pixel
+// (docs/camera_look.md): its noise, its blur, its JPEG compression and its colour saturation. A render is noiseless, sharp to the pixel
 // and uncompressed; a photograph is none of these, and a detector learns the difference before the object.
 //
 // Everything is measured on the image as it is stored (after the camera's own processing and compression), in
@@ -60,9 +60,10 @@ std::vector<double> EdgeRiseWidths(const ImageU8& image, const std::array<int, 4
 
 // Which of the camera's traits synth gives the inserted pixels (SynthOptions::camera_look).
 struct CameraLookOptions {
-  bool blur = true;   // the rendered layer blurred to the image's edge rise
-  bool noise = true;  // the image's noise added to the inserted pixels, before the compression
-  bool jpeg = true;   // the inserted pixels through the image's own JPEG quality, on its 8x8 grid
+  bool blur = true;    // the rendered layer blurred to the image's edge rise
+  bool noise = true;   // the image's noise added to the inserted pixels, before the compression
+  bool jpeg = true;    // the inserted pixels through the image's own JPEG quality, on its 8x8 grid
+  bool colour = true;  // no insert more saturated than the image's real objects of its category (CapSaturation)
 };
 
 // The Gaussian sigma (pixels) that brings an edge of rise `from_px` to `to_px` (a Gaussian's 10-90 % rise is
@@ -72,6 +73,20 @@ double ExtraBlurSigma(double from_px, double to_px);
 // Blurs `image` (any channel count) inside [x0, x1) x [y0, y1) by a separable Gaussian of `sigma`, reading
 // clamped pixels outside it.
 void GaussianBlurRegion(ImageF* image, double sigma, int x0, int y0, int x1, int y1);
+
+// Colour: an asset's albedo is a new object's (a cone's pure orange); the camera's colour response, dirt and haze
+// leave the real ones of a log far less saturated (bench_camera_look: inserted cones 1.7-2.1x the real cones of
+// the same images). Saturation is measured as synth/realism.h measures an object: mean HSV saturation of the
+// sRGB-encoded pixels inside its projected box outline (`outline` > 0.5). When the insert measures above
+// `ceiling` (the most saturated real object of its category in the image), its own pixels (`weight`, 0..1: its
+// coverage) are moved towards their luminance in linear light, c' = Y + k (c - Y), by the k that brings the
+// outline's measure to the ceiling (k >= `min_scale`). `linear`: the composite, linear light, 3 channels.
+struct SaturationCap {
+  double before = 0, after = 0, ceiling = 0;
+  double scale = 1;  // the k applied; 1: untouched
+};
+SaturationCap CapSaturation(ImageF* linear, const ImageF& outline, const ImageF& weight, double ceiling,
+                            double min_scale = 0.2);
 
 // The sensor's last steps on the inserted pixels of a final sRGB image: noise of `look` (scaled by each pixel's
 // alpha), then a round trip through JPEG at the image's quality over the 8x8-aligned rectangle around them,

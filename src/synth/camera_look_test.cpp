@@ -125,7 +125,7 @@ TEST(CameraLook, InsertedPixelsGetTheImagesNoiseThroughItsCompression) {
   EXPECT_LT(inserted / real, 1.4) << inserted << " vs " << real;
   // Off: nothing changes.
   ImageU8 untouched = composite;
-  ApplySensorToInserts(&untouched, alpha, nullptr, 96, 64, 224, 160, look, CameraLookOptions{false, false, false}, 3);
+  ApplySensorToInserts(&untouched, alpha, nullptr, 96, 64, 224, 160, look, CameraLookOptions{false, false, false, false}, 3);
   EXPECT_EQ(untouched.vector(), composite.vector());
 }
 
@@ -174,6 +174,45 @@ TEST(Realism, AnObjectsNoiseAndSaturationOverItsProjectedBox) {
   // Behind the camera: nothing to measure.
   box.T_frame_box.translation = Eigen::Vector3d(-10, 0, 0);
   EXPECT_EQ(MeasureObjectLook(photo, cam, box, look).pixels, 0);
+}
+
+// The colour cap on orange, white and grey inserts over a grey road: the orange one is moved towards its luminance
+// until its outline measures the ceiling; white and grey ones, already below it, are untouched; so is every pixel
+// the insert does not cover.
+TEST(CameraLook, SaturationCapMovesOnlyTooColourfulInsertsToTheCeiling) {
+  const int w = 64, h = 48;
+  struct Case { std::array<float, 3> colour; bool capped; };
+  for (const Case c : {Case{{0.80f, 0.12f, 0.01f}, true}, Case{{0.85f, 0.85f, 0.85f}, false}, Case{{0.2f, 0.2f, 0.21f}, false}}) {
+    ImageF linear(w, h, 3, 0.1f);  // grey road
+    ImageF outline(w, h, 1, 0.0f), weight(w, h, 1, 0.0f);
+    for (int y = 8; y < 40; ++y)
+      for (int x = 16; x < 48; ++x) {
+        outline.at(x, y) = 1;
+        if (x >= 20 && x < 44) {  // the insert, with a soft left edge
+          weight.at(x, y) = x == 20 ? 0.5f : 1.0f;
+          for (int ch = 0; ch < 3; ++ch) linear.at(x, y, ch) = c.colour[ch] * weight.at(x, y) + 0.1f * (1 - weight.at(x, y));
+        }
+      }
+    const ImageF before = linear;
+    const SaturationCap cap = CapSaturation(&linear, outline, weight, 0.3);
+    SCOPED_TRACE(c.colour[0]);
+    if (c.capped) {
+      EXPECT_GT(cap.before, 0.6);
+      EXPECT_NEAR(cap.after, 0.3, 0.01);
+      EXPECT_LT(cap.scale, 1.0);
+      // Moved towards luminance: the luminance of a fully covered pixel is kept.
+      const auto lum = [](const ImageF& im, int x, int y) { return 0.2126f * im.at(x, y, 0) + 0.7152f * im.at(x, y, 1) + 0.0722f * im.at(x, y, 2); };
+      EXPECT_NEAR(lum(linear, 30, 20), lum(before, 30, 20), 1e-5);
+    } else {
+      EXPECT_LT(cap.before, 0.3);
+      EXPECT_EQ(cap.scale, 1.0);
+    }
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        if (weight.at(x, y) > 0) continue;
+        for (int ch = 0; ch < 3; ++ch) ASSERT_EQ(linear.at(x, y, ch), before.at(x, y, ch));
+      }
+  }
 }
 
 }  // namespace

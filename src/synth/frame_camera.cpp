@@ -3,8 +3,11 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
+#include <string>
 
 #include "core/log.h"
+#include "datasets/categories.h"
 #include "geometry/box_projection.h"
 #include "models/harmonization.h"
 #include "render/camera_render.h"
@@ -266,6 +269,60 @@ int HarmonizeObjects(const models::Harmonizer& harmonizer, const ObjectRender& r
   return harmonized;
 }
 
+// Colour (camera_look.h CapSaturation): each visible insert no more saturated than the most saturated real object
+// of its category in the frame's images (the rig's cameras share their colour processing), measured as
+// synth/realism.h measures them. Returns one record per insert: what it was capped to, or that the frame holds no
+// real object of its category to say.
+nlohmann::json CapInsertSaturation(const CameraStageInput& st, const CameraSensor& cam, const ObjectRender& r,
+                                   const Composite& c, const Rect& rect, ImageF* linear) {
+  constexpr int kMinRealPixels = 24 * 12;  // realism.h's measurable real objects
+  const std::vector<PlacedObject>& placed = *st.placed;
+  std::map<std::string, std::pair<double, int>> ceiling;  // category -> (most saturated, views)
+  for (const PlacedObject& p : placed) ceiling[CanonicalCategory(p.asset->info.category)] = {0.0, 0};
+  const std::vector<CameraSensor>& cameras = st.in->frame->cameras;
+  for (const auto& [category, box] : st.in->annotated) {
+    const auto it = ceiling.find(CanonicalCategory(category));
+    if (it == ceiling.end() || st.sequence) continue;
+    for (size_t j = 0; j < cameras.size(); ++j) {
+      int pixels = 0;
+      const double saturation = MeasureSaturation(st.in->Image(j), cameras[j], box, &pixels);
+      if (pixels < kMinRealPixels) continue;
+      it->second.first = std::max(it->second.first, saturation);
+      ++it->second.second;
+    }
+  }
+  nlohmann::json out = nlohmann::json::array();
+  for (size_t k = 0; k < placed.size(); ++k) {
+    if (c.visible[k] < 4) continue;
+    const std::string category = CanonicalCategory(placed[k].asset->info.category);
+    const auto& [most, real] = ceiling.at(category);
+    nlohmann::json rec = {{"object", k}, {"category", category}, {"real_views", real}};
+    if (st.sequence) {
+      // A per-frame reference would change an object's colour between the frames that show a real one and those
+      // that do not; a sequence needs one reference over all its frames (not done yet).
+      rec["note"] = "sequence: colour left as rendered (a per-frame reference would flicker)";
+      out.push_back(rec);
+      continue;
+    }
+    if (real == 0) {
+      rec["note"] = "no real " + category + " in the frame's images: colour left as rendered";
+      out.push_back(rec);
+      continue;
+    }
+    ImageF weight(linear->width(), linear->height(), 1, 0.0f);
+    for (int y = rect.y0; y < rect.y1; ++y)
+      for (int x = rect.x0; x < rect.x1; ++x)
+        if (r.render.object.at(x, y) == static_cast<int>(k)) weight.at(x, y) = c.object_alpha.at(x, y);
+    const SaturationCap cap = CapSaturation(linear, ObjectOutline(cam, placed[k].box), weight, most);
+    rec["saturation_ceiling"] = cap.ceiling;
+    rec["saturation_before"] = cap.before;
+    rec["saturation_after"] = cap.after;
+    rec["chroma_scale"] = cap.scale;
+    out.push_back(rec);
+  }
+  return out;
+}
+
 // For people: the light at the objects in this camera.
 std::string DescribeCameraLight(const CameraLight& cl, const Composite& c, const FrameLight& fl) {
   if (!cl.object_light) return "road calibration";
@@ -304,7 +361,7 @@ std::optional<CameraOutcome> SynthesizeCamera(const CameraStageInput& st, size_t
   const ImageF receiver_depth = ReceiverDepth(cam, st.in->ground->seed_plane(), r, rect);
   const OcclusionMasks occ = OccludeByScene(st, cam, original, r, receiver_depth, rect);
   const CameraLookOptions& look_options = st.options->camera_look;
-  const bool any_look = look_options.blur || look_options.noise || look_options.jpeg;
+  const bool any_look = look_options.blur || look_options.noise || look_options.jpeg || look_options.colour;
   CameraLook look;
   if (any_look) {
     const ImageF real_objects = ObjectOutlinesMask(cam, st.in->real_boxes, kMinRealObjectPixels);
@@ -323,6 +380,8 @@ std::optional<CameraOutcome> SynthesizeCamera(const CameraStageInput& st, size_t
     for (int x = rect.x0; x < rect.x1; ++x)
       for (int ch = 0; ch < 3; ++ch) linear.at(x, y, ch) = std::max(0.0f, linear.at(x, y, ch) - c.shadow_only_loss.at(x, y, ch));
 
+  const nlohmann::json colour = look_options.colour ? CapInsertSaturation(st, cam, r, c, rect, &linear) : nlohmann::json();
+
   CameraOutcome co;
   co.channel = cam.channel;
   co.before = original;
@@ -336,7 +395,9 @@ std::optional<CameraOutcome> SynthesizeCamera(const CameraStageInput& st, size_t
     co.look = look.ToJson();
     co.look["render_edge_rise_px"] = render_rise;
     co.look["blur_sigma_px"] = blur;
-    co.look["applied"] = {{"blur", look_options.blur}, {"noise", look_options.noise}, {"jpeg", look_options.jpeg}};
+    co.look["applied"] = {{"blur", look_options.blur}, {"noise", look_options.noise}, {"jpeg", look_options.jpeg},
+                          {"colour", look_options.colour}};
+    if (look_options.colour) co.look["colour"] = colour;
   }
   for (size_t k = 0; k < placed.size(); ++k) {
     ObjectOutcome& oc = (*objects)[k];

@@ -72,6 +72,7 @@ struct CameraStageInput {
   const ObjectScene* scene = nullptr;
   const models::Harmonizer* harmonizer = nullptr;  // null: no harmonisation
   const SynthOptions* options = nullptr;
+  bool sequence = false;  // the frame is one of a planned sequence (world-fixed objects seen over frames)
 };
 
 // One camera: its light at the objects, the render and the soft shadows, the receiver's depth, occlusion by the

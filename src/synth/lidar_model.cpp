@@ -84,11 +84,6 @@ int IntensityFeature(const PointCloud& sweep) {
   return -1;
 }
 
-std::string CanonicalCategory(const std::string& name) {
-  const auto info = FindCategory(name);
-  return info ? info->name : name;
-}
-
 }  // namespace
 
 double LidarModel::FiringTime(double azimuth) const {

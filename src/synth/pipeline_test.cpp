@@ -70,7 +70,7 @@ class PipelineTest : public ::testing::Test {
     unharmonised_ = new FrameOutcome(SynthesizeFrame(*log_, 0, *assets_, *scenario_, unharmonised));
     // The render composited as it is: what the camera's look (blur, noise, JPEG) changed.
     SynthOptions bare;
-    bare.camera_look = CameraLookOptions{false, false, false};
+    bare.camera_look = CameraLookOptions{false, false, false, false};
     no_look_ = new FrameOutcome(SynthesizeFrame(*log_, 0, *assets_, *scenario_, bare));
   }
   static void TearDownTestSuite() {

@@ -32,6 +32,48 @@ double Saturation(const uint8_t* p) {
 
 }  // namespace
 
+namespace {
+
+// Calls fn(x, y) for every pixel of `camera`'s image whose centre lies inside `box_ego`'s projected outline.
+template <typename Fn>
+void ForEachOutlinePixel(const CameraSensor& camera, const Box3& box_ego, Fn fn) {
+  const auto in_image = geometry::ProjectBoxToImage(camera.intrinsics, camera.T_ego_cam.Inverse(), box_ego, kNearM);
+  if (!in_image || in_image->clipped.Empty()) return;
+  const Box2& r = in_image->clipped;
+  const int x0 = std::max(0, static_cast<int>(std::floor(r.x1))), y0 = std::max(0, static_cast<int>(std::floor(r.y1)));
+  const int x1 = std::min(camera.intrinsics.width, static_cast<int>(std::ceil(r.x2)));
+  const int y1 = std::min(camera.intrinsics.height, static_cast<int>(std::ceil(r.y2)));
+  for (int y = y0; y < y1; ++y)
+    for (int x = x0; x < x1; ++x)
+      if (geometry::InsideConvexPolygon(in_image->outline, {x + 0.5, y + 0.5})) fn(x, y);
+}
+
+}  // namespace
+
+ImageF ObjectOutline(const CameraSensor& camera, const Box3& box_ego, int* pixels) {
+  ImageF mask(camera.intrinsics.width, camera.intrinsics.height, 1, 0.0f);
+  int count = 0;
+  ForEachOutlinePixel(camera, box_ego, [&](int x, int y) {
+    mask.at(x, y) = 1;
+    ++count;
+  });
+  if (pixels) *pixels = count;
+  return mask;
+}
+
+double MeasureSaturation(const ImageU8& image, const CameraSensor& camera, const Box3& box_ego, int* pixels) {
+  if (pixels) *pixels = 0;
+  if (image.width() != camera.intrinsics.width || image.height() != camera.intrinsics.height) return 0;  // not its image
+  int count = 0;
+  double saturation = 0;
+  ForEachOutlinePixel(camera, box_ego, [&](int x, int y) {
+    saturation += Saturation(image.pixel(x, y));
+    ++count;
+  });
+  if (pixels) *pixels = count;
+  return count ? saturation / count : 0.0;
+}
+
 ObjectLook MeasureObjectLook(const ImageU8& image, const CameraSensor& camera, const Box3& box_ego, const CameraLook& look) {
   ObjectLook out;
   const auto in_image = geometry::ProjectBoxToImage(camera.intrinsics, camera.T_ego_cam.Inverse(), box_ego, kNearM);
@@ -40,15 +82,14 @@ ObjectLook MeasureObjectLook(const ImageU8& image, const CameraSensor& camera, c
   const int x0 = static_cast<int>(std::floor(r.x1)), y0 = static_cast<int>(std::floor(r.y1));
   const int x1 = std::min(image.width(), static_cast<int>(std::ceil(r.x2)));
   const int y1 = std::min(image.height(), static_cast<int>(std::ceil(r.y2)));
+  if (image.width() != camera.intrinsics.width || image.height() != camera.intrinsics.height) return out;  // not its image
   ImageF mask(image.width(), image.height(), 1, 0.0f);
   double saturation = 0;
-  for (int y = y0; y < y1; ++y)
-    for (int x = x0; x < x1; ++x)
-      if (geometry::InsideConvexPolygon(in_image->outline, {x + 0.5, y + 0.5})) {
-        mask.at(x, y) = 1;
-        saturation += Saturation(image.pixel(x, y));
-        ++out.pixels;
-      }
+  ForEachOutlinePixel(camera, box_ego, [&](int x, int y) {
+    mask.at(x, y) = 1;
+    saturation += Saturation(image.pixel(x, y));
+    ++out.pixels;
+  });
   if (out.pixels == 0) return out;
   out.saturation = saturation / out.pixels;
 
@@ -199,8 +240,7 @@ RealismReport EvaluateRealism(const std::filesystem::path& synth_out) {
       };
       for (const Annotation& a : frame->annotations) {
         ObjectLook o = MeasureObjectLook(after, *cam, a.box, look);
-        const auto cat = FindCategory(a.category);
-        o.category = cat ? cat->name : a.category;
+        o.category = CanonicalCategory(a.category);
         if (o.pixels >= kMinRealPixels) add(o);
       }
       for (const auto& [category, box] : inserted) {

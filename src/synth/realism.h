@@ -34,6 +34,12 @@ struct ObjectLook {
 // Measures `box_ego` (ego frame) in `image` of `camera`, against the image's `look` (its noise model).
 ObjectLook MeasureObjectLook(const ImageU8& image, const CameraSensor& camera, const Box3& box_ego, const CameraLook& look);
 
+// The outline MeasureObjectLook measures over: the projected box (near-plane clipped) as a mask of `camera`'s
+// image size, 1 inside; `pixels` (optional) counts them.
+ImageF ObjectOutline(const CameraSensor& camera, const Box3& box_ego, int* pixels = nullptr);
+// Its saturation alone (ObjectLook::saturation); 0 with no pixel inside the image.
+double MeasureSaturation(const ImageU8& image, const CameraSensor& camera, const Box3& box_ego, int* pixels = nullptr);
+
 // The projected outlines of `boxes_ego` in `camera`'s image as a mask (1 inside), skipping outlines of fewer
 // than `min_pixels` pixels inside the image: where the real objects of an image are.
 ImageF ObjectOutlinesMask(const CameraSensor& camera, const std::vector<Box3>& boxes_ego, int min_pixels);

@@ -180,8 +180,7 @@ std::string RealismTable(const Frame& frame, const FrameOutcome& o, const Camera
   std::vector<ObjectLook> real;
   for (const Annotation& a : frame.annotations) {
     ObjectLook l = MeasureObjectLook(co.after, cam, a.box, look);
-    const auto cat = FindCategory(a.category);
-    l.category = cat ? cat->name : a.category;
+    l.category = CanonicalCategory(a.category);
     if (l.pixels >= 24 * 12) real.push_back(l);
   }
   std::ostringstream h;

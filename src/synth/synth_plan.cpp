@@ -109,8 +109,7 @@ SynthPlan PlanSynthesis(const Log& log, const std::vector<size_t>& selected, con
                         const std::vector<Asset>& assets, const fs::path& scenario_file, bool need_assets) {
   SequencePlanOptions options;
   for (const Asset& a : assets) {
-    const auto cat = FindCategory(a.info.category);
-    options.assets.push_back(PlanAsset{a.info.id, cat ? cat->name : a.info.category, a.info.extent});
+    options.assets.push_back(PlanAsset{a.info.id, CanonicalCategory(a.info.category), a.info.extent});
   }
   std::vector<size_t> sorted = selected;
   std::sort(sorted.begin(), sorted.end());

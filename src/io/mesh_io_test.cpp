@@ -86,12 +86,31 @@ TEST(MeshIo, BarrierAndCarLoadWithTextures) {
 
   const TriangleMesh car = LoadObj(RepoData("assets/torcs_p406/obj/torcs_p406.obj"));
   ExpectTextured(car);
-  EXPECT_EQ(car.NumFaces(), 8557u);
+  // TORCS's body (8557 faces) and the four wheels scripts/car_wheels.py added (320 faces each, tyre and rim).
+  EXPECT_EQ(car.NumFaces(), 8557u + 4 * 320u);
+  ASSERT_EQ(car.materials.size(), 3u);
   EXPECT_EQ(car.materials[0].base_color_texture_name, "p406.png");
   EXPECT_EQ(car.materials[0].base_color_texture->width(), 512);
-  // Metres, x forward, y up: 4.64 long, 1.27 tall, 2.0 wide.
-  EXPECT_TRUE(car.Bounds().Size().isApprox(Eigen::Vector3f(4.64f, 1.27f, 2.0f), 1e-4f));
+  EXPECT_EQ(car.materials[car.MaterialOf(car.NumFaces() - 1)].name, "rim");
+  // Metres, x forward, y up: 4.64 long, 1.42 tall (the tyres reach 0.147 below the body's sill), 2.0 wide.
+  EXPECT_TRUE(car.Bounds().Size().isApprox(Eigen::Vector3f(4.64f, 1.422f, 2.0f), 1e-4f));
   for (const auto& uv : car.uvs) ASSERT_TRUE(uv.allFinite());
+}
+
+// The shipped car stands on four wheels, not on its sill: its lowest points (within 2 cm of the ground) lie in
+// four patches at the corners of a wheelbase and track, and nothing else reaches down there.
+TEST(MeshIo, TheShippedCarStandsOnFourWheels) {
+  const TriangleMesh car = LoadObj(RepoData("assets/torcs_p406/obj/torcs_p406.obj"));  // x forward, y up, z side
+  const float ground = car.Bounds().min.y();
+  int quadrant[2][2] = {{0, 0}, {0, 0}};
+  for (const auto& p : car.positions) {
+    if (p.y() > ground + 0.02f) continue;
+    ASSERT_GT(std::abs(p.x()), 1.1f) << "a low point between the axles: " << p.transpose();
+    ASSERT_GT(std::abs(p.z()), 0.6f) << "a low point between the wheels: " << p.transpose();
+    ++quadrant[p.x() > 0][p.z() > 0];
+  }
+  for (const auto& row : quadrant)
+    for (int n : row) EXPECT_GT(n, 0);
 }
 
 TEST(MeshIo, ObjSplitsVerticesAndFlipsV) {
@@ -118,8 +137,16 @@ TEST(MeshIo, ObjSplitsVerticesAndFlipsV) {
 }
 
 TEST(MeshIo, GlbRoundTripInZUp) {
-  TriangleMesh m = LoadObj(RepoData("assets/torcs_p406/obj/torcs_p406.obj"));
+  // The car's body alone (one material, so the GLB keeps the vertex order): the OBJ cut at the wheels' block.
   TempDir tmp;
+  const std::filesystem::path obj = RepoData("assets/torcs_p406/obj/torcs_p406.obj");
+  const std::string text = ReadFileToString(obj);
+  const size_t wheels = text.find("\n# --- wheels added by scripts/car_wheels.py");
+  ASSERT_NE(wheels, std::string::npos);
+  WriteFileAtomic(tmp / "body.obj", text.substr(0, wheels + 1));
+  for (const char* f : {"torcs_p406.mtl", "p406.png"}) std::filesystem::copy_file(obj.parent_path() / f, tmp / f);
+  TriangleMesh m = LoadObj(tmp / "body.obj");
+  ASSERT_EQ(m.NumFaces(), 8557u);
   SaveGlb(tmp / "car.glb", m);
   // The raw file is y-up: the car's y-up OBJ is treated as z-up, so its y extent (1.27) lands on -z.
   const TriangleMesh raw = LoadGltf(tmp / "car.glb");

@@ -119,14 +119,15 @@ nlohmann::json CategoryRows(const Run& r) {
 
 nlohmann::json Row(const Run& r) {
   const sd::LookComparison c = sd::CompareLooks(r.objects);
+  const sd::TwoSampleTest t = sd::ClassifyRealVsInserted(r.objects);
   std::vector<double> grain = r.shadow_grain;
   std::sort(grain.begin(), grain.end());
   const double grain_median = grain.empty() ? 0.0 : grain[grain.size() / 2];
-  std::printf("| %-22s | %-22s | %3d | %3d | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f (%zu) | %6.1f |\n", r.log.c_str(),
+  std::printf("| %-22s | %-22s | %3d | %3d | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f | %5.2f (%zu) | %4.2f | %6.1f |\n", r.log.c_str(),
               r.mode.c_str(), c.real, c.inserted, c.real_noise, c.inserted_noise,
               c.real_noise > 0 ? c.inserted_noise / c.real_noise : 0.0, c.real_edge_rise, c.inserted_edge_rise,
               c.real_edge_rise > 0 ? c.inserted_edge_rise / c.real_edge_rise : 0.0, c.real_saturation, c.inserted_saturation,
-              grain_median, grain.size(), r.seconds);
+              grain_median, grain.size(), t.balanced_accuracy, r.seconds);
   return {{"log", r.log},
           {"mode", r.mode},
           {"real_objects", c.real},
@@ -135,6 +136,7 @@ nlohmann::json Row(const Run& r) {
           {"edge_rise_px", {{"real", c.real_edge_rise}, {"inserted", c.inserted_edge_rise}}},
           {"saturation", {{"real", c.real_saturation}, {"inserted", c.inserted_saturation}}},
           {"shadow_grain", {{"median", grain_median}, {"blocks", grain.size()}}},
+          {"classifier", t.ToJson()},
           {"seconds", r.seconds}};
 }
 
@@ -152,8 +154,8 @@ int main() {
   for (const sd::bench::DemoMesh& m : sd::bench::DemoMeshes())
     assets.push_back(sd::bench::ImportDemoAsset(data, m, tmp / "assets" / m.id));
   const sd::CameraLookOptions off{false, false, false, false}, on{};
-  std::printf("| log | camera look | real | ins | noise real | noise ins | ratio | rise real px | rise ins px | ratio | sat real | sat ins | shadow grain (blocks) | s |\n");
-  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+  std::printf("| log | camera look | real | ins | noise real | noise ins | ratio | rise real px | rise ins px | ratio | sat real | sat ins | shadow grain (blocks) | classifier | s |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   nlohmann::json rows = nlohmann::json::array();
   std::vector<Run> runs;
   const auto row = [&](Run r) {

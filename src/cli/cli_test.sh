@@ -258,7 +258,8 @@ synth "${SY[@]}" --out "$T/k_plain" && [ ! -e "$T/k_plain.parts" ] && ok || bad 
 # synth output is refused in one line, writing nothing.
 "$BIN" -q eval realism --synth "$T/k_plain" --out "$T/k_realism.json" > "$T/realism.txt" \
   && grep -q '"inserted_objects"' "$T/k_realism.json" && grep -q "^traffic_cone" "$T/realism.txt" \
-  && [ "$(grep -o '"inserted": true' "$T/k_realism.json" | wc -l)" -ge 1 ] && ok || bad "eval realism on a synth output"
+  && [ "$(grep -o '"inserted": true' "$T/k_realism.json" | wc -l)" -ge 1 ] && grep -q '"classifier"' "$T/k_realism.json" \
+  && grep -q "^real-vs-inserted classifier" "$T/realism.txt" && ok || bad "eval realism on a synth output"
 expect_error "eval realism: not a synth output" "no synth.json" "$T/nr.json" -- "$BIN" -q eval realism --synth "$T/cone" --out "$T/nr.json"
 synth "${SY[@]}" --out "$T/k_sh" --shard 0/2 && synth "${SY[@]}" --out "$T/k_sh" --shard 0/2 \
   && [ "$(grep -c '"status":"skipped"' "$T/k_sh.parts/log-0-of-2.jsonl")" -eq 2 ] \

@@ -86,6 +86,12 @@ Runner AddEvalCommand(CLI::App& app) {
                     cell(c.real_noise, c.inserted_noise).c_str(), cell(c.real_edge_rise, c.inserted_edge_rise).c_str(),
                     cell(c.real_saturation, c.inserted_saturation).c_str());
       }
+      const TwoSampleTest& t = report.classifier;
+      if (t.folds > 0)
+        std::printf("real-vs-inserted classifier (noise, edge rise, saturation; %d-fold): balanced accuracy %.2f "
+                    "(0.5 = chance) over %d real and %d inserted\n", t.folds, t.balanced_accuracy, t.real, t.inserted);
+      else
+        std::printf("real-vs-inserted classifier: fewer than two objects in a class (%d real, %d inserted)\n", t.real, t.inserted);
       nlohmann::json j = report.ToJson();
       j["synth"] = dir.string();
       WriteJsonFile(out, j);

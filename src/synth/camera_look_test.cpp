@@ -215,5 +215,38 @@ TEST(CameraLook, SaturationCapMovesOnlyTooColourfulInsertsToTheCeiling) {
   }
 }
 
+// The two-sample classifier: at chance on objects drawn from one distribution, near 1 when inserts carry three
+// times the real objects' grain, and silent with a single insert.
+TEST(Realism, TheRealVsInsertedClassifierIsAtChanceOnlyWhenTheyMeasureAlike) {
+  std::mt19937 rng(11);
+  std::lognormal_distribution<double> noise(0.0, 0.3), rise(1.0, 0.3);
+  std::uniform_real_distribution<double> saturation(0.1, 0.4);
+  const auto draw = [&](bool inserted, double grain) {
+    ObjectLook o;
+    o.inserted = inserted;
+    o.pixels = 1000;
+    o.noise_blocks = 10;
+    o.noise_ratio = grain * noise(rng);
+    o.edges = 5;
+    o.edge_rise_px = rise(rng);
+    o.saturation = saturation(rng);
+    return o;
+  };
+  std::vector<ObjectLook> alike, pasted;
+  for (int i = 0; i < 60; ++i) alike.push_back(draw(false, 1.0)), pasted.push_back(draw(false, 1.0));
+  for (int i = 0; i < 30; ++i) alike.push_back(draw(true, 1.0)), pasted.push_back(draw(true, 3.0));
+  const TwoSampleTest same = ClassifyRealVsInserted(alike);
+  EXPECT_EQ(same.folds, 5);
+  EXPECT_EQ(same.real, 60);
+  EXPECT_EQ(same.inserted, 30);
+  EXPECT_GT(same.balanced_accuracy, 0.3);
+  EXPECT_LT(same.balanced_accuracy, 0.65);
+  const TwoSampleTest told = ClassifyRealVsInserted(pasted);
+  EXPECT_GT(told.balanced_accuracy, 0.9);
+  EXPECT_GT(told.weights[0], 0);  // more grain: inserted
+  std::vector<ObjectLook> one(alike.begin(), alike.begin() + 61);
+  EXPECT_EQ(ClassifyRealVsInserted(one).folds, 0);
+}
+
 }  // namespace
 }  // namespace sd

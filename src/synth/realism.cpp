@@ -157,6 +157,102 @@ LookComparison CompareLooks(const std::vector<ObjectLook>& objects) {
 
 namespace {
 
+using Features = std::array<double, 3>;
+
+// Class-weighted, L2-regularised logistic regression (Newton's method; 3 features + bias). Returns (w, b).
+std::pair<Features, double> FitLogistic(const std::vector<Features>& x, const std::vector<int>& y, double lambda) {
+  double n1 = 0, n0 = 0;
+  for (int v : y) (v ? n1 : n0) += 1;
+  const double w1 = 0.5 * y.size() / std::max(n1, 1.0), w0 = 0.5 * y.size() / std::max(n0, 1.0);
+  Eigen::Vector4d theta = Eigen::Vector4d::Zero();  // w0..w2, b
+  for (int it = 0; it < 25; ++it) {
+    Eigen::Vector4d grad = Eigen::Vector4d::Zero();
+    Eigen::Matrix4d hess = Eigen::Matrix4d::Zero();
+    for (size_t i = 0; i < x.size(); ++i) {
+      const Eigen::Vector4d xi(x[i][0], x[i][1], x[i][2], 1.0);
+      const double p = 1.0 / (1.0 + std::exp(-theta.dot(xi)));
+      const double w = y[i] ? w1 : w0;
+      grad += w * (p - y[i]) * xi;
+      hess += w * p * (1 - p) * xi * xi.transpose();
+    }
+    for (int k = 0; k < 3; ++k) {  // the bias is not shrunk
+      grad[k] += lambda * theta[k];
+      hess(k, k) += lambda;
+    }
+    hess(3, 3) += 1e-9;
+    const Eigen::Vector4d step = hess.ldlt().solve(grad);
+    theta -= step;
+    if (step.norm() < 1e-10) break;
+  }
+  return {{theta[0], theta[1], theta[2]}, theta[3]};
+}
+
+}  // namespace
+
+nlohmann::json TwoSampleTest::ToJson() const {
+  nlohmann::json j = {{"real", real}, {"inserted", inserted}, {"folds", folds}};
+  if (folds > 0) {
+    j["balanced_accuracy"] = balanced_accuracy;
+    j["weights"] = {{"log_noise_ratio", weights[0]}, {"log_edge_rise", weights[1]}, {"saturation", weights[2]}};
+  } else {
+    j["note"] = "fewer than two objects in a class: no cross-validated figure";
+  }
+  return j;
+}
+
+TwoSampleTest ClassifyRealVsInserted(const std::vector<ObjectLook>& objects) {
+  TwoSampleTest t;
+  std::vector<double> noise, rise;
+  for (const ObjectLook& o : objects) {
+    if (o.pixels == 0) continue;
+    (o.inserted ? t.inserted : t.real) += 1;
+    if (o.noise_blocks > 0 && o.noise_ratio > 0) noise.push_back(std::log(o.noise_ratio));
+    if (o.edges > 0 && o.edge_rise_px > 0) rise.push_back(std::log(o.edge_rise_px));
+  }
+  const int k = std::min(5, std::min(t.real, t.inserted));
+  if (k < 2) return t;
+  const double noise_fill = Median(noise), rise_fill = Median(rise);
+  std::vector<Features> x;
+  std::vector<int> y;
+  for (const ObjectLook& o : objects) {
+    if (o.pixels == 0) continue;
+    x.push_back({o.noise_blocks > 0 && o.noise_ratio > 0 ? std::log(o.noise_ratio) : noise_fill,
+                 o.edges > 0 && o.edge_rise_px > 0 ? std::log(o.edge_rise_px) : rise_fill, o.saturation});
+    y.push_back(o.inserted ? 1 : 0);
+  }
+  // Standardised over all objects (the folds share the scaling: it carries no label).
+  for (int f = 0; f < 3; ++f) {
+    double mean = 0, var = 0;
+    for (const Features& v : x) mean += v[f];
+    mean /= x.size();
+    for (const Features& v : x) var += (v[f] - mean) * (v[f] - mean);
+    const double sd = std::sqrt(var / x.size());
+    for (Features& v : x) v[f] = sd > 1e-12 ? (v[f] - mean) / sd : 0.0;
+  }
+  std::vector<int> fold(x.size());
+  int seen[2] = {0, 0};
+  for (size_t i = 0; i < x.size(); ++i) fold[i] = seen[y[i]]++ % k;
+  double correct[2] = {0, 0};
+  for (int f = 0; f < k; ++f) {
+    std::vector<Features> xt;
+    std::vector<int> yt;
+    for (size_t i = 0; i < x.size(); ++i)
+      if (fold[i] != f) xt.push_back(x[i]), yt.push_back(y[i]);
+    const auto [w, b] = FitLogistic(xt, yt, 1.0);
+    for (size_t i = 0; i < x.size(); ++i) {
+      if (fold[i] != f) continue;
+      const double score = w[0] * x[i][0] + w[1] * x[i][1] + w[2] * x[i][2] + b;
+      correct[y[i]] += (score > 0) == (y[i] == 1);
+    }
+  }
+  t.folds = k;
+  t.balanced_accuracy = 0.5 * (correct[0] / t.real + correct[1] / t.inserted);
+  t.weights = FitLogistic(x, y, 1.0).first;
+  return t;
+}
+
+namespace {
+
 nlohmann::json ComparisonJson(const LookComparison& c) {
   auto ratio = [](double ins, double real) { return real > 0 && ins > 0 ? nlohmann::json(ins / real) : nlohmann::json(nullptr); };
   return {{"real_objects", c.real},
@@ -181,6 +277,7 @@ nlohmann::json RealismReport::ToJson() const {
     c["category"] = s.category.empty() ? nlohmann::json("all") : nlohmann::json(s.category);
     j["summaries"].push_back(c);
   }
+  j["classifier"] = classifier.ToJson();
   j["objects"] = nlohmann::json::array();
   for (const RealismRow& r : rows)
     j["objects"].push_back({{"frame", r.frame},
@@ -256,6 +353,7 @@ RealismReport EvaluateRealism(const std::filesystem::path& synth_out) {
     const LookComparison c = CompareLooks(objects);
     if (c.inserted > 0) report.summaries.push_back({category, c});
   }
+  report.classifier = ClassifyRealVsInserted(all);
   return report;
 }
 

@@ -81,6 +81,11 @@ void GaussianBlurRegion(ImageF* image, double sigma, int x0, int y0, int x1, int
 // `ceiling` (the most saturated real object of its category in the image), its own pixels (`weight`, 0..1: its
 // coverage) are moved towards their luminance in linear light, c' = Y + k (c - Y), by the k that brings the
 // outline's measure to the ceiling (k >= `min_scale`). `linear`: the composite, linear light, 3 channels.
+// The ceiling of one category: its most saturated real object, over how many views (0: none seen, no cap).
+struct SaturationReference {
+  double ceiling = 0;
+  int views = 0;
+};
 struct SaturationCap {
   double before = 0, after = 0, ceiling = 0;
   double scale = 1;  // the k applied; 1: untouched

@@ -433,7 +433,8 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
   std::shared_ptr<const models::Harmonizer> harmonizer = options.harmonizer_model;
   if (!harmonizer && options.harmonizer != "none" && !placed.empty())
     harmonizer = std::make_shared<const models::Harmonizer>(ResolveSynthHarmonizer(options.harmonizer));
-  const CameraStageInput stage{&in, &placed, &light, &scene, harmonizer.get(), &options, plan != nullptr};
+  const CameraStageInput stage{&in, &placed, &light, &scene, harmonizer.get(), &options,
+                               plan ? &plan->colour_reference : nullptr};
   for (size_t cam_index = 0; cam_index < in.frame->cameras.size(); ++cam_index) {
     std::optional<CameraOutcome> camera = SynthesizeCamera(stage, cam_index, &out.objects);
     if (!camera) continue;

@@ -270,42 +270,43 @@ int HarmonizeObjects(const models::Harmonizer& harmonizer, const ObjectRender& r
 }
 
 // Colour (camera_look.h CapSaturation): each visible insert no more saturated than the most saturated real object
-// of its category in the frame's images (the rig's cameras share their colour processing), measured as
-// synth/realism.h measures them. Returns one record per insert: what it was capped to, or that the frame holds no
-// real object of its category to say.
+// of its category: over the planned sequence's frames (one reference for all of them, so the colour does not
+// change from frame to frame), else in the frame's images (the rig's cameras share their colour processing),
+// measured as synth/realism.h measures objects. Returns one record per insert: what it was capped to, or that no
+// real object of its category was there to say.
 nlohmann::json CapInsertSaturation(const CameraStageInput& st, const CameraSensor& cam, const ObjectRender& r,
                                    const Composite& c, const Rect& rect, ImageF* linear) {
   constexpr int kMinRealPixels = 24 * 12;  // realism.h's measurable real objects
   const std::vector<PlacedObject>& placed = *st.placed;
-  std::map<std::string, std::pair<double, int>> ceiling;  // category -> (most saturated, views)
-  for (const PlacedObject& p : placed) ceiling[CanonicalCategory(p.asset->info.category)] = {0.0, 0};
-  const std::vector<CameraSensor>& cameras = st.in->frame->cameras;
-  for (const auto& [category, box] : st.in->annotated) {
-    const auto it = ceiling.find(CanonicalCategory(category));
-    if (it == ceiling.end() || st.sequence) continue;
-    for (size_t j = 0; j < cameras.size(); ++j) {
-      int pixels = 0;
-      const double saturation = MeasureSaturation(st.in->Image(j), cameras[j], box, &pixels);
-      if (pixels < kMinRealPixels) continue;
-      it->second.first = std::max(it->second.first, saturation);
-      ++it->second.second;
+  std::map<std::string, SaturationReference> reference;
+  if (st.colour_reference) {
+    reference = *st.colour_reference;
+  } else {
+    for (const PlacedObject& p : placed) reference[CanonicalCategory(p.asset->info.category)] = {};
+    const std::vector<CameraSensor>& cameras = st.in->frame->cameras;
+    for (const auto& [category, box] : st.in->annotated) {
+      const auto it = reference.find(CanonicalCategory(category));
+      if (it == reference.end()) continue;
+      for (size_t j = 0; j < cameras.size(); ++j) {
+        if (OutlinePixels(cameras[j], box) < kMinRealPixels) continue;
+        int pixels = 0;
+        const double saturation = MeasureSaturation(st.in->Image(j), cameras[j], box, &pixels);
+        if (pixels < kMinRealPixels) continue;
+        it->second.ceiling = std::max(it->second.ceiling, saturation);
+        ++it->second.views;
+      }
     }
   }
+  const char* scope = st.colour_reference ? "sequence" : "frame";
   nlohmann::json out = nlohmann::json::array();
   for (size_t k = 0; k < placed.size(); ++k) {
     if (c.visible[k] < 4) continue;
     const std::string category = CanonicalCategory(placed[k].asset->info.category);
-    const auto& [most, real] = ceiling.at(category);
-    nlohmann::json rec = {{"object", k}, {"category", category}, {"real_views", real}};
-    if (st.sequence) {
-      // A per-frame reference would change an object's colour between the frames that show a real one and those
-      // that do not; a sequence needs one reference over all its frames (not done yet).
-      rec["note"] = "sequence: colour left as rendered (a per-frame reference would flicker)";
-      out.push_back(rec);
-      continue;
-    }
-    if (real == 0) {
-      rec["note"] = "no real " + category + " in the frame's images: colour left as rendered";
+    const auto it = reference.find(category);
+    const SaturationReference ref = it == reference.end() ? SaturationReference{} : it->second;
+    nlohmann::json rec = {{"object", k}, {"category", category}, {"reference", scope}, {"real_views", ref.views}};
+    if (ref.views == 0) {
+      rec["note"] = std::string("no real ") + category + " in the " + scope + "'s images: colour left as rendered";
       out.push_back(rec);
       continue;
     }
@@ -313,7 +314,7 @@ nlohmann::json CapInsertSaturation(const CameraStageInput& st, const CameraSenso
     for (int y = rect.y0; y < rect.y1; ++y)
       for (int x = rect.x0; x < rect.x1; ++x)
         if (r.render.object.at(x, y) == static_cast<int>(k)) weight.at(x, y) = c.object_alpha.at(x, y);
-    const SaturationCap cap = CapSaturation(linear, ObjectOutline(cam, placed[k].box), weight, most);
+    const SaturationCap cap = CapSaturation(linear, ObjectOutline(cam, placed[k].box), weight, ref.ceiling);
     rec["saturation_ceiling"] = cap.ceiling;
     rec["saturation_before"] = cap.before;
     rec["saturation_after"] = cap.after;

@@ -4,6 +4,8 @@
 // light -> the object scene -> each camera -> the LiDAR.
 #include <optional>
 #include <string>
+#include <map>
+#include <string>
 #include <vector>
 
 #include <Eigen/Core>
@@ -72,7 +74,8 @@ struct CameraStageInput {
   const ObjectScene* scene = nullptr;
   const models::Harmonizer* harmonizer = nullptr;  // null: no harmonisation
   const SynthOptions* options = nullptr;
-  bool sequence = false;  // the frame is one of a planned sequence (world-fixed objects seen over frames)
+  // A planned sequence's colour reference (SequencePlan::colour_reference); null: the frame's own real objects.
+  const std::map<std::string, SaturationReference>* colour_reference = nullptr;
 };
 
 // One camera: its light at the objects, the render and the soft shadows, the receiver's depth, occlusion by the

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <optional>
 
 #include "core/error.h"
 #include "datasets/categories.h"
@@ -59,6 +60,12 @@ ImageF ObjectOutline(const CameraSensor& camera, const Box3& box_ego, int* pixel
   });
   if (pixels) *pixels = count;
   return mask;
+}
+
+int OutlinePixels(const CameraSensor& camera, const Box3& box_ego) {
+  int count = 0;
+  ForEachOutlinePixel(camera, box_ego, [&](int, int) { ++count; });
+  return count;
 }
 
 double MeasureSaturation(const ImageU8& image, const CameraSensor& camera, const Box3& box_ego, int* pixels) {
@@ -153,6 +160,30 @@ LookComparison CompareLooks(const std::vector<ObjectLook>& objects) {
   c.real_edge_rise = Median(edges[0]), c.inserted_edge_rise = Median(edges[1]);
   c.real_saturation = Median(saturation[0]), c.inserted_saturation = Median(saturation[1]);
   return c;
+}
+
+std::map<std::string, SaturationReference> RealSaturation(const Log& log, const std::vector<size_t>& frames,
+                                                          const std::set<std::string>& categories) {
+  std::map<std::string, SaturationReference> out;
+  for (const std::string& c : categories) out[c] = {};
+  for (size_t fi : frames) {
+    const Frame& frame = log.frames.at(fi);
+    for (const CameraSensor& cam : frame.cameras) {
+      std::optional<ImageU8> image;
+      for (const Annotation& a : frame.annotations) {
+        const auto it = out.find(CanonicalCategory(a.category));
+        if (it == out.end()) continue;
+        if (OutlinePixels(cam, a.box) < kMinRealPixels) continue;
+        if (!image) image = ReadImage(cam.image_path, 3);
+        int pixels = 0;
+        const double saturation = MeasureSaturation(*image, cam, a.box, &pixels);
+        if (pixels < kMinRealPixels) continue;
+        it->second.ceiling = std::max(it->second.ceiling, saturation);
+        ++it->second.views;
+      }
+    }
+  }
+  return out;
 }
 
 namespace {

@@ -9,6 +9,8 @@
 //  - saturation: the mean HSV saturation of the outline's pixels.
 #include <array>
 #include <filesystem>
+#include <map>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -38,6 +40,8 @@ ObjectLook MeasureObjectLook(const ImageU8& image, const CameraSensor& camera, c
 // The outline MeasureObjectLook measures over: the projected box (near-plane clipped) as a mask of `camera`'s
 // image size, 1 inside; `pixels` (optional) counts them.
 ImageF ObjectOutline(const CameraSensor& camera, const Box3& box_ego, int* pixels = nullptr);
+// How many pixels that outline holds, without the mask.
+int OutlinePixels(const CameraSensor& camera, const Box3& box_ego);
 // Its saturation alone (ObjectLook::saturation); 0 with no pixel inside the image.
 double MeasureSaturation(const ImageU8& image, const CameraSensor& camera, const Box3& box_ego, int* pixels = nullptr);
 
@@ -53,6 +57,14 @@ struct LookComparison {
   double real_saturation = 0, inserted_saturation = 0;  // medians
 };
 LookComparison CompareLooks(const std::vector<ObjectLook>& objects);
+
+// The colour reference of the camera look's saturation cap (camera_look.h CapSaturation), for each of
+// `categories` (canonical names): the most saturated real object of the category over `frames` of `log` and all
+// their cameras (MeasureSaturation; projected outlines of at least 288 pixels), and how many views it rests on.
+// Images are read only where such an object is seen. A planned sequence takes one reference over all its frames,
+// so an object's colour does not change between frames that show a real one and frames that do not.
+std::map<std::string, SaturationReference> RealSaturation(const Log& log, const std::vector<size_t>& frames,
+                                                          const std::set<std::string>& categories);
 
 // Can a classifier tell inserted objects from real ones by these statistics? Features per object: log noise
 // ratio, log edge rise, saturation (a missing measure takes the median of all objects'); an L2-regularised

@@ -22,6 +22,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -31,6 +32,7 @@
 #include "core/box3.h"
 #include "core/rigid3.h"
 #include "datasets/log.h"
+#include "synth/camera_look.h"
 #include "synth/scenario.h"
 #include "synth/surface.h"
 
@@ -125,6 +127,10 @@ struct SequencePlan {
   std::vector<PlannedObject> objects;
   std::vector<PlannedFrame> frames;
   std::vector<PlanStats> stats;
+  // Per planned category: the most saturated real object over the sequence's frames (synth/realism.h
+  // RealSaturation), the camera look's colour reference for every frame alike. Filled by PlanSynthesis when it
+  // plans for rendering.
+  std::map<std::string, SaturationReference> colour_reference;
 };
 
 // Plans every arrangement, then every plain object request (their distance_m / lateral_m read as path

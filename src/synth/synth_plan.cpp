@@ -4,9 +4,11 @@
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <set>
 
 #include "core/log.h"
 #include "datasets/categories.h"
+#include "synth/realism.h"
 #include "synth/road_surface.h"
 
 namespace sd {
@@ -170,6 +172,13 @@ SynthPlan PlanSynthesis(const Log& log, const std::vector<size_t>& selected, con
           throw InputError(scenario_file, Msg() << o.source << " places a " << o.category << " (" << o.role
                                                 << "), and no asset of that category was given: rendering needs one "
                                                    "(--asset or assets_from_bank; --dry-run plans without)");
+    if (need_assets && !seq.plan.objects.empty()) {
+      std::set<std::string> categories;
+      for (const PlannedObject& o : seq.plan.objects) categories.insert(CanonicalCategory(o.category));
+      std::vector<size_t> frames;
+      for (size_t k = first; k <= last; ++k) frames.push_back(k);
+      seq.plan.colour_reference = RealSaturation(log, frames, categories);
+    }
     SD_LOG(Info, "plan of frames " << first << ".." << last << ": " << seq.plan.objects.size() << " world-fixed object(s), surface: "
                                    << seq.surface << " (" << seq.surface_detail << ")");
     out.sequences.push_back(std::move(seq));

@@ -3,7 +3,10 @@
 #include <algorithm>
 #include <cmath>
 #include <memory>
+#include <map>
 #include <optional>
+#include <set>
+#include <string>
 #include <tuple>
 
 #include "core/log.h"
@@ -16,6 +19,7 @@
 #include "synth/lidar_sim.h"
 #include "synth/lighting.h"
 #include "synth/object_light.h"
+#include "synth/realism.h"
 
 namespace sd {
 namespace fs = std::filesystem;
@@ -56,6 +60,14 @@ FrameInputs ReadFrameInputs(const Log& log, size_t frame_index, const Scenario& 
   for (int i : out->ground.ground_indices()) in.is_ground[i] = 1;
   in.images.resize(frame.cameras.size());
   return in;
+}
+
+std::map<std::string, SaturationReference> ColourReference(const FrameInputs& in, const std::vector<PlacedObject>& placed,
+                                                           const SequencePlan* plan) {
+  if (plan) return plan->colour_reference;
+  std::set<std::string> categories;
+  for (const PlacedObject& p : placed) categories.insert(CanonicalCategory(p.asset->info.category));
+  return RealSaturation(*in.log, {in.index}, categories, [&](size_t, size_t camera) -> const ImageU8& { return in.Image(camera); });
 }
 
 std::vector<Eigen::Vector3d> RoadPointsNear(const GroundModel& ground, const std::vector<PlacedObject>& objects, double margin_m) {
@@ -433,8 +445,10 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
   std::shared_ptr<const models::Harmonizer> harmonizer = options.harmonizer_model;
   if (!harmonizer && options.harmonizer != "none" && !placed.empty())
     harmonizer = std::make_shared<const models::Harmonizer>(ResolveSynthHarmonizer(options.harmonizer));
+  std::map<std::string, SaturationReference> colour_reference;
+  if (options.camera_look.colour && !placed.empty()) colour_reference = ColourReference(in, placed, plan);
   const CameraStageInput stage{&in, &placed, &light, &scene, harmonizer.get(), &options,
-                               plan ? &plan->colour_reference : nullptr};
+                               options.camera_look.colour ? &colour_reference : nullptr, plan != nullptr};
   for (size_t cam_index = 0; cam_index < in.frame->cameras.size(); ++cam_index) {
     std::optional<CameraOutcome> camera = SynthesizeCamera(stage, cam_index, &out.objects);
     if (!camera) continue;

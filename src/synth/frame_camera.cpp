@@ -270,34 +270,14 @@ int HarmonizeObjects(const models::Harmonizer& harmonizer, const ObjectRender& r
 }
 
 // Colour (camera_look.h CapSaturation): each visible insert no more saturated than the most saturated real object
-// of its category: over the planned sequence's frames (one reference for all of them, so the colour does not
-// change from frame to frame), else in the frame's images (the rig's cameras share their colour processing),
-// measured as synth/realism.h measures objects. Returns one record per insert: what it was capped to, or that no
-// real object of its category was there to say.
+// of its category (the stage's colour reference: the frame's or the planned sequence's, ColourReference).
+// Returns one record per insert: what it was capped to, or that no real object of its category was there to say.
 nlohmann::json CapInsertSaturation(const CameraStageInput& st, const CameraSensor& cam, const ObjectRender& r,
                                    const Composite& c, const Rect& rect, ImageF* linear) {
-  constexpr int kMinRealPixels = 24 * 12;  // realism.h's measurable real objects
   const std::vector<PlacedObject>& placed = *st.placed;
-  std::map<std::string, SaturationReference> reference;
-  if (st.colour_reference) {
-    reference = *st.colour_reference;
-  } else {
-    for (const PlacedObject& p : placed) reference[CanonicalCategory(p.asset->info.category)] = {};
-    const std::vector<CameraSensor>& cameras = st.in->frame->cameras;
-    for (const auto& [category, box] : st.in->annotated) {
-      const auto it = reference.find(CanonicalCategory(category));
-      if (it == reference.end()) continue;
-      for (size_t j = 0; j < cameras.size(); ++j) {
-        if (OutlinePixels(cameras[j], box) < kMinRealPixels) continue;
-        int pixels = 0;
-        const double saturation = MeasureSaturation(st.in->Image(j), cameras[j], box, &pixels);
-        if (pixels < kMinRealPixels) continue;
-        it->second.ceiling = std::max(it->second.ceiling, saturation);
-        ++it->second.views;
-      }
-    }
-  }
-  const char* scope = st.colour_reference ? "sequence" : "frame";
+  SD_CHECK(st.colour_reference != nullptr);
+  const std::map<std::string, SaturationReference>& reference = *st.colour_reference;
+  const char* scope = st.sequence ? "sequence" : "frame";
   nlohmann::json out = nlohmann::json::array();
   for (size_t k = 0; k < placed.size(); ++k) {
     if (c.visible[k] < 4) continue;
@@ -381,7 +361,7 @@ std::optional<CameraOutcome> SynthesizeCamera(const CameraStageInput& st, size_t
     for (int x = rect.x0; x < rect.x1; ++x)
       for (int ch = 0; ch < 3; ++ch) linear.at(x, y, ch) = std::max(0.0f, linear.at(x, y, ch) - c.shadow_only_loss.at(x, y, ch));
 
-  const nlohmann::json colour = look_options.colour ? CapInsertSaturation(st, cam, r, c, rect, &linear) : nlohmann::json();
+  const nlohmann::json colour = st.colour_reference ? CapInsertSaturation(st, cam, r, c, rect, &linear) : nlohmann::json();
 
   CameraOutcome co;
   co.channel = cam.channel;

@@ -2,9 +2,8 @@
 // The stages of SynthesizeFrame (synth/frame.h) and what they hand each other; internal to synth/frame.cpp and
 // synth/frame_camera.cpp. The data flow is the one of docs/architecture.md: inputs -> placement -> the frame's
 // light -> the object scene -> each camera -> the LiDAR.
-#include <optional>
-#include <string>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -17,6 +16,7 @@
 #include "synth/frame.h"
 #include "synth/outcome.h"
 #include "synth/placement.h"
+#include "synth/sequence_plan.h"
 
 namespace sd {
 namespace models {
@@ -74,9 +74,17 @@ struct CameraStageInput {
   const ObjectScene* scene = nullptr;
   const models::Harmonizer* harmonizer = nullptr;  // null: no harmonisation
   const SynthOptions* options = nullptr;
-  // A planned sequence's colour reference (SequencePlan::colour_reference); null: the frame's own real objects.
+  // The camera look's colour reference (ColourReference); null when the look's colour step is off.
   const std::map<std::string, SaturationReference>* colour_reference = nullptr;
+  bool sequence = false;  // that reference is a planned sequence's
 };
+
+// The colour reference of a frame's inserts: per category placed, its most saturated real object (realism.h
+// RealSaturation) over the planned sequence's frames when there is a plan (one reference for all of them, so an
+// object's colour does not change from frame to frame), else over the frame's own images (the rig's cameras
+// share their colour processing).
+std::map<std::string, SaturationReference> ColourReference(const FrameInputs& in, const std::vector<PlacedObject>& placed,
+                                                           const SequencePlan* plan);
 
 // One camera: its light at the objects, the render and the soft shadows, the receiver's depth, occlusion by the
 // real scene, the composite in linear light, harmonisation, and the objects' 2D boxes. Adds the camera's pixels

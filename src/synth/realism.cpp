@@ -163,20 +163,21 @@ LookComparison CompareLooks(const std::vector<ObjectLook>& objects) {
 }
 
 std::map<std::string, SaturationReference> RealSaturation(const Log& log, const std::vector<size_t>& frames,
-                                                          const std::set<std::string>& categories) {
+                                                          const std::set<std::string>& categories, const FrameImage& image) {
   std::map<std::string, SaturationReference> out;
   for (const std::string& c : categories) out[c] = {};
   for (size_t fi : frames) {
     const Frame& frame = log.frames.at(fi);
-    for (const CameraSensor& cam : frame.cameras) {
-      std::optional<ImageU8> image;
+    for (size_t ci = 0; ci < frame.cameras.size(); ++ci) {
+      const CameraSensor& cam = frame.cameras[ci];
+      std::optional<ImageU8> read;
+      const ImageU8* photo = nullptr;
       for (const Annotation& a : frame.annotations) {
         const auto it = out.find(CanonicalCategory(a.category));
-        if (it == out.end()) continue;
-        if (OutlinePixels(cam, a.box) < kMinRealPixels) continue;
-        if (!image) image = ReadImage(cam.image_path, 3);
+        if (it == out.end() || OutlinePixels(cam, a.box) < kMinRealPixels) continue;
+        if (!photo) photo = image ? &image(fi, ci) : &read.emplace(ReadImage(cam.image_path, 3));
         int pixels = 0;
-        const double saturation = MeasureSaturation(*image, cam, a.box, &pixels);
+        const double saturation = MeasureSaturation(*photo, cam, a.box, &pixels);
         if (pixels < kMinRealPixels) continue;
         it->second.ceiling = std::max(it->second.ceiling, saturation);
         ++it->second.views;

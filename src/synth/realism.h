@@ -9,6 +9,7 @@
 //  - saturation: the mean HSV saturation of the outline's pixels.
 #include <array>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <set>
 #include <string>
@@ -63,8 +64,11 @@ LookComparison CompareLooks(const std::vector<ObjectLook>& objects);
 // their cameras (MeasureSaturation; projected outlines of at least 288 pixels), and how many views it rests on.
 // Images are read only where such an object is seen. A planned sequence takes one reference over all its frames,
 // so an object's colour does not change between frames that show a real one and frames that do not.
+// `image` (optional): camera `camera` of frame `frame`'s photograph, where the caller has it decoded already.
+using FrameImage = std::function<const ImageU8&(size_t frame, size_t camera)>;
 std::map<std::string, SaturationReference> RealSaturation(const Log& log, const std::vector<size_t>& frames,
-                                                          const std::set<std::string>& categories);
+                                                          const std::set<std::string>& categories,
+                                                          const FrameImage& image = nullptr);
 
 // Can a classifier tell inserted objects from real ones by these statistics? Features per object: log noise
 // ratio, log edge rise, saturation (a missing measure takes the median of all objects'); an L2-regularised

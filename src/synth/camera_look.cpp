@@ -331,6 +331,27 @@ void ApplySensorToInserts(ImageU8* image, const ImageF& alpha, const ImageF* sha
 }
 
 
+double ImageSaturationCeiling(const ImageU8& image) {
+  std::vector<double> s;
+  for (int y = 0; y < image.height(); y += 2)
+    for (int x = 0; x < image.width(); x += 2) {
+      const uint8_t* p = image.pixel(x, y);
+      const double mx = std::max({p[0], p[1], p[2]}), mn = std::min({p[0], p[1], p[2]});
+      if (mx > 40) s.push_back((mx - mn) / mx);
+    }
+  if (s.empty()) return 0;
+  const size_t k = static_cast<size_t>(0.995 * static_cast<double>(s.size() - 1));
+  std::nth_element(s.begin(), s.begin() + static_cast<long>(k), s.end());
+  return s[k];
+}
+
+double OutlineSaturation(std::vector<double> pixel_saturations) {
+  if (pixel_saturations.empty()) return 0;
+  const size_t k = static_cast<size_t>(0.9 * static_cast<double>(pixel_saturations.size() - 1));
+  std::nth_element(pixel_saturations.begin(), pixel_saturations.begin() + static_cast<long>(k), pixel_saturations.end());
+  return pixel_saturations[k];
+}
+
 SaturationCap CapSaturation(ImageF* linear, const ImageF& outline, const ImageF& weight, double ceiling, double min_scale) {
   SD_CHECK(linear->channels() == 3 && outline.width() == linear->width() && outline.height() == linear->height() &&
            weight.width() == linear->width() && weight.height() == linear->height());
@@ -352,22 +373,23 @@ SaturationCap CapSaturation(ImageF* linear, const ImageF& outline, const ImageF&
     }
     return mx > 0 ? (mx - mn) / mx : 0.0;
   };
-  // The real pixels of the outline measure the same whatever k is: summed once.
-  double fixed = 0;
+  // The real pixels of the outline measure the same whatever k is: computed once.
+  std::vector<double> fixed;
   std::vector<Pixel> inserted;
   for (const Pixel& p : pixels) {
     if (p.w > 0) inserted.push_back(p);
-    else fixed += saturation({linear->at(p.x, p.y, 0), linear->at(p.x, p.y, 1), linear->at(p.x, p.y, 2)});
+    else fixed.push_back(saturation({linear->at(p.x, p.y, 0), linear->at(p.x, p.y, 1), linear->at(p.x, p.y, 2)}));
   }
+  std::vector<double> all;
   const auto saturation_at = [&](double k) {
-    double sum = fixed;
+    all = fixed;
     for (const Pixel& p : inserted) {
       std::array<double, 3> c{linear->at(p.x, p.y, 0), linear->at(p.x, p.y, 1), linear->at(p.x, p.y, 2)};
       const double luminance = 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
       for (double& v : c) v += p.w * (luminance + k * (v - luminance) - v);
-      sum += saturation(c);
+      all.push_back(saturation(c));
     }
-    return sum / pixels.size();
+    return OutlineSaturation(all);
   };
   cap.before = cap.after = saturation_at(1.0);
   if (cap.before <= ceiling) return cap;

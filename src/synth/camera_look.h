@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -74,14 +75,24 @@ double ExtraBlurSigma(double from_px, double to_px);
 // clamped pixels outside it.
 void GaussianBlurRegion(ImageF* image, double sigma, int x0, int y0, int x1, int y1);
 
+// An object's saturation (synth/realism.h and the cap below): the 90th percentile of the HSV saturation of the
+// sRGB-encoded pixels inside its projected box outline: its most colourful surfaces, whatever share of the box
+// its stripes and the background take (a mean would ask a plain red cone to be as dull as a striped one).
+double OutlineSaturation(std::vector<double> pixel_saturations);
+
 // Colour: an asset's albedo is a new object's (a cone's pure orange); the camera's colour response, dirt and haze
-// leave the real ones of a log far less saturated (bench_camera_look: inserted cones 1.7-2.1x the real cones of
-// the same images). Saturation is measured as synth/realism.h measures an object: mean HSV saturation of the
-// sRGB-encoded pixels inside its projected box outline (`outline` > 0.5). When the insert measures above
+// leave the real ones of a log less saturated. Saturation is measured as synth/realism.h measures an object
+// (OutlineSaturation over `outline` > 0.5). When the insert measures above
 // `ceiling` (the most saturated real object of its category in the image), its own pixels (`weight`, 0..1: its
 // coverage) are moved towards their luminance in linear light, c' = Y + k (c - Y), by the k that brings the
 // outline's measure to the ceiling (k >= `min_scale`). `linear`: the composite, linear light, 3 channels.
-// The ceiling of one category: its most saturated real object, over how many views (0: none seen, no cap).
+// The most colourful the camera rendered anything in `image`: the 99.5th percentile of the HSV saturation of its
+// pixels brighter than 40 (dark pixels' saturation is noise), on a 2-pixel grid. The colour cap's ceiling where
+// no real object of an insert's category is seen: no insert more colourful than the image's most colourful half
+// per cent.
+double ImageSaturationCeiling(const ImageU8& image);
+
+// The ceiling of one category: its most saturated real object, over how many views (0: none seen).
 struct SaturationReference {
   double ceiling = 0;
   int views = 0;

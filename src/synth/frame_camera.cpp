@@ -270,14 +270,16 @@ int HarmonizeObjects(const models::Harmonizer& harmonizer, const ObjectRender& r
 }
 
 // Colour (camera_look.h CapSaturation): each visible insert no more saturated than the most saturated real object
-// of its category (the stage's colour reference: the frame's or the planned sequence's, ColourReference).
-// Returns one record per insert: what it was capped to, or that no real object of its category was there to say.
-nlohmann::json CapInsertSaturation(const CameraStageInput& st, const CameraSensor& cam, const ObjectRender& r,
+// of its category (the stage's colour reference: the frame's or the planned sequence's, ColourReference), or,
+// where none is seen, than the image's most colourful pixels (ImageSaturationCeiling). Returns one record per
+// insert: its reference, ceiling, saturation before and after, and the chroma scale applied.
+nlohmann::json CapInsertSaturation(const CameraStageInput& st, const CameraSensor& cam, const ImageU8& original, const ObjectRender& r,
                                    const Composite& c, const Rect& rect, ImageF* linear) {
   const std::vector<PlacedObject>& placed = *st.placed;
   SD_CHECK(st.colour_reference != nullptr);
   const std::map<std::string, SaturationReference>& reference = *st.colour_reference;
   const char* scope = st.sequence ? "sequence" : "frame";
+  double image_ceiling = -1;  // computed on first need
   nlohmann::json out = nlohmann::json::array();
   for (size_t k = 0; k < placed.size(); ++k) {
     if (c.visible[k] < 4) continue;
@@ -285,16 +287,18 @@ nlohmann::json CapInsertSaturation(const CameraStageInput& st, const CameraSenso
     const auto it = reference.find(category);
     const SaturationReference ref = it == reference.end() ? SaturationReference{} : it->second;
     nlohmann::json rec = {{"object", k}, {"category", category}, {"reference", scope}, {"real_views", ref.views}};
-    if (ref.views == 0) {
-      rec["note"] = std::string("no real ") + category + " in the " + scope + "'s images: colour left as rendered";
-      out.push_back(rec);
-      continue;
+    double ceiling = ref.ceiling;
+    if (ref.views == 0) {  // no real object of the category: the image's own most colourful pixels bound it
+      if (image_ceiling < 0) image_ceiling = ImageSaturationCeiling(original);
+      ceiling = image_ceiling;
+      rec["reference"] = "image";
+      rec["note"] = std::string("no real ") + category + " in the " + scope + "'s images: capped at the image's 99.5th percentile";
     }
     ImageF weight(linear->width(), linear->height(), 1, 0.0f);
     for (int y = rect.y0; y < rect.y1; ++y)
       for (int x = rect.x0; x < rect.x1; ++x)
         if (r.render.object.at(x, y) == static_cast<int>(k)) weight.at(x, y) = c.object_alpha.at(x, y);
-    const SaturationCap cap = CapSaturation(linear, ObjectOutline(cam, placed[k].box), weight, ref.ceiling);
+    const SaturationCap cap = CapSaturation(linear, ObjectOutline(cam, placed[k].box), weight, ceiling);
     rec["saturation_ceiling"] = cap.ceiling;
     rec["saturation_before"] = cap.before;
     rec["saturation_after"] = cap.after;
@@ -361,7 +365,7 @@ std::optional<CameraOutcome> SynthesizeCamera(const CameraStageInput& st, size_t
     for (int x = rect.x0; x < rect.x1; ++x)
       for (int ch = 0; ch < 3; ++ch) linear.at(x, y, ch) = std::max(0.0f, linear.at(x, y, ch) - c.shadow_only_loss.at(x, y, ch));
 
-  const nlohmann::json colour = st.colour_reference ? CapInsertSaturation(st, cam, r, c, rect, &linear) : nlohmann::json();
+  const nlohmann::json colour = st.colour_reference ? CapInsertSaturation(st, cam, original, r, c, rect, &linear) : nlohmann::json();
 
   CameraOutcome co;
   co.channel = cam.channel;

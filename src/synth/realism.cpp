@@ -71,14 +71,10 @@ int OutlinePixels(const CameraSensor& camera, const Box3& box_ego) {
 double MeasureSaturation(const ImageU8& image, const CameraSensor& camera, const Box3& box_ego, int* pixels) {
   if (pixels) *pixels = 0;
   if (image.width() != camera.intrinsics.width || image.height() != camera.intrinsics.height) return 0;  // not its image
-  int count = 0;
-  double saturation = 0;
-  ForEachOutlinePixel(camera, box_ego, [&](int x, int y) {
-    saturation += Saturation(image.pixel(x, y));
-    ++count;
-  });
-  if (pixels) *pixels = count;
-  return count ? saturation / count : 0.0;
+  std::vector<double> saturation;
+  ForEachOutlinePixel(camera, box_ego, [&](int x, int y) { saturation.push_back(Saturation(image.pixel(x, y))); });
+  if (pixels) *pixels = static_cast<int>(saturation.size());
+  return OutlineSaturation(std::move(saturation));
 }
 
 ObjectLook MeasureObjectLook(const ImageU8& image, const CameraSensor& camera, const Box3& box_ego, const CameraLook& look) {
@@ -91,14 +87,14 @@ ObjectLook MeasureObjectLook(const ImageU8& image, const CameraSensor& camera, c
   const int y1 = std::min(image.height(), static_cast<int>(std::ceil(r.y2)));
   if (image.width() != camera.intrinsics.width || image.height() != camera.intrinsics.height) return out;  // not its image
   ImageF mask(image.width(), image.height(), 1, 0.0f);
-  double saturation = 0;
+  std::vector<double> saturation;
   ForEachOutlinePixel(camera, box_ego, [&](int x, int y) {
     mask.at(x, y) = 1;
-    saturation += Saturation(image.pixel(x, y));
-    ++out.pixels;
+    saturation.push_back(Saturation(image.pixel(x, y)));
   });
+  out.pixels = static_cast<int>(saturation.size());
   if (out.pixels == 0) return out;
-  out.saturation = saturation / out.pixels;
+  out.saturation = OutlineSaturation(std::move(saturation));
 
   std::vector<double> ratios;
   for (int by = y0 / 8; by * 8 + 8 <= y1; ++by)
@@ -302,7 +298,7 @@ nlohmann::json RealismReport::ToJson() const {
   nlohmann::json j;
   j["protocol"] = "synth/realism.h: over each object's projected 3D box in the output image; noise = 20th percentile of "
                   "its 8x8 blocks' residual sigma over the original image's noise model; edge rise = median 10-90 % rise "
-                  "of its step edges; saturation = mean HSV saturation";
+                  "of its step edges; saturation = 90th percentile of its pixels' HSV saturation";
   j["summaries"] = nlohmann::json::array();
   for (const RealismSummary& s : summaries) {
     nlohmann::json c = ComparisonJson(s.comparison);

@@ -6,7 +6,7 @@
 //    sigma (synth/camera_look.h BlockNoiseSigma, green) over the image's own noise model at the block's level;
 //    1 is the image's flat-region noise, more is grain or texture;
 //  - edge rise: the median 10-90 % rise of the strong step edges inside the outline (EdgeRiseWidths);
-//  - saturation: the mean HSV saturation of the outline's pixels.
+//  - saturation: the 90th percentile of the outline's pixels' HSV saturation (camera_look.h OutlineSaturation).
 #include <array>
 #include <filesystem>
 #include <functional>

@@ -330,14 +330,17 @@ void ApplySensorToInserts(ImageU8* image, const ImageF& alpha, const ImageF* sha
   }
 }
 
+double HsvSaturation(double r, double g, double b) {
+  const double mx = std::max({r, g, b}), mn = std::min({r, g, b});
+  return mx > 0 ? (mx - mn) / mx : 0.0;
+}
 
 double ImageSaturationCeiling(const ImageU8& image) {
   std::vector<double> s;
   for (int y = 0; y < image.height(); y += 2)
     for (int x = 0; x < image.width(); x += 2) {
       const uint8_t* p = image.pixel(x, y);
-      const double mx = std::max({p[0], p[1], p[2]}), mn = std::min({p[0], p[1], p[2]});
-      if (mx > 40) s.push_back((mx - mn) / mx);
+      if (std::max({p[0], p[1], p[2]}) > 40) s.push_back(HsvSaturation(p[0], p[1], p[2]));
     }
   if (s.empty()) return 0;
   const size_t k = static_cast<size_t>(0.995 * static_cast<double>(s.size() - 1));
@@ -364,14 +367,9 @@ SaturationCap CapSaturation(ImageF* linear, const ImageF& outline, const ImageF&
   SaturationCap cap;
   cap.ceiling = ceiling;
   if (pixels.empty()) return cap;
-  const auto saturation = [](std::array<double, 3> c) {
-    double mx = 0, mn = 1;
-    for (double v : c) {
-      const double e = LinearToSrgb(static_cast<float>(std::clamp(v, 0.0, 1.0)));
-      mx = std::max(mx, e);
-      mn = std::min(mn, e);
-    }
-    return mx > 0 ? (mx - mn) / mx : 0.0;
+  const auto saturation = [](const std::array<double, 3>& c) {
+    const auto srgb = [](double v) { return LinearToSrgb(static_cast<float>(std::clamp(v, 0.0, 1.0))); };
+    return HsvSaturation(srgb(c[0]), srgb(c[1]), srgb(c[2]));
   };
   // The real pixels of the outline measure the same whatever k is: computed once.
   std::vector<double> fixed;

@@ -86,6 +86,9 @@ double OutlineSaturation(std::vector<double> pixel_saturations);
 // `ceiling` (the most saturated real object of its category in the image), its own pixels (`weight`, 0..1: its
 // coverage) are moved towards their luminance in linear light, c' = Y + k (c - Y), by the k that brings the
 // outline's measure to the ceiling (k >= `min_scale`). `linear`: the composite, linear light, 3 channels.
+// HSV saturation, (max - min) / max of the three channels in any one scale (8-bit or 0..1 sRGB); 0 for black.
+double HsvSaturation(double r, double g, double b);
+
 // The most colourful the camera rendered anything in `image`: the 99.5th percentile of the HSV saturation of its
 // pixels brighter than 40 (dark pixels' saturation is noise), on a 2-pixel grid. The colour cap's ceiling where
 // no real object of an insert's category is seen: no insert more colourful than the image's most colourful half

@@ -298,7 +298,7 @@ nlohmann::json CapInsertSaturation(const CameraStageInput& st, const CameraSenso
     for (int y = rect.y0; y < rect.y1; ++y)
       for (int x = rect.x0; x < rect.x1; ++x)
         if (r.render.object.at(x, y) == static_cast<int>(k)) weight.at(x, y) = c.object_alpha.at(x, y);
-    const SaturationCap cap = CapSaturation(linear, ObjectOutline(cam, placed[k].box), weight, ceiling);
+    const SaturationCap cap = CapSaturation(linear, ObjectOutlinesMask(cam, {placed[k].box}, 0), weight, ceiling);
     rec["saturation_ceiling"] = cap.ceiling;
     rec["saturation_before"] = cap.before;
     rec["saturation_after"] = cap.after;

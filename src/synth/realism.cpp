@@ -26,20 +26,14 @@ double Median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 
-double Saturation(const uint8_t* p) {
-  const double mx = std::max({p[0], p[1], p[2]}), mn = std::min({p[0], p[1], p[2]});
-  return mx > 0 ? (mx - mn) / mx : 0.0;
-}
+double Saturation(const uint8_t* p) { return HsvSaturation(p[0], p[1], p[2]); }
 
-}  // namespace
-
-namespace {
-
-// Calls fn(x, y) for every pixel of `camera`'s image whose centre lies inside `box_ego`'s projected outline.
+// Calls fn(x, y) for every pixel of `camera`'s image whose centre lies inside `box_ego`'s projected outline;
+// nothing when the outline's rectangle inside the image covers less than `min_area` pixels.
 template <typename Fn>
-void ForEachOutlinePixel(const CameraSensor& camera, const Box3& box_ego, Fn fn) {
+void ForEachOutlinePixel(const CameraSensor& camera, const Box3& box_ego, Fn fn, double min_area = 0) {
   const auto in_image = geometry::ProjectBoxToImage(camera.intrinsics, camera.T_ego_cam.Inverse(), box_ego, kNearM);
-  if (!in_image || in_image->clipped.Empty()) return;
+  if (!in_image || in_image->clipped.Empty() || in_image->clipped.Area() < min_area) return;
   const Box2& r = in_image->clipped;
   const int x0 = std::max(0, static_cast<int>(std::floor(r.x1))), y0 = std::max(0, static_cast<int>(std::floor(r.y1)));
   const int x1 = std::min(camera.intrinsics.width, static_cast<int>(std::ceil(r.x2)));
@@ -50,17 +44,6 @@ void ForEachOutlinePixel(const CameraSensor& camera, const Box3& box_ego, Fn fn)
 }
 
 }  // namespace
-
-ImageF ObjectOutline(const CameraSensor& camera, const Box3& box_ego, int* pixels) {
-  ImageF mask(camera.intrinsics.width, camera.intrinsics.height, 1, 0.0f);
-  int count = 0;
-  ForEachOutlinePixel(camera, box_ego, [&](int x, int y) {
-    mask.at(x, y) = 1;
-    ++count;
-  });
-  if (pixels) *pixels = count;
-  return mask;
-}
 
 int OutlinePixels(const CameraSensor& camera, const Box3& box_ego) {
   int count = 0;
@@ -129,16 +112,8 @@ ObjectLook MeasureObjectLook(const ImageU8& image, const CameraSensor& camera, c
 }
 
 ImageF ObjectOutlinesMask(const CameraSensor& camera, const std::vector<Box3>& boxes_ego, int min_pixels) {
-  const int w = camera.intrinsics.width, h = camera.intrinsics.height;
-  ImageF mask(w, h, 1, 0.0f);
-  for (const Box3& box : boxes_ego) {
-    const auto in_image = geometry::ProjectBoxToImage(camera.intrinsics, camera.T_ego_cam.Inverse(), box, kNearM);
-    if (!in_image || in_image->clipped.Area() < min_pixels) continue;
-    const Box2& r = in_image->clipped;
-    for (int y = static_cast<int>(r.y1); y < std::min(h, static_cast<int>(std::ceil(r.y2))); ++y)
-      for (int x = static_cast<int>(r.x1); x < std::min(w, static_cast<int>(std::ceil(r.x2))); ++x)
-        if (geometry::InsideConvexPolygon(in_image->outline, {x + 0.5, y + 0.5})) mask.at(x, y) = 1;
-  }
+  ImageF mask(camera.intrinsics.width, camera.intrinsics.height, 1, 0.0f);
+  for (const Box3& box : boxes_ego) ForEachOutlinePixel(camera, box, [&](int x, int y) { mask.at(x, y) = 1; }, min_pixels);
   return mask;
 }
 

@@ -38,10 +38,8 @@ struct ObjectLook {
 // Measures `box_ego` (ego frame) in `image` of `camera`, against the image's `look` (its noise model).
 ObjectLook MeasureObjectLook(const ImageU8& image, const CameraSensor& camera, const Box3& box_ego, const CameraLook& look);
 
-// The outline MeasureObjectLook measures over: the projected box (near-plane clipped) as a mask of `camera`'s
-// image size, 1 inside; `pixels` (optional) counts them.
-ImageF ObjectOutline(const CameraSensor& camera, const Box3& box_ego, int* pixels = nullptr);
-// How many pixels that outline holds, without the mask.
+// How many pixels the outline MeasureObjectLook measures over holds (the projected box, near-plane clipped; as a
+// mask: ObjectOutlinesMask).
 int OutlinePixels(const CameraSensor& camera, const Box3& box_ego);
 // Its saturation alone (ObjectLook::saturation); 0 with no pixel inside the image.
 double MeasureSaturation(const ImageU8& image, const CameraSensor& camera, const Box3& box_ego, int* pixels = nullptr);

@@ -149,7 +149,12 @@ TriangleMesh MarchingCubes(const ScalarGrid& grid, float iso) {
           const float v0 = grid.values[node], v1 = grid.values[node + stride[axis]];
           float s = (iso - v0) / (v1 - v0);
           if (!std::isfinite(s)) s = 0.5f;  // a NaN endpoint: no better guess than the middle
-          s = std::clamp(s, 0.0f, 1.0f);
+          // Strictly inside the edge: a sample exactly at the iso value would otherwise put the vertices of all its
+          // crossed edges at one point, a surface pinched there, which any welding by position (refinement's, the
+          // texture's) fuses into non-manifold edges. A hundredth of a voxel is far below the surface's accuracy
+          // and far above welding tolerances (1e-6 of the diagonal: under 0.004 voxel at 2048^3).
+          constexpr float kInset = 0.01f;
+          s = std::clamp(s, kInset, 1.0f - kInset);
           Eigen::Vector3f offset(static_cast<float>(i), static_cast<float>(j), static_cast<float>(k));
           offset[axis] += s;
           mesh.positions[id] = grid.origin + grid.voxel_size * offset;

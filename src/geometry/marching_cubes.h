@@ -28,7 +28,9 @@ struct ScalarGrid {
 // Iso-surface at `iso`, "inside" where value > iso; faces counter-clockwise seen from outside, vertices
 // shared between faces (a closed field gives a watertight manifold mesh: the ambiguous cases are resolved
 // consistently). Fields must be <= iso on the grid border for the result to be closed.
-// One vertex per crossed grid edge (linear interpolation), plus, rarely, a centre vertex for a cell whose
+// One vertex per crossed grid edge (linear interpolation, kept a hundredth of a voxel from the edge's ends so that
+// no two vertices coincide and the mesh is manifold by position as well as by index), plus, rarely, a centre
+// vertex for a cell whose
 // contour loop cannot be fanned without an edge in a cell face. Ambiguous faces use the asymptotic decider.
 // NaN samples count as outside. Positions and faces only (no normals). Parallel over z-slabs.
 TriangleMesh MarchingCubes(const ScalarGrid& grid, float iso);

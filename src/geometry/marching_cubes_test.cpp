@@ -150,6 +150,14 @@ TEST(MarchingCubes, RandomFieldsGiveClosedOrientedManifolds) {
     EXPECT_EQ(report.euler_characteristic, t.euler) << seed;
     EXPECT_EQ(t.euler % 2, 0) << seed;  // closed orientable surfaces: chi = 2 (components - genus)
     EXPECT_GT(SignedVolume(m), 0) << seed;
+    // Manifold by position too, not only by index: a sample exactly at the iso value must not put the vertices
+    // of its several crossed edges at one point, which welding (as refinement does) would fuse into a
+    // non-manifold edge.
+    std::vector<Eigen::Vector3f> positions = m.positions;
+    std::vector<Eigen::Vector3i> faces = m.faces;
+    WeldVertices(&positions, &faces, 1e-6f * static_cast<float>(g.dims.cast<float>().norm()));
+    const TopologyReport welded = AnalyzeTopology(int(positions.size()), faces);
+    EXPECT_TRUE(welded.IsWatertight()) << "seed " << seed << ": " << welded.Describe();
   }
 }
 

@@ -3,9 +3,10 @@
 //
 // Objects: the PandaSet sequence of ../shared/data (12 frames, 6 cameras, two LiDARs, tracks): every cone, the
 // road roller, and the parked cars the side cameras pass; the repo's nuScenes keyframe (one frame: cones,
-// barriers, cars); the repo's KITTI frames (cars, one camera). Per object: harvest every view of its track, hold
+// barriers, cars); the KITTI frames of ../shared (else the repo's; cars, one camera). Per object: harvest every view of its track, hold
 // out the middle one, build the asset, and report
-//   views      real views used / candidates (crops before the whole-and-unhidden and spread selection)
+//   views      real views used / candidates (crops before the unhidden and spread selection); "+N cut": of the
+//              views used, N show the object cut by the image border (their pixels past it unknown)
 //   held IoU   silhouette IoU of the asset redrawn at the held-out real view against that view's mask (the mask
 //              is the segmenter's, itself an estimate: read the figure as agreement, not ground truth)
 //   held PSNR  masked PSNR of the asset's colour there (unlit base colour against the photo's pixels)
@@ -154,7 +155,9 @@ int main(int argc, char** argv) {
     for (const Target& t : Targets("nuscenes", logs.back(), wanted({"traffic_cone", "barrier", "car"}), 20)) targets.push_back(t);
   }
   if (sets.count("kitti")) {
-    logs.push_back(OpenLog(root / "data/driving/kitti-object"));
+    // ../shared's KITTI object sample has the repo's three frames and two more (a car 13 m ahead in 000003).
+    const fs::path p = shared / "kitti-object-openpcdet";
+    logs.push_back(OpenLog(fs::exists(p) ? p : root / "data/driving/kitti-object"));
     for (const Target& t : Targets("kitti", logs.back(), wanted({"car"}), 25)) targets.push_back(t);
   }
   if (static_cast<int>(targets.size()) > max_objects) targets.resize(max_objects);
@@ -193,16 +196,18 @@ int main(int argc, char** argv) {
       auto fig = [&](const char* key) { return q.contains(key) ? q[key].get<double>() : -1.0; };
       const double iou = fig(quality::kHeldOutSilhouetteIou), psnr = fig("heldout_masked_psnr_db");
       const double p2m = fig(quality::kLidarPointToMeshMedianM), real = fig(quality::kRealTextureFraction);
-      std::printf("%-9s %-30s %3zu/%-3d %5d %8.3f %8.2f %8.4f %8.2f %7.2f  %s\n", t.set.c_str(), t.label.c_str(),
+      int cut = 0;
+      for (const MultiView& v : object.views) cut += !IsWhole(v);
+      std::printf("%-9s %-30s %3zu/%-3d %5d %8.3f %8.2f %8.4f %8.2f %7.2f  %s%s\n", t.set.c_str(), t.label.c_str(),
                   object.views.size(), object.candidate_views, object.frames, iou, psnr, p2m, real, seconds,
-                  ToString(fit.prior));
+                  ToString(fit.prior), cut ? (" (" + std::to_string(cut) + " cut)").c_str() : "");
       std::fflush(stdout);
       const std::string cls = object.category;
       if (iou >= 0) iou_by[cls].push_back(iou), psnr_by[cls].push_back(psnr);
       if (p2m >= 0) p2m_by[cls].push_back(p2m);
       sec_by[cls].push_back(seconds);
       results.push_back({{"set", t.set}, {"object", t.label}, {"category", cls}, {"views", object.views.size()},
-                         {"candidate_views", object.candidate_views}, {"frames", object.frames},
+                         {"candidate_views", object.candidate_views}, {"cut_views", cut}, {"frames", object.frames},
                          {"seconds", seconds}, {"quality", q}, {"source", object.source}});
       // Turntable: the largest real crop, then the asset all round.
       const int size = 160;

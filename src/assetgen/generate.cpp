@@ -169,8 +169,10 @@ ViewAgreement AgreementAtView(const GeneratedMesh& g, const MultiView& view, con
   for (auto& p : back.positions) p = Rt * ((p - g.translation.cast<float>()) / float(g.scale));
   back.normals.clear();
   const AlbedoRender drawn = RenderAlbedo(back, view.view, 2);
+  // Pixels past the source image's border (a view cut by it) are not judged.
   double inter = 0, uni = 0;
   for (size_t i = 0; i < truth.vector().size(); ++i) {
+    if (!view.known.empty() && view.known.vector()[i] <= 0.5f) continue;
     const bool p = drawn.mask.vector()[i] > 0.5f, t = truth.vector()[i] > 0.5f;
     inter += p && t, uni += p || t;
   }
@@ -239,7 +241,8 @@ GeneratedMesh GenerateFromHull(const HarvestedObject& object, const MultiViewSet
   hull.tolerated_outside_views = fit.real_views >= 6 ? 1 : 0;
   hull.free_segments = object.free_segments;
   std::vector<geometry::SilhouetteView> silhouettes;
-  for (const MultiView& v : views) silhouettes.push_back({v.view.camera, v.view.T_world_cam.Inverse(), v.mask});
+  // A view cut by the image border carves nothing past it.
+  for (const MultiView& v : views) silhouettes.push_back({v.view.camera, v.view.T_world_cam.Inverse(), MaskOrUnknown(v)});
   TriangleMesh coarse = geometry::VisualHull(silhouettes, hull);
   std::string coarse_method = Msg() << "visual hull of " << fit.real_views << " real + " << fit.synthetic_views
                                     << " " << ToString(fit.prior) << " views in the " << object.size.x() << " x "
@@ -291,16 +294,39 @@ void FillHarvestQuality(const HarvestedObject& object, const GeneratedMesh& g, c
 GeneratedMesh GenerateFromHarvest(const HarvestedObject& object, GenerateOptions options, HarvestFit* fit_out) {
   HarvestFit fit;
   if (object.views.empty()) throw InputError({}, "the harvested object has no views");
-  // Held out: the middle view, when at least two others remain to fit.
-  if (object.views.size() >= 3) fit.held_out.push_back(MiddleView(object.views));
+  // Held out: the middle one of the whole views, else of all (a view cut by the image border is scored on the
+  // pixels it sees), when at least two views remain to fit.
+  std::vector<size_t> whole, all;
+  for (size_t i = 0; i < object.views.size(); ++i) {
+    all.push_back(i);
+    if (IsWhole(object.views[i])) whole.push_back(i);
+  }
+  if (object.views.size() >= 3) {
+    const std::vector<size_t>& from = whole.empty() ? all : whole;
+    MultiViewSet candidates;
+    for (size_t i : from) candidates.push_back(object.views[i]);
+    fit.held_out.push_back(from[MiddleView(candidates)]);
+  }
   MultiViewSet views;
   for (size_t i = 0; i < object.views.size(); ++i)
     if (std::find(fit.held_out.begin(), fit.held_out.end(), i) == fit.held_out.end()) views.push_back(object.views[i]);
-  fit.real_views = static_cast<int>(views.size());
 
   // The prior: the category's, a revolve demoted when the largest silhouette is not mirror-symmetric.
   fit.prior = DefaultShapePrior(object.category);
   fit.prior_reason = "category " + object.category;
+  if (fit.prior == ShapePrior::kRevolve) {
+    // A profile is read off whole silhouettes only.
+    MultiViewSet whole_views;
+    for (const MultiView& v : views)
+      if (IsWhole(v)) whole_views.push_back(v);
+    if (whole_views.empty()) {
+      fit.prior = ShapePrior::kHull;
+      fit.prior_reason = Msg() << "category " << object.category << ", but no view shows it whole";
+    } else {
+      views = std::move(whole_views);
+    }
+  }
+  fit.real_views = static_cast<int>(views.size());
   if (fit.prior == ShapePrior::kRevolve) {
     // A log's masks are a segmenter's at a few dozen pixels, shaded on one side: less symmetric than a photo's
     // (the photo path asks 0.85); what is far below is no surface of revolution (a fallen or crushed cone).

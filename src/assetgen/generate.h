@@ -93,7 +93,8 @@ nlohmann::json MeshQuality(const GeneratedMesh& generated);
 
 // The finished asset moved back into its views' frame and drawn (unlit base colour) at `view`: its silhouette
 // IoU with `truth` (a mask of the view's size) and the PSNR of its colour against the view's, in sRGB, inside
-// `truth`. At a view the asset was made from this is a self-consistency figure, at a held-out one a test.
+// `truth`; pixels the view marks unknown (past its source image's border) are not judged. At a view the asset was
+// made from this is a self-consistency figure, at a held-out one a test.
 struct ViewAgreement {
   double silhouette_iou = 0;
   double masked_psnr_db = 0;

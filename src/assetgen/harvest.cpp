@@ -24,6 +24,8 @@ namespace sd {
 namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
+// A view shows the object whole when at most this fraction of its projected box lies outside the image.
+constexpr double kWholeTruncation = 0.01;
 
 // The object frame in the ego frame: the box's frame moved down to the centre of its bottom face.
 Rigid3d ObjectInEgo(const Box3& box) {
@@ -125,31 +127,38 @@ ImageF RefineMask(const models::Segmenter& segmenter, const ImageU8& crop, const
   return out;
 }
 
-// The crop padded to a square about its centre and resampled to `size`: the view's colour (linear), mask and
-// camera (the source camera shifted to the window and scaled).
+// A window of the source image, resampled to a square view of `size` pixels: the view's colour (linear), mask and
+// camera (the source camera shifted to the window and scaled). `window` is square, in source pixels; the crop (of
+// `crop_rect`, resampled by `crop_scale`) supplies colour and mask, source pixels outside it are background. With
+// `mark_unknown`, view pixels beyond the source image's border are marked unknown (MultiView::known).
 struct SquareView {
   PinholeCamera camera;
-  ImageF color, mask;
+  ImageF color, mask, known;
 };
 SquareView ToSquareView(const ImageU8& crop, const ImageF& mask, const PinholeCamera& source, const Box2& crop_rect,
-                        double crop_scale, int size) {
-  const int w = crop.width(), h = crop.height(), side = std::max(w, h);
-  const double ox = 0.5 * (side - w), oy = 0.5 * (side - h);  // crop pixel (0, 0) sits at (ox, oy) of the square
-  const double r = static_cast<double>(size) / side;
+                        double crop_scale, const Box2& window, int size, bool mark_unknown) {
+  const int w = crop.width(), h = crop.height();
+  const double r = static_cast<double>(size) / (window.x2 - window.x1);  // view pixels per source pixel
   SquareView v;
   v.camera = source;
   v.camera.width = v.camera.height = size;
-  v.camera.fx = source.fx * crop_scale * r;
-  v.camera.fy = source.fy * crop_scale * r;
-  v.camera.cx = ((source.cx - crop_rect.x1) * crop_scale + ox) * r;
-  v.camera.cy = ((source.cy - crop_rect.y1) * crop_scale + oy) * r;
+  v.camera.fx = source.fx * r;
+  v.camera.fy = source.fy * r;
+  v.camera.cx = (source.cx - window.x1) * r;
+  v.camera.cy = (source.cy - window.y1) * r;
   const ImageF linear = ToLinear(crop);
   v.color = ImageF(size, size, 3, 0.0f);
   v.mask = ImageF(size, size, 1, 0.0f);
+  if (mark_unknown) v.known = ImageF(size, size, 1, 1.0f);
   for (int y = 0; y < size; ++y)
     for (int x = 0; x < size; ++x) {
-      // Continuous crop coordinates of the view pixel's centre.
-      const double u = (x + 0.5) / r - ox, t = (y + 0.5) / r - oy;
+      // The view pixel's centre in source, then in (continuous) crop coordinates.
+      const double sx = window.x1 + (x + 0.5) / r, sy = window.y1 + (y + 0.5) / r;
+      if (mark_unknown && (sx < 0 || sy < 0 || sx >= source.width || sy >= source.height)) {
+        v.known.at(x, y) = 0.0f;
+        continue;
+      }
+      const double u = (sx - crop_rect.x1) * crop_scale, t = (sy - crop_rect.y1) * crop_scale;
       if (u < 0 || t < 0 || u > w || t > h) continue;
       float c[3], m;
       SampleBilinear(linear, u - 0.5, t - 0.5, c);
@@ -160,27 +169,35 @@ SquareView ToSquareView(const ImageU8& crop, const ImageF& mask, const PinholeCa
   return v;
 }
 
-// Farthest-point selection of viewing directions, starting from the view that shows the object largest.
+// Farthest-point selection of viewing directions: first among the whole views (`whole`), starting from the one
+// that shows the object largest; then views cut by the image border join, farthest first, where they look from a
+// direction at least `min_gap` (unit-vector distance) from every whole view chosen (they add an outline where no
+// whole view has one; among themselves they differ in what the border hides, so they are not spaced).
 std::vector<size_t> SpreadViews(const std::vector<Eigen::Vector3d>& directions, const std::vector<int>& size_px,
-                                size_t limit) {
+                                const std::vector<bool>& whole, size_t limit, double min_gap) {
   std::vector<size_t> chosen;
-  if (directions.empty()) return chosen;
-  const size_t first = std::max_element(size_px.begin(), size_px.end()) - size_px.begin();
-  chosen.push_back(first);
-  std::vector<double> nearest(directions.size(), std::numeric_limits<double>::infinity());
-  while (chosen.size() < std::min(limit, directions.size())) {
-    const Eigen::Vector3d& last = directions[chosen.back()];
-    size_t best = directions.size();
-    double best_d = -1;
-    for (size_t i = 0; i < directions.size(); ++i) {
-      nearest[i] = std::min(nearest[i], (directions[i] - last).norm());
-      if (std::find(chosen.begin(), chosen.end(), i) != chosen.end()) continue;
-      // Ties (the same direction seen again) go to the larger view.
-      const double d = nearest[i] + 1e-6 * size_px[i];
-      if (d > best_d) best_d = d, best = i;
+  const double inf = std::numeric_limits<double>::infinity();
+  std::vector<double> nearest(directions.size(), inf), nearest_whole(directions.size(), inf);
+  for (bool pass_whole : {true, false}) {
+    while (chosen.size() < limit) {
+      size_t best = directions.size();
+      double best_d = -1;
+      for (size_t i = 0; i < directions.size(); ++i) {
+        if (whole[i] != pass_whole || std::find(chosen.begin(), chosen.end(), i) != chosen.end()) continue;
+        if (!pass_whole && nearest_whole[i] < min_gap) continue;
+        // The first view: the largest; then the farthest from those chosen, ties (the same direction seen again)
+        // to the larger view.
+        const double d = (std::isinf(nearest[i]) ? 0.0 : nearest[i]) + 1e-6 * size_px[i];
+        if (d > best_d) best_d = d, best = i;
+      }
+      if (best == directions.size()) break;
+      chosen.push_back(best);
+      for (size_t j = 0; j < directions.size(); ++j) {
+        const double d = (directions[j] - directions[best]).norm();
+        nearest[j] = std::min(nearest[j], d);
+        if (pass_whole) nearest_whole[j] = std::min(nearest_whole[j], d);
+      }
     }
-    if (best == directions.size()) break;
-    chosen.push_back(best);
   }
   std::sort(chosen.begin(), chosen.end());
   return chosen;
@@ -225,6 +242,9 @@ HarvestedObject HarvestObject(const Log& log, const HarvestTarget& target, const
     throw InputError(log.source, Msg() << "frame " << frame0->token << ": the object's box size " << out.size.transpose()
                                        << " is not positive");
 
+  if (!(o.max_truncation >= 0 && o.max_truncation < 1))
+    throw InputError({}, Msg() << "harvest: max truncation " << o.max_truncation << " outside [0, 1)");
+  const double max_cut = o.use_truncated_views ? o.max_truncation : kWholeTruncation;
   const models::Segmenter segmenter = models::Segmenter::Resolve(o.segmenter);
   mining::LogCropOptions crop_options;
   crop_options.context = o.context;
@@ -241,8 +261,10 @@ HarvestedObject HarvestObject(const Log& log, const HarvestTarget& target, const
     Eigen::Vector3d direction;  // unit, object centre to camera, object frame
     mining::ObjectCrop crop;
     std::vector<Eigen::Vector2d> polygon;  // the projected box, crop pixels
+    Box2 outline;                          // the projected box's bounds, source pixels, past the border if cut
   };
   std::vector<Candidate> candidates;
+  int refused_cut = 0, refused_hidden = 0;
   const Eigen::Vector3f lo(-0.5f * float(out.size.x()) - float(o.lidar_margin_m), -0.5f * float(out.size.y()) - float(o.lidar_margin_m),
                            float(o.ground_clearance_m));
   const Eigen::Vector3f hi(0.5f * float(out.size.x()) + float(o.lidar_margin_m), 0.5f * float(out.size.y()) + float(o.lidar_margin_m),
@@ -335,7 +357,14 @@ HarvestedObject HarvestObject(const Log& log, const HarvestTarget& target, const
       c.info.truncation = std::max(0.0, crop.item.truncation);
       c.info.occlusion = std::max(0.0, crop.item.occlusion);
       c.info.object_px = static_cast<int>(std::min(crop.item.box2d.x2 - crop.item.box2d.x1, crop.item.box2d.y2 - crop.item.box2d.y1));
-      if (c.info.truncation > o.max_truncation || c.info.occlusion > o.max_occlusion) continue;
+      if (c.info.truncation > max_cut) {
+        ++refused_cut;
+        continue;
+      }
+      if (c.info.occlusion > o.max_occlusion) {
+        ++refused_hidden;
+        continue;
+      }
       const Rigid3d T_obj_cam = T_obj_ego * cam->T_ego_cam;
       const Eigen::Vector3d to_cam = T_obj_cam.translation - Eigen::Vector3d(0, 0, out.size.z() / 2);
       c.info.distance_m = to_cam.norm();
@@ -344,6 +373,11 @@ HarvestedObject HarvestObject(const Log& log, const HarvestTarget& target, const
       c.direction = to_cam.normalized();
       // The projected box in crop pixels.
       c.polygon = geometry::ProjectBoxOutline(cam->intrinsics, cam->T_ego_cam.Inverse(), ann->box, crop_options.near_m);
+      if (c.polygon.size() < 3) continue;
+      c.outline = Box2{1e18, 1e18, -1e18, -1e18};
+      for (const Eigen::Vector2d& p : c.polygon)
+        c.outline = Box2{std::min(c.outline.x1, p.x()), std::min(c.outline.y1, p.y()), std::max(c.outline.x2, p.x()),
+                         std::max(c.outline.y2, p.y())};
       for (Eigen::Vector2d& p : c.polygon)
         p = (p - Eigen::Vector2d(crop.item.crop_rect.x1, crop.item.crop_rect.y1)) * crop.item.crop_scale;
       c.view.view = {Msg() << "f" << frame->token << "_" << cam->channel, cam->intrinsics, T_obj_cam};
@@ -356,13 +390,21 @@ HarvestedObject HarvestObject(const Log& log, const HarvestTarget& target, const
   if (progress) progress->Finish();
   if (candidates.empty())
     throw InputError(log.source, Msg() << "the object (" << out.category << ", frame " << frame0->token
-                                       << ") is seen whole by no camera: " << out.candidate_views
-                                       << " crops, all cut by the image border, hidden, or under " << o.min_object_px
-                                       << " px");
+                                       << ") is seen by no camera: of " << out.candidate_views << " crops at least "
+                                       << o.min_object_px << " px, " << refused_cut << " more than "
+                                       << static_cast<int>(std::lround(100 * max_cut)) << "% cut by the image border, "
+                                       << refused_hidden << " more than "
+                                       << static_cast<int>(std::lround(100 * o.max_occlusion))
+                                       << "% hidden behind nearer LiDAR returns");
   std::vector<Eigen::Vector3d> directions;
   std::vector<int> sizes;
-  for (const Candidate& c : candidates) directions.push_back(c.direction), sizes.push_back(c.info.object_px);
-  for (size_t i : SpreadViews(directions, sizes, static_cast<size_t>(std::max(1, o.max_views)))) {
+  std::vector<bool> whole;
+  for (const Candidate& c : candidates)
+    directions.push_back(c.direction), sizes.push_back(c.info.object_px), whole.push_back(c.info.truncation <= kWholeTruncation);
+  // Views cut by the border join where they add a direction 10 degrees from every whole one.
+  const double min_gap = 2 * std::sin(0.5 * 10 * kDeg);
+  for (size_t i : SpreadViews(directions, sizes, whole, static_cast<size_t>(std::max(1, o.max_views)),
+                              min_gap)) {
     Candidate& c = candidates[i];
     const mining::ObjectCrop& crop = c.crop;
     // Seeds: the object's returns from every frame (object frame), projected into this crop.
@@ -373,10 +415,27 @@ HarvestedObject HarvestObject(const Log& log, const HarvestTarget& target, const
       if (const auto uv = source_camera.Project(T_cam_obj * p.cast<double>(), crop_options.near_m))
         seeds.push_back((*uv - Eigen::Vector2d(crop.item.crop_rect.x1, crop.item.crop_rect.y1)) * crop.item.crop_scale);
     const ImageF mask = RefineMask(segmenter, crop.image, crop.mask, c.polygon, seeds, crop.item.mask_source, &c.info.mask_method);
-    const SquareView sq = ToSquareView(crop.image, mask, source_camera, crop.item.crop_rect, crop.item.crop_scale, o.view_size);
+    // The view's window. A whole object's is its crop padded to a square (the crop is the projected box with
+    // context, clipped to the image). A cut one's is the square about the whole projected box with the same
+    // context, reaching past the image border: the view frames the whole object and marks the pixels it cannot see.
+    const bool cut = c.info.truncation > kWholeTruncation;
+    double side, cx, cy;
+    if (cut) {
+      side = (1 + 2 * o.context) * std::max(c.outline.x2 - c.outline.x1, c.outline.y2 - c.outline.y1);
+      cx = 0.5 * (c.outline.x1 + c.outline.x2), cy = 0.5 * (c.outline.y1 + c.outline.y2);
+    } else {
+      // In the crop's own pixels (it may be resampled), then in source pixels.
+      const double w = crop.image.width(), h = crop.image.height(), k = crop.item.crop_scale;
+      side = std::max(w, h) / k;
+      cx = crop.item.crop_rect.x1 + 0.5 * w / k, cy = crop.item.crop_rect.y1 + 0.5 * h / k;
+    }
+    const Box2 window{cx - 0.5 * side, cy - 0.5 * side, cx + 0.5 * side, cy + 0.5 * side};
+    const SquareView sq = ToSquareView(crop.image, mask, source_camera, crop.item.crop_rect, crop.item.crop_scale,
+                                       window, o.view_size, cut);
     c.view.view.camera = sq.camera;
     c.view.color = sq.color;
     c.view.mask = sq.mask;
+    c.view.known = sq.known;
     c.view.normals = ImageF(o.view_size, o.view_size, 3, 0.0f);
     out.views.push_back(std::move(c.view));
     out.view_info.push_back(candidates[i].info);
@@ -391,6 +450,7 @@ HarvestedObject HarvestObject(const Log& log, const HarvestTarget& target, const
       for (const MultiView& v : out.views) {
         const auto uv = v.view.camera.Project(v.view.T_world_cam.Inverse() * p.cast<double>());
         if (!uv || !v.view.camera.InImage(*uv)) continue;
+        if (!v.known.empty() && v.known.at(static_cast<int>(uv->x()), static_cast<int>(uv->y())) < 0.5f) continue;
         ++seen;
         // Within two pixels of the mask: the outline's own uncertainty.
         bool in = false;
@@ -633,7 +693,7 @@ MultiViewSet SymmetryViews(const MultiViewSet& real, ShapePrior prior, int limit
       MultiView v = r;
       v.view.T_world_cam = Rigid3d(M * r.view.T_world_cam.Rotation() * F, M * r.view.T_world_cam.translation);
       v.view.camera.cx = r.view.camera.width - r.view.camera.cx;
-      for (ImageF* img : {&v.color, &v.mask, &v.normals}) {
+      for (ImageF* img : {&v.color, &v.mask, &v.normals, &v.known}) {
         if (img->empty()) continue;
         ImageF flipped(img->width(), img->height(), img->channels());
         for (int y = 0; y < img->height(); ++y)

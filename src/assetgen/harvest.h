@@ -13,8 +13,10 @@
 // Views: the object's crop in each camera image (mining/log_crops.h), its mask the LiDAR returns' footprint
 // refined to the image's outline by the segmenter (GrabCut seeded by the returns, inside the projected box), padded
 // to a square about the object and resampled to `view_size`, with the camera shifted and scaled to match. Views in
-// which the object is cut by the image border or hidden behind nearer returns are dropped (a silhouette must show
-// the whole object); of the rest at most `max_views` are kept, spread over the directions they see it from.
+// which the object is hidden behind nearer returns are dropped. A view in which it is cut by the image border
+// still frames the whole object, its pixels past the border marked unknown: such views are used where no whole
+// view sees the object from their direction. At most `max_views` are kept, spread over the directions they see it
+// from, whole views first.
 #include <string>
 #include <utility>
 #include <vector>
@@ -33,7 +35,11 @@ struct HarvestOptions {
   int view_size = 256;            // pixels, square
   double context = 0.3;           // margin about the projected box, of its size, per side (background colour)
   int min_object_px = 24;         // shorter side of the object's box in the source image
-  double max_truncation = 0.01;   // fraction of the projected box outside the image
+  // Views of an object cut by the image border (up to `max_truncation` of its projected box outside the image)
+  // frame the whole object and mark the pixels past the border unknown (MultiView::known); they join the whole
+  // views where they add a direction (a parked car the side cameras never see whole). Off: whole views only.
+  bool use_truncated_views = true;
+  double max_truncation = 0.5;
   double max_occlusion = 0.2;     // fraction of the object's image hidden behind nearer LiDAR returns
   int max_views = 16;
   double lidar_margin_m = 0.08;   // returns within the box grown by this are the object's
@@ -76,8 +82,9 @@ struct HarvestedObject {
   std::string source;         // provenance line: log, track, frames, cameras
 };
 
-// InputError naming the log for: no frame `frame_token`, no annotation near the box there, an object seen whole by
-// no camera (every crop truncated, hidden or too small), camera images that cannot be read.
+// InputError naming the log for: no frame `frame_token`, no annotation near the box there, an object no camera
+// shows (every crop cut by more than max_truncation, hidden or too small; or, with use_truncated_views off, none
+// whole), camera images that cannot be read.
 HarvestedObject HarvestObject(const Log& log, const HarvestTarget& target, const HarvestOptions& options = {});
 
 // The axis of a surface of revolution standing upright in the object frame: the vertical line through the

@@ -10,7 +10,9 @@
 #include "core/error.h"
 #include "datasets/categories.h"
 #include "datasets/readers.h"
+#include "geometry/box_projection.h"
 #include "geometry/closest_point.h"
+#include "io/image_io.h"
 #include "testing/testing.h"
 
 namespace sd {
@@ -166,6 +168,86 @@ TEST(HarvestObject, ABarrierOfTheRepoKeyframeBecomesAMetricWatertightAsset) {
     EXPECT_LE(g.extent[k], object.size[k] * 1.15) << k;
     EXPECT_GE(g.extent[k], object.size[k] * 0.6) << k;
   }
+}
+
+// The keyframe's best-seen barrier, its camera image cut so that the image border crosses the barrier (the
+// left 35 % of its box gone; the camera's principal point moved with the cut): the view still frames the whole
+// box, the pixels past the border are marked unknown, and the asset fills its box as the uncut one does (those
+// pixels carve nothing; counted as background they would shave the cut end off).
+TEST(HarvestObject, AnObjectCutByTheImageBorderStillFillsItsBox) {
+  Log log = OpenLog(testing::RepoData(kKeyframe));
+  Frame& frame = log.frames.front();
+  const Annotation* best = nullptr;
+  size_t most = 0;
+  for (const Annotation& a : frame.annotations) {
+    const auto c = FindCategory(a.category);
+    if (!c || c->name != "barrier") continue;
+    try {
+      const HarvestedObject o = HarvestObject(log, {frame.token, a.box});
+      if (o.views.size() == 1 && o.points.size() > most) most = o.points.size(), best = &a;
+    } catch (const InputError&) {
+    }
+  }
+  ASSERT_NE(best, nullptr);
+  const Box3 box = best->box;
+  const HarvestedObject uncut = HarvestObject(log, {frame.token, box});
+  ASSERT_TRUE(IsWhole(uncut.views.front()));
+  CameraSensor* cam = nullptr;
+  for (CameraSensor& c : frame.cameras)
+    if (c.channel == uncut.view_info.front().camera) cam = &c;
+  ASSERT_NE(cam, nullptr);
+  const auto in_image = geometry::ProjectBoxToImage(cam->intrinsics, cam->T_ego_cam.Inverse(), box, 0.1);
+  ASSERT_TRUE(in_image);
+  const int cut_x = static_cast<int>(in_image->clipped.x1 + 0.35 * (in_image->clipped.x2 - in_image->clipped.x1));
+  const ImageU8 image = ReadImage(cam->image_path, 3);
+  ImageU8 cropped(image.width() - cut_x, image.height(), 3);
+  for (int y = 0; y < image.height(); ++y)
+    for (int x = 0; x < cropped.width(); ++x)
+      for (int c = 0; c < 3; ++c) cropped.at(x, y, c) = image.at(x + cut_x, y, c);
+  testing::TempDir tmp;
+  cam->image_path = tmp / "cut.png";
+  WriteImage(cam->image_path, cropped);
+  cam->intrinsics.cx -= cut_x;
+  cam->intrinsics.width = cropped.width();
+
+  const HarvestedObject object = HarvestObject(log, {frame.token, box});
+  ASSERT_EQ(object.views.size(), 1u);
+  const MultiView& v = object.views.front();
+  EXPECT_FALSE(IsWhole(v));
+  EXPECT_GT(object.view_info.front().truncation, 0.2);
+  // The window is about the whole projected box, not the part the image shows.
+  const auto uv = v.view.camera.Project(v.view.T_world_cam.Inverse() * Eigen::Vector3d(0, 0, object.size.z() / 2));
+  ASSERT_TRUE(uv);
+  EXPECT_NEAR(uv->x(), 128, 16);
+  EXPECT_NEAR(uv->y(), 128, 16);
+  // Nothing is said past the border: the unknown pixels are the view's left part, and hold no mask.
+  int unknown = 0;
+  for (int y = 0; y < v.mask.height(); ++y)
+    for (int x = 0; x < v.mask.width(); ++x)
+      if (v.known.at(x, y) < 0.5f) {
+        ++unknown;
+        EXPECT_LT(x, 128);
+        EXPECT_EQ(v.mask.at(x, y), 0.0f);
+      }
+  EXPECT_GT(unknown, 256 * 20);
+
+  GenerateOptions options;
+  options.refine.steps = 10;
+  options.refine.show_progress = false;
+  options.upscale = "bicubic";
+  options.hull_resolution = 48;
+  options.texture_size = 512;
+  HarvestFit fit_uncut, fit_cut;
+  const GeneratedMesh whole = GenerateFromHarvest(uncut, options, &fit_uncut);
+  const GeneratedMesh cut = GenerateFromHarvest(object, options, &fit_cut);
+  std::printf("box %s; extent uncut %s, cut %s; p2m uncut %.4f, cut %.4f\n", std::string(Msg() << object.size.transpose()).c_str(),
+              std::string(Msg() << whole.extent.transpose()).c_str(), std::string(Msg() << cut.extent.transpose()).c_str(),
+              fit_uncut.quality[quality::kLidarPointToMeshMedianM].get<double>(),
+              fit_cut.quality[quality::kLidarPointToMeshMedianM].get<double>());
+  EXPECT_EQ(fit_cut.quality[quality::kWatertight].get<int>(), 1);
+  for (int k = 0; k < 3; ++k) EXPECT_NEAR(cut.extent[k], whole.extent[k], 0.1 * whole.extent[k]) << k;
+  EXPECT_LT(fit_cut.quality[quality::kLidarPointToMeshMedianM].get<double>(),
+            1.5 * fit_uncut.quality[quality::kLidarPointToMeshMedianM].get<double>() + 0.01);
 }
 
 TEST(HarvestObject, RefusesWhatItCannotHarvestInOneLine) {

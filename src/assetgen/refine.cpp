@@ -48,6 +48,10 @@ void CheckViews(const MultiViewSet& views) {
       throw InputError({}, Msg() << "refine: view " << v.view.name << ": mask is " << v.mask.width() << "x" << v.mask.height()
                              << "x" << v.mask.channels() << ", camera is " << c.width << "x" << c.height
                              << " (1 channel expected)");
+    if (!v.known.empty() && (v.known.width() != c.width || v.known.height() != c.height || v.known.channels() != 1))
+      throw InputError({}, Msg() << "refine: view " << v.view.name << ": known-pixel mask is " << v.known.width() << "x"
+                             << v.known.height() << "x" << v.known.channels() << ", camera is " << c.width << "x"
+                             << c.height << " (1 channel expected)");
     if (!(c.fx > 0 && c.fy > 0)) throw InputError({}, Msg() << "refine: view " << v.view.name << ": focal length must be positive");
   }
 }
@@ -75,6 +79,9 @@ struct ViewState {
   Eigen::Matrix4f clip_from_world;
   size_t valid_normal_pixels = 0;
   float mask_area = 1;  // target mask area in pixels: both terms are per object pixel
+  // The silhouette target: the mask, and -1 at pixels past the source image's border (MultiView::known), which
+  // the silhouette term skips (what the camera did not see says nothing about the outline).
+  std::vector<float> mask_target;
   std::vector<float> clip, grad_clip, normal_img, grad_normal_img, grad_bary, coverage, aa, grad_aa, grad_coverage;
   raster::RasterBuffer rast;
   raster::AntialiasRecord aa_record;
@@ -145,8 +152,12 @@ void ViewLossAndGradient(const std::vector<Eigen::Vector3f>& positions, const st
     s.grad_aa.resize(np);
     double sum = 0;
     const float scale = o.lambda_mask * view_weight / s.mask_area;
-    const float* target = view.mask.data();
+    const float* target = s.mask_target.data();
     for (size_t p = 0; p < np; ++p) {
+      if (target[p] < 0) {
+        s.grad_aa[p] = 0;
+        continue;
+      }
       const float d = s.aa[p] - target[p];
       sum += d * d;
       s.grad_aa[p] = scale * 2.0f * d;
@@ -300,8 +311,12 @@ RefineResult RefineMesh(const TriangleMesh& coarse_in, const MultiViewSet& views
     const float near = std::max(1e-3f * dist, depth - 3.0f * radius), far = std::max(near * 1.001f, depth + 3.0f * radius);
     state[i].clip_from_world = raster::ClipFromWorld(v.camera, v.T_world_cam.Inverse(), near, far);
     const MultiView& mv = views[i];
+    state[i].mask_target = mv.mask.vector();
+    if (!mv.known.empty())
+      for (size_t p = 0; p < state[i].mask_target.size(); ++p)
+        if (mv.known.vector()[p] <= 0.5f) state[i].mask_target[p] = -1.0f;
     double area = 0;
-    for (float m : mv.mask.vector()) area += m;
+    for (float m : state[i].mask_target) area += std::max(m, 0.0f);
     state[i].mask_area = static_cast<float>(std::max(area, 1.0));
     for (int y = 0; y < mv.mask.height(); ++y)
       for (int x = 0; x < mv.mask.width(); ++x)
@@ -319,7 +334,7 @@ RefineResult RefineMesh(const TriangleMesh& coarse_in, const MultiViewSet& views
       t.clip_from_world = s.clip_from_world;
       t.width = views[i].view.camera.width, t.height = views[i].view.camera.height;
       t.normals = views[i].normals.vector();
-      t.mask = views[i].mask.vector();
+      t.mask = s.mask_target;
       if (options.lambda_normal > 0 && s.valid_normal_pixels > 0) {
         t.normal_grad_scale = options.lambda_normal * view_weight / static_cast<float>(s.valid_normal_pixels);
         t.normal_loss_scale = view_weight / static_cast<float>(s.valid_normal_pixels);

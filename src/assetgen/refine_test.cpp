@@ -87,6 +87,39 @@ TEST(RefineMesh, PointsRecoverTheConcavityTheSilhouettesCannotSee) {
   EXPECT_THROW(RefineMesh(coarse, views, options, bad), InputError);
 }
 
+// Views cut by the image border: the pixels past it are unknown (MultiView::known) and must not pull the surface.
+// Every view's right third is cut (its mask there empty, as a camera that did not see it would give): marked
+// unknown, the sphere keeps its shape; taken as background, refinement shaves the sphere's sides away.
+TEST(RefineMesh, PixelsPastTheImageBorderSuperviseNothing) {
+  const TriangleMesh sphere = geometry::testing::Icosphere(3, 0.8f);
+  MultiViewSet views = RenderOracleViews(sphere, Zero123PlusPlusRig(96), 2);
+  for (MultiView& v : views) v.normals = ImageF(v.normals.width(), v.normals.height(), 3, 0.0f);
+  RefineOptions options;
+  options.steps = 10;
+  options.lambda_normal = 0;
+  options.show_progress = false;
+  const RefineResult whole = RefineMesh(sphere, views, options);
+  for (MultiView& v : views) {
+    v.known = ImageF(v.mask.width(), v.mask.height(), 1, 1.0f);
+    for (int y = 0; y < v.mask.height(); ++y)
+      for (int x = 2 * v.mask.width() / 3; x < v.mask.width(); ++x) v.mask.at(x, y) = 0, v.known.at(x, y) = 0;
+    EXPECT_FALSE(IsWhole(v));
+  }
+  const RefineResult known = RefineMesh(sphere, views, options);
+  for (MultiView& v : views) v.known = ImageF();
+  const RefineResult cut = RefineMesh(sphere, views, options);
+  geometry::GeometryMetricsOptions mo;
+  mo.num_samples = 20000;
+  mo.iou_resolution = 64;
+  const double cd_whole = geometry::CompareMeshes(whole.mesh, sphere, mo).chamfer;
+  const double cd_known = geometry::CompareMeshes(known.mesh, sphere, mo).chamfer;
+  const double cd_cut = geometry::CompareMeshes(cut.mesh, sphere, mo).chamfer;
+  std::printf("Chamfer to the sphere: whole views %.5f, unknown pixels skipped %.5f, taken as background %.5f\n",
+              cd_whole, cd_known, cd_cut);
+  EXPECT_LT(cd_known, 1.4 * cd_whole);
+  EXPECT_GT(cd_cut, 1.5 * cd_known);
+}
+
 TEST(RefineMesh, RejectsBadInput) {
   const TriangleMesh sphere = geometry::testing::Icosphere(2, 0.8f);
   const MultiViewSet views = RenderOracleViews(sphere, Zero123PlusPlusRig(32), 1);
@@ -109,6 +142,9 @@ TEST(RefineMesh, RejectsBadInput) {
   MultiViewSet mixed = views;
   mixed[2].mask = ImageF(16, 16, 1);
   EXPECT_THROW(RefineMesh(sphere, mixed, o), InputError);
+  MultiViewSet bad_known = views;
+  bad_known[0].known = ImageF(8, 8, 1, 1.0f);
+  EXPECT_THROW(RefineMesh(sphere, bad_known, o), InputError);
   MultiViewSet resized = views;
   resized[1].view.camera.width = 64;
   EXPECT_THROW(RefineMesh(sphere, resized, o), InputError);

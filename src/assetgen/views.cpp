@@ -291,6 +291,15 @@ MultiViewSet LoadViews(const std::filesystem::path& dir) {
                              << " but views[0] is " << views[0].view.camera.width << "x" << views[0].view.camera.height
                              << " (all views of a set must have one size)");
 
+    if (v.Has("known")) {
+      const std::filesystem::path known_file = dir / v["known"].String();
+      const ImageU8 known = ReadImage(known_file, 1);
+      if (known.width() != cam.width || known.height() != cam.height)
+        throw InputError(known_file, Msg() << "image is " << known.width() << "x" << known.height()
+                                           << " but its camera in cameras.json says " << cam.width << "x" << cam.height);
+      mv.known = ImageF(cam.width, cam.height, 1);
+      for (size_t k = 0; k < mv.known.vector().size(); ++k) mv.known.vector()[k] = known.data()[k] > 127 ? 1.0f : 0.0f;
+    }
     if (v.Has("synthetic")) mv.synthetic = v["synthetic"].Bool();
     if (v.Has("source")) mv.source = v["source"].String();
     if (v.Has("image")) {
@@ -358,12 +367,32 @@ void SaveViews(const MultiViewSet& views, const std::filesystem::path& dir, cons
       WriteImage(out.path() / cf, ToSrgb8(v.color));
       entry["image"] = cf;
     }
+    if (!v.known.empty()) {
+      char kf[32];
+      std::snprintf(kf, sizeof(kf), "known_%02zu.png", i);
+      ImageU8 known(cam.width, cam.height, 1, 0);
+      for (size_t k = 0; k < v.known.vector().size(); ++k) known.data()[k] = v.known.vector()[k] > 0.5f ? 255 : 0;
+      WriteImage(out.path() / kf, known);
+      entry["known"] = kf;
+    }
     if (v.synthetic) entry["synthetic"] = true;
     if (!v.source.empty()) entry["source"] = v.source;
     list.push_back(entry);
   }
   WriteJsonFile(out.path() / "cameras.json", {{"format", kFormat}, {"normal_frame", normal_frame}, {"views", list}});
   out.Commit();
+}
+
+bool IsWhole(const MultiView& view) {
+  return std::all_of(view.known.vector().begin(), view.known.vector().end(), [](float k) { return k > 0.5f; });
+}
+
+ImageF MaskOrUnknown(const MultiView& view) {
+  ImageF out = view.mask;
+  if (view.known.empty()) return out;
+  for (size_t k = 0; k < out.vector().size(); ++k)
+    if (view.known.vector()[k] <= 0.5f) out.vector()[k] = 1.0f;
+  return out;
 }
 
 ImageU8 NormalMapPreview(const MultiView& view) {

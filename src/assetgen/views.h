@@ -14,7 +14,8 @@
 //                  "width": 320, "height": 320, "fx": ..., "fy": ..., "cx": ..., "cy": ...,
 //                  "T_world_cam": [[...4x4 row-major...]], "image": "image_00.png" }, ... ] }
 // "image" is optional: an sRGB colour picture of the object at that camera (what texture fusion reads).
-// Optional too: "synthetic": true for a view a shape prior made, "source": where a real view came from.
+// Optional too: "synthetic": true for a view a shape prior made, "source": where a real view came from, "known":
+// the mask of pixels inside the source camera's image (MultiView::known).
 // Masks are 8-bit grey PNGs, 255 = object (soft edges allowed). All views of a set have the same size.
 #include <cstdint>
 #include <filesystem>
@@ -40,6 +41,11 @@ struct MultiView {
   ImageF normals;  // 3 channels, unit world-frame normals; (0, 0, 0) outside the object
   ImageF mask;     // 1 channel, 0..1
   ImageF color;    // empty, or 3 channels, linear RGB (the "image" of the view)
+  // Empty when every pixel shows the scene; else 1 channel, 1 where the pixel shows the camera's image and 0 where
+  // it lies beyond the source image's border (a log object cut by the image edge, its view still framing the
+  // whole object): there the silhouette and colour are unknown, so such pixels carve nothing, supervise nothing
+  // and texture nothing. cameras.json "known": a grey PNG, 255 = known.
+  ImageF known;
   // Made by a shape prior from a real view (rotated about the object's axis, or mirrored), not seen by a
   // camera; texturing prefers real views (texture.h). cameras.json "synthetic": true.
   bool synthetic = false;
@@ -47,6 +53,12 @@ struct MultiView {
 };
 
 using MultiViewSet = std::vector<MultiView>;
+
+// Whether every pixel of the view shows the scene (MultiView::known empty or all 1).
+bool IsWhole(const MultiView& view);
+// The view's silhouette with its unknown pixels counted as object: a view cut by the image border cannot say the
+// object is absent there (what carving a visual hull wants).
+ImageF MaskOrUnknown(const MultiView& view);
 
 // The Zero123++ v1.2 rig (DESIGN.md): 6 views at azimuth 30°, 90°, …, 330° (from +x towards +y, about +z),
 // elevation +20° / -10° alternating, 30° vertical field of view, square images, looking at the origin from

@@ -78,7 +78,11 @@ TEST(RenderOracleViews, SphereSilhouetteAndNormalsMatchAnalyticValues) {
 
 TEST(Views, SaveAndLoadRoundTripInBothNormalFrames) {
   const TriangleMesh sphere = geometry::testing::Icosphere(3, 0.9f);
-  const MultiViewSet views = RenderOracleViews(sphere, Zero123PlusPlusRig(64), 1);
+  MultiViewSet views = RenderOracleViews(sphere, Zero123PlusPlusRig(64), 1);
+  // One view cut by an image border: its known-pixel mask travels with it; the others stay whole.
+  views[1].known = ImageF(64, 64, 1, 1.0f);
+  for (int y = 0; y < 64; ++y)
+    for (int x = 50; x < 64; ++x) views[1].known.at(x, y) = 0.0f;
   for (const std::string frame : {"camera", "world"}) {
     testing::TempDir tmp;
     SaveViews(views, tmp / "views", frame, false);
@@ -88,6 +92,8 @@ TEST(Views, SaveAndLoadRoundTripInBothNormalFrames) {
       EXPECT_EQ(back[i].view.name, views[i].view.name);
       EXPECT_NEAR((back[i].view.T_world_cam.Matrix() - views[i].view.T_world_cam.Matrix()).norm(), 0.0, 1e-9);
       EXPECT_DOUBLE_EQ(back[i].view.camera.fx, views[i].view.camera.fx);
+      EXPECT_EQ(back[i].known.vector(), views[i].known.vector()) << i;
+      EXPECT_EQ(IsWhole(back[i]), i != 1);
       double worst_normal = 0, worst_mask = 0;
       for (int y = 0; y < 64; ++y)
         for (int x = 0; x < 64; ++x) {

@@ -24,7 +24,7 @@ struct NormalMaskView {
   Eigen::Matrix4f clip_from_world;
   int width = 0, height = 0;
   std::vector<float> normals;  // 3 per pixel, world frame; a pixel with |t|^2 < 0.5 has no target
-  std::vector<float> mask;     // 1 per pixel, 0..1
+  std::vector<float> mask;     // 1 per pixel, 0..1; negative: unknown (past the source image's border), no term
   // Per-term factors: the gradient of the loss is grad_scale * d(sum over pixels)/dx and the reported term
   // loss_scale * sum; 0 grad_scale switches a term off.
   float normal_grad_scale = 0, normal_loss_scale = 0, mask_grad_scale = 0, mask_loss_scale = 0;

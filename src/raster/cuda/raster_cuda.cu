@@ -528,7 +528,8 @@ __global__ void MaskLossKernel(const float* aa, const float* target, size_t num_
   const size_t p = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
   double local = 0;
   if (p < num_pixels) {
-    const float d = aa[p] - target[p];
+    // A negative target marks a pixel the camera did not see (normal_mask_loss.h): no term.
+    const float d = target[p] < 0 ? 0.0f : aa[p] - target[p];
     local = d * d;
     grad_aa[p] = grad_scale * 2.0f * d;
   }

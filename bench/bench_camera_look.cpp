@@ -20,6 +20,7 @@
 #include "datasets/categories.h"
 #include "io/files.h"
 #include "io/json.h"
+#include "io/image_io.h"
 #include "synth/batch.h"
 #include "synth/camera_look.h"
 #include "synth/realism.h"
@@ -34,6 +35,7 @@ struct Run {
   std::string log, mode;
   std::vector<sd::ObjectLook> objects;
   std::vector<double> shadow_grain;  // per shadowed road block: its residual sigma after / before
+  std::vector<sd::ShadowContrast> shadows;  // cast shadows' road darkening, real and inserted objects
   double seconds = 0;
 };
 
@@ -62,7 +64,7 @@ void ShadowGrain(const sd::CameraOutcome& co, const sd::CameraSensor& cam, const
 Run Measure(const std::string& name, const sd::Log& log, const std::vector<size_t>& frames, const std::vector<sd::Asset>& assets,
             const sd::Scenario& scenario, const sd::SynthPlan* plan, const sd::CameraLookOptions& look_options,
             const std::string& mode) {
-  Run run{name, mode, {}, {}, 0};
+  Run run{name, mode, {}, {}, {}, 0};
   sd::SynthOptions options;
   options.camera_look = look_options;
   for (size_t fi : frames) {
@@ -76,6 +78,18 @@ Run Measure(const std::string& name, const sd::Log& log, const std::vector<size_
     }
     run.seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     const sd::Frame& frame = log.frames[fi];
+    // Shadows over the frame's final images (the untouched cameras' are the originals).
+    std::vector<sd::ImageF> linear;
+    for (const sd::CameraSensor& cam : frame.cameras) {
+      const sd::CameraOutcome* touched = nullptr;
+      for (const sd::CameraOutcome& co : out.cameras)
+        if (co.channel == cam.channel) touched = &co;
+      linear.push_back(sd::ToLinear(touched ? touched->after : sd::ReadImage(cam.image_path, 3)));
+    }
+    std::vector<std::pair<std::string, sd::Box3>> inserted;
+    for (const sd::ObjectOutcome& ob : out.objects) inserted.emplace_back(ob.label.category, ob.placement.box);
+    for (sd::ShadowContrast& s : sd::MeasureShadowContrasts(frame, inserted, linear, out.sun_direction_ego))
+      run.shadows.push_back(std::move(s));
     for (const sd::CameraOutcome& co : out.cameras) {
       const sd::CameraSensor* cam = frame.FindCamera(co.channel);
       // The image's own look, from the photograph before insertion.
@@ -128,8 +142,17 @@ nlohmann::json Row(const Run& r) {
               c.real_noise > 0 ? c.inserted_noise / c.real_noise : 0.0, c.real_edge_rise, c.inserted_edge_rise,
               c.real_edge_rise > 0 ? c.inserted_edge_rise / c.real_edge_rise : 0.0, c.real_saturation, c.inserted_saturation,
               grain_median, grain.size(), t.balanced_accuracy, r.seconds);
+  const sd::ShadowComparison sh = sd::CompareShadows(r.shadows);
+  std::printf("|   cast shadows (lit/shadow road, 1 = none): real %.2f (%d objects), inserted %.2f (%d)\n", sh.real_contrast,
+              sh.real, sh.inserted_contrast, sh.inserted);
+  nlohmann::json shadows = nlohmann::json::array();
+  for (const sd::ShadowContrast& s : r.shadows)
+    shadows.push_back({{"frame", s.frame}, {"camera", s.channel}, {"category", s.category}, {"inserted", s.inserted},
+                       {"contrast", s.contrast}});
   return {{"log", r.log},
           {"mode", r.mode},
+          {"shadow_contrast", {{"real", sh.real_contrast}, {"real_objects", sh.real}, {"inserted", sh.inserted_contrast},
+                               {"inserted_objects", sh.inserted}, {"objects", shadows}}},
           {"real_objects", c.real},
           {"inserted_objects", c.inserted},
           {"noise", {{"real", c.real_noise}, {"inserted", c.inserted_noise}}},

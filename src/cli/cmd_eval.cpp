@@ -92,6 +92,12 @@ Runner AddEvalCommand(CLI::App& app) {
                     "(0.5 = chance) over %d real and %d inserted\n", t.folds, t.balanced_accuracy, t.real, t.inserted);
       else
         std::printf("real-vs-inserted classifier: fewer than two objects in a class (%d real, %d inserted)\n", t.real, t.inserted);
+      const ShadowComparison& sh = report.shadow;
+      if (sh.real > 0 || sh.inserted > 0)
+        std::printf("cast shadows (road darkening, lit/shadow, 1 = none): real median %.2f over %d objects, inserted %.2f "
+                    "over %d\n", sh.real_contrast, sh.real, sh.inserted_contrast, sh.inserted);
+      else
+        std::printf("cast shadows: no object with enough visible road around it (or synth.json without the frames' sun)\n");
       nlohmann::json j = report.ToJson();
       j["synth"] = dir.string();
       WriteJsonFile(out, j);

@@ -37,5 +37,26 @@ TEST(Polygon, RandomPointsAreInsideTheirHull) {
   EXPECT_FALSE(InsideConvexPolygon(hull, {10, 0}));
 }
 
+TEST(ConvexPolygonsOverlap, OverlapTouchAndSeparation) {
+  const std::vector<Eigen::Vector2d> square = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
+  auto shifted = [&](double dx, double dy) {
+    std::vector<Eigen::Vector2d> s = square;
+    for (auto& p : s) p += Eigen::Vector2d(dx, dy);
+    return s;
+  };
+  EXPECT_TRUE(ConvexPolygonsOverlap(square, shifted(0.5, 0.5)));
+  EXPECT_TRUE(ConvexPolygonsOverlap(square, shifted(0, 0)));
+  EXPECT_FALSE(ConvexPolygonsOverlap(square, shifted(1, 0)));   // sharing an edge only
+  EXPECT_FALSE(ConvexPolygonsOverlap(square, shifted(1.5, 0.2)));
+  // A diamond whose bounding box overlaps the square's but which lies beyond its corner: only a diagonal axis
+  // (one of the diamond's edge normals) separates them.
+  const std::vector<Eigen::Vector2d> diamond = {{1.6, 1.0}, {2.2, 1.6}, {1.6, 2.2}, {1.0, 1.6}};
+  EXPECT_FALSE(ConvexPolygonsOverlap(square, diamond));
+  // Clockwise input works too, and degenerate polygons never overlap.
+  std::vector<Eigen::Vector2d> clockwise(square.rbegin(), square.rend());
+  EXPECT_TRUE(ConvexPolygonsOverlap(clockwise, shifted(0.5, -0.5)));
+  EXPECT_FALSE(ConvexPolygonsOverlap(square, {{0.5, 0.5}, {0.6, 0.6}}));
+}
+
 }  // namespace
 }  // namespace sd::geometry

@@ -95,6 +95,7 @@ SynthSummary WriteSynthOutput(const SynthInputs& in, const SynthRequest& request
     nlohmann::json jf;
     jf["token"] = log.frames[o.frame_index].token;
     jf["sun"] = o.sun_source;
+    jf["sun_direction_ego"] = {o.sun_direction_ego.x(), o.sun_direction_ego.y(), o.sun_direction_ego.z()};
     jf["light"] = o.light;
     jf["camera_light"] = nlohmann::json::object();
     for (const auto& co : o.cameras) jf["camera_light"][co.channel] = co.light;

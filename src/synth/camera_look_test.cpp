@@ -3,10 +3,13 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <numbers>
 #include <random>
 
 #include "io/files.h"
+#include "geometry/polygon.h"
 #include "io/image_io.h"
+#include "synth/environment.h"
 #include "synth/realism.h"
 #include "testing/testing.h"
 
@@ -246,6 +249,79 @@ TEST(Realism, TheRealVsInsertedClassifierIsAtChanceOnlyWhenTheyMeasureAlike) {
   EXPECT_GT(told.weights[0], 0);  // more grain: inserted
   std::vector<ObjectLook> one(alike.begin(), alike.begin() + 61);
   EXPECT_EQ(ClassifyRealVsInserted(one).folds, 0);
+}
+
+// A camera 12 m above flat ground looking straight down at two real cars and two inserted cones, the ground
+// drawn with each box's shadow (a box's shadow with its footprint is exactly environment.h's ShadowHull): the
+// real cars' shadows at a quarter of the lit road, the inserts' at half. The measure reads 4 and 2; the cone
+// standing where a car's shadow covers the road it would be compared with is left out.
+TEST(Realism, ShadowContrastOfRealAndInsertedObjectsOnASyntheticRoad) {
+  Frame f;
+  f.token = "synthetic";
+  CameraSensor cam;
+  cam.channel = "CAM_FRONT";
+  cam.intrinsics.width = 800;
+  cam.intrinsics.height = 600;
+  cam.intrinsics.fx = cam.intrinsics.fy = 450;
+  cam.intrinsics.cx = 400;
+  cam.intrinsics.cy = 300;
+  Eigen::Matrix3d R;
+  R << 1, 0, 0, 0, -1, 0, 0, 0, -1;
+  cam.T_ego_cam = Rigid3d(R, Eigen::Vector3d(0, 0, 12));
+  f.cameras.push_back(cam);
+  auto box = [](double x, double y, double yaw, const Eigen::Vector3d& size) {
+    Box3 b;
+    b.T_frame_box = Rigid3d::FromYaw(yaw, Eigen::Vector3d(x, y, size.z() / 2));
+    b.size = size;
+    return b;
+  };
+  for (const Box3& b : {box(4, 3, 0.3, {1.8, 1.2, 1.6}), box(-4, 3.5, -0.7, {1.8, 1.2, 1.6})}) {
+    Annotation a;
+    a.category = "car";
+    a.box = b;
+    f.annotations.push_back(a);
+  }
+  const Eigen::Vector3d cone(0.5, 0.5, 0.7);
+  const std::vector<std::pair<std::string, Box3>> inserted = {{"traffic_cone", box(-3, -3, 0.2, cone)},
+                                                              {"traffic_cone", box(3.3, 1.0, 0.0, cone)}};
+  const double az = 65 * std::numbers::pi / 180, el = 50 * std::numbers::pi / 180;
+  const Eigen::Vector3d sun(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el));
+  ImageF img(cam.intrinsics.width, cam.intrinsics.height, 3, 0.3f);
+  for (int y = 0; y < img.height(); ++y)
+    for (int x = 0; x < img.width(); ++x) {
+      const Eigen::Vector3d o = cam.T_ego_cam.translation, d = cam.T_ego_cam.rotation * cam.intrinsics.RayDirection({x + 0.5, y + 0.5});
+      const Eigen::Vector2d p = (o + d * (-o.z() / d.z())).head<2>();
+      float value = 0.3f;
+      for (const Annotation& a : f.annotations)
+        if (geometry::InsideConvexPolygon(ShadowHull(a.box, sun), p)) value = 0.075f;
+      for (const auto& [category, b] : inserted)
+        if (geometry::InsideConvexPolygon(ShadowHull(b, sun), p)) value = std::min(value, 0.15f);
+      for (int c = 0; c < 3; ++c) img.at(x, y, c) = value;
+    }
+  const std::vector<ShadowContrast> shadows = MeasureShadowContrasts(f, inserted, {img}, sun);
+  int real = 0, ins = 0;
+  for (const ShadowContrast& s : shadows) {
+    EXPECT_EQ(s.frame, "synthetic");
+    EXPECT_EQ(s.channel, "CAM_FRONT");
+    if (s.inserted) {
+      ++ins;
+      EXPECT_EQ(s.category, "traffic_cone");
+      EXPECT_NEAR(s.contrast, 2.0, 0.1);
+    } else {
+      ++real;
+      EXPECT_EQ(s.category, "car");
+      EXPECT_NEAR(s.contrast, 4.0, 0.2);
+    }
+  }
+  EXPECT_EQ(real, 2);
+  EXPECT_EQ(ins, 1);  // the cone beside the car is left out
+  const ShadowComparison c = CompareShadows(shadows);
+  EXPECT_EQ(c.real, 2);
+  EXPECT_EQ(c.inserted, 1);
+  EXPECT_NEAR(c.inserted_contrast / c.real_contrast, 0.5, 0.05);
+  // Without a sun-lit shadow drawn, the contrast is 1.
+  const ImageF flat(cam.intrinsics.width, cam.intrinsics.height, 3, 0.3f);
+  for (const ShadowContrast& s : MeasureShadowContrasts(f, inserted, {flat}, sun)) EXPECT_NEAR(s.contrast, 1.0, 1e-6);
 }
 
 }  // namespace

@@ -268,6 +268,7 @@ ShadowCheck Judge(const std::vector<GroundPatch>& patches, const Eigen::Vector3d
     const auto hull = ShadowHull(g.box, sun, false), mirror = ShadowHull(g.box, sun, true);
     double s_sum = 0, m_sum = 0;
     int s_n = 0, m_n = 0;
+    std::vector<float> s_values, m_values;
     for (int j = 0; j < g.n; ++j)
       for (int i = 0; i < g.n; ++i) {
         const float y = g.lum[static_cast<size_t>(j) * g.n + i];
@@ -275,8 +276,8 @@ ShadowCheck Judge(const std::vector<GroundPatch>& patches, const Eigen::Vector3d
         const Eigen::Vector2d p(g.origin.x() + (i + 0.5) * g.cell, g.origin.y() + (j + 0.5) * g.cell);
         const bool in_s = InConvex(hull, p), in_m = InConvex(mirror, p);
         if (in_s == in_m) continue;  // the footprint (in both) or neither
-        if (in_s) s_sum += y, ++s_n;
-        else m_sum += y, ++m_n;
+        if (in_s) s_sum += y, ++s_n, s_values.push_back(y);
+        else m_sum += y, ++m_n, m_values.push_back(y);
       }
     if (s_n < opt.min_cells || m_n < opt.min_cells) continue;
     ShadowCheckBox b;
@@ -285,6 +286,12 @@ ShadowCheck Judge(const std::vector<GroundPatch>& patches, const Eigen::Vector3d
     b.shadow_luminance = s_sum / s_n;
     b.mirrored_luminance = m_sum / m_n;
     if (b.shadow_luminance <= 0 || b.mirrored_luminance <= 0) continue;
+    auto p20 = [](std::vector<float>& v) {
+      std::nth_element(v.begin(), v.begin() + v.size() / 5, v.end());
+      return static_cast<double>(v[v.size() / 5]);
+    };
+    b.shadow_core_luminance = p20(s_values);
+    b.mirrored_core_luminance = p20(m_values);
     sum_log += std::clamp(std::log(b.Ratio()), -1.0, 1.0);  // one odd object (a dark kerb, a black car) must not decide alone
     agree += b.Ratio() > 1.0 ? 1 : 0;
     out.boxes.push_back(b);

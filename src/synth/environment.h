@@ -147,6 +147,10 @@ struct ShadowCheckBox {
   std::string channel;
   double shadow_luminance = 0, mirrored_luminance = 0;  // mean linear Y in the predicted / mirrored region
   double Ratio() const { return shadow_luminance > 0 ? mirrored_luminance / shadow_luminance : 0; }
+  // The 20th percentiles of the same two regions: the shadow's core, which a thin object's shadow (a cone's, a
+  // fraction of its box's shadow hull) still fills, against the same statistic of the road it would darken.
+  double shadow_core_luminance = 0, mirrored_core_luminance = 0;
+  double CoreContrast() const { return shadow_core_luminance > 0 ? mirrored_core_luminance / shadow_core_luminance : 0; }
 };
 struct ShadowCheck {
   std::vector<ShadowCheckBox> boxes;  // the objects that could be judged

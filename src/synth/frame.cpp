@@ -158,6 +158,7 @@ FrameLight LightFrame(const FrameInputs& in, const Scenario& scenario, const Syn
     out->light = options.light == SynthOptions::Light::kRoad ? "road calibration per camera" : "no objects";
   }
   out->sun_source = sun_source;
+  out->sun_direction_ego = light.sun_dir;
 
   const GroundModel& ground = *in.ground;
   light.road_points = RoadPointsNear(ground, placed);

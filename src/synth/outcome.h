@@ -45,6 +45,7 @@ struct FrameOutcome {
   std::vector<CameraOutcome> cameras;
   GroundModel ground;
   std::string sun_source;
+  Eigen::Vector3d sun_direction_ego = Eigen::Vector3d::UnitZ();  // unit, towards the sun (the one the frame was lit by)
   std::string light;  // for people: the light model of the frame (environment map: sun, sun/sky split, seams)
   PointCloud sweep_before;  // sensor frame
   std::vector<std::pair<int, int>> lidar_object_points;  // (point index in edit.points, object index)

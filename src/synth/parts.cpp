@@ -188,6 +188,7 @@ void WritePart(const fs::path& dir, const FrameOutcome& o, const SynthInputs& in
             {"request", in.fingerprint},
             {"frame", {{"index", o.frame_index}, {"token", in.log.frames[o.frame_index].token}}},
             {"sun", o.sun_source},
+            {"sun_direction_ego", {o.sun_direction_ego.x(), o.sun_direction_ego.y(), o.sun_direction_ego.z()}},
             {"light", o.light},
             {"objects", objects},
             {"cameras", cameras},
@@ -225,6 +226,11 @@ FrameOutcome ReadPart(const fs::path& dir, size_t frame_index, const SynthInputs
   o.frame_index = frame_index;
   o.edit.frame_index = frame_index;
   o.sun_source = r["sun"].String();
+  // Optional: parts written before it was recorded read as the overhead default.
+  if (r.Has("sun_direction_ego")) {
+    for (int k = 0; k < 3; ++k) o.sun_direction_ego[k] = r["sun_direction_ego"][k].Number();
+    if (!(std::abs(o.sun_direction_ego.norm() - 1) < 1e-3)) r["sun_direction_ego"].Fail("is not a unit vector");
+  }
   o.light = r["light"].String();
   std::map<std::string, const Asset*> by_id;
   for (const Asset& a : in.assets) by_id[a.info.id] = &a;

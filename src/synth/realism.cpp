@@ -12,6 +12,7 @@
 #include "geometry/polygon.h"
 #include "io/image_io.h"
 #include "io/json.h"
+#include "synth/environment.h"
 
 namespace sd {
 namespace {
@@ -281,6 +282,16 @@ nlohmann::json RealismReport::ToJson() const {
     j["summaries"].push_back(c);
   }
   j["classifier"] = classifier.ToJson();
+  j["shadow_protocol"] = "synth/realism.h MeasureShadowContrasts: 20th percentile of linear luminance of the road the "
+                         "object's shadow covers against the same road mirrored through its footprint (1 = no shadow)";
+  j["shadow"] = {{"real", shadow.real},
+                 {"inserted", shadow.inserted},
+                 {"real_median_contrast", shadow.real_contrast},
+                 {"inserted_median_contrast", shadow.inserted_contrast}};
+  j["shadows"] = nlohmann::json::array();
+  for (const ShadowContrast& sc : shadows)
+    j["shadows"].push_back({{"frame", sc.frame}, {"camera", sc.channel}, {"category", sc.category},
+                            {"inserted", sc.inserted}, {"contrast", sc.contrast}});
   j["objects"] = nlohmann::json::array();
   for (const RealismRow& r : rows)
     j["objects"].push_back({{"frame", r.frame},
@@ -294,6 +305,53 @@ nlohmann::json RealismReport::ToJson() const {
                             {"saturation", r.look.saturation},
                             {"pixels", r.look.pixels}});
   return j;
+}
+
+std::vector<ShadowContrast> MeasureShadowContrasts(const Frame& frame,
+                                                   const std::vector<std::pair<std::string, Box3>>& inserted,
+                                                   const std::vector<ImageF>& linear, const Eigen::Vector3d& sun_dir_ego) {
+  // The frame with the inserts as annotations: every box, real or not, hides the road behind it from the camera.
+  Frame scene = frame;
+  const size_t real = frame.annotations.size();
+  for (const auto& [category, box] : inserted) {
+    Annotation a;
+    a.category = category;
+    a.box = box;
+    scene.annotations.push_back(a);
+  }
+  ShadowCheckOptions options;
+  options.min_height_m = 0.5;  // cones, posts and barriers as well as vehicles
+  options.cell_m = 0.05;       // a cone's shadow is a few decimetres wide
+  // An object is compared with itself only where no other box's shadow (or footprint) reaches the road it is
+  // compared against: in a closure of cones a neighbour's shadow on the mirrored side would read as no shadow.
+  const Eigen::Vector3d sun = sun_dir_ego.normalized();
+  std::vector<std::vector<Eigen::Vector2d>> shadow_of;
+  for (const Annotation& a : scene.annotations) shadow_of.push_back(ShadowHull(a.box, sun, false));
+  std::vector<ShadowContrast> out;
+  for (const ShadowCheckBox& b : CheckSunAgainstShadows(scene, linear, sun, options).boxes) {
+    if (!(b.CoreContrast() > 0)) continue;
+    const std::vector<Eigen::Vector2d> mirrored = ShadowHull(scene.annotations[b.annotation].box, sun, true);
+    bool confounded = false;
+    for (size_t k = 0; k < shadow_of.size() && !confounded; ++k)
+      confounded = k != b.annotation && geometry::ConvexPolygonsOverlap(mirrored, shadow_of[k]);
+    if (confounded) continue;
+    const bool is_inserted = b.annotation >= real;
+    out.push_back({frame.token, b.channel,
+                   is_inserted ? scene.annotations[b.annotation].category : CanonicalCategory(scene.annotations[b.annotation].category),
+                   is_inserted, b.CoreContrast()});
+  }
+  return out;
+}
+
+ShadowComparison CompareShadows(const std::vector<ShadowContrast>& shadows) {
+  std::vector<double> real, inserted;
+  for (const ShadowContrast& s : shadows) (s.inserted ? inserted : real).push_back(s.contrast);
+  ShadowComparison c;
+  c.real = static_cast<int>(real.size());
+  c.inserted = static_cast<int>(inserted.size());
+  c.real_contrast = real.empty() ? 0 : Median(real);
+  c.inserted_contrast = inserted.empty() ? 0 : Median(inserted);
+  return c;
 }
 
 RealismReport EvaluateRealism(const std::filesystem::path& synth_out) {
@@ -324,6 +382,19 @@ RealismReport EvaluateRealism(const std::filesystem::path& synth_out) {
                               Eigen::Vector3d(o["center_ego_m"][0].Number(), o["center_ego_m"][1].Number(), o["center_ego_m"][2].Number()));
       b.size = Eigen::Vector3d(o["size_m"][0].Number(), o["size_m"][1].Number(), o["size_m"][2].Number());
       inserted.push_back({o["category"].String(), b});
+    }
+    // Shadows: over the frame's final images (untouched cameras are the original ones), with the frame's sun.
+    if (rf.Has("sun_direction_ego")) {
+      Eigen::Vector3d sun;
+      for (int k = 0; k < 3; ++k) sun[k] = rf["sun_direction_ego"][k].Number();
+      if (!(sun.norm() > 0.5)) rf["sun_direction_ego"].Fail("is not a direction");
+      std::vector<ImageF> linear;
+      for (const CameraSensor& cam : frame->cameras) {
+        const fs::path rel = cam.image_path.lexically_relative(log.data_root);
+        const bool touched = rf["camera_light"].raw().contains(cam.channel);
+        linear.push_back(ToLinear(ReadImage(touched ? synth_out / rel : cam.image_path, 3)));
+      }
+      for (ShadowContrast& s : MeasureShadowContrasts(*frame, inserted, linear, sun)) report.shadows.push_back(std::move(s));
     }
     for (const auto& [channel, light] : rf["camera_light"].raw().items()) {
       const CameraSensor* cam = frame->FindCamera(channel);
@@ -357,6 +428,7 @@ RealismReport EvaluateRealism(const std::filesystem::path& synth_out) {
     if (c.inserted > 0) report.summaries.push_back({category, c});
   }
   report.classifier = ClassifyRealVsInserted(all);
+  report.shadow = CompareShadows(report.shadows);
   return report;
 }
 

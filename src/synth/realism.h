@@ -82,6 +82,28 @@ struct TwoSampleTest {
 };
 TwoSampleTest ClassifyRealVsInserted(const std::vector<ObjectLook>& objects);
 
+// Cast shadows: how much an object's shadow darkens the road, inserts against the real objects of the same frame.
+// Every object 0.5 m tall or more within 25 m, real or inserted, is judged in the camera that sees it nearest its
+// image centre (environment.h CheckSunAgainstShadows on the final images, with the sun the frame was lit by; the
+// road another box hides is left out): the contrast of the road its shadow should cover against the same road
+// mirrored through its footprint, 20th percentiles of linear luminance (ShadowCheckBox::CoreContrast). 1 is no
+// visible shadow; a sunlit scene's real objects read 1.5-4. Objects whose mirrored road another box's shadow or
+// footprint reaches are left out (that road is no reference). `inserted`: (category, box in the ego frame);
+// `linear`: the frame's final images, linear, parallel to frame.cameras.
+struct ShadowContrast {
+  std::string frame, channel, category;
+  bool inserted = false;
+  double contrast = 0;
+};
+std::vector<ShadowContrast> MeasureShadowContrasts(const Frame& frame,
+                                                   const std::vector<std::pair<std::string, Box3>>& inserted,
+                                                   const std::vector<ImageF>& linear, const Eigen::Vector3d& sun_dir_ego);
+struct ShadowComparison {
+  int real = 0, inserted = 0;
+  double real_contrast = 0, inserted_contrast = 0;  // medians; 0 with none
+};
+ShadowComparison CompareShadows(const std::vector<ShadowContrast>& shadows);
+
 // `synthdrive eval realism`: every frame and camera of a synth output, its inserted objects (synth.json) and the
 // real annotated objects of the original log (synth.json "log") measured in the output images, the noise model
 // from the original image. InputError naming the file for a folder without synth.json, an original log that is
@@ -98,6 +120,8 @@ struct RealismReport {
   std::vector<RealismRow> rows;
   std::vector<RealismSummary> summaries;  // all objects first, then per category with inserted objects
   TwoSampleTest classifier;               // over all objects
+  std::vector<ShadowContrast> shadows;    // frames that record their sun (synth.json sun_direction_ego)
+  ShadowComparison shadow;
   nlohmann::json ToJson() const;
 };
 RealismReport EvaluateRealism(const std::filesystem::path& synth_out);

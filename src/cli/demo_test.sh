@@ -38,6 +38,8 @@ ls "$SYN"/report/assets/*/turntable.png > /dev/null 2>&1 || bad "no turntable in
 # Each inserted object at full resolution with its figures against the image's real objects (synth/realism.h).
 grep -q "Inserted objects at full resolution" "$SYN/report.html" || bad "no full-resolution crops in the report"
 ls "$SYN"/report/crop*_after.png > /dev/null 2>&1 || bad "no crop images in the report"
+# And whether a classifier tells the inserts from the real objects by those figures.
+grep -qE "with a balanced accuracy of <b>[01]\.[0-9]{2}</b>" "$SYN/report.html" || bad "no real-vs-inserted classifier in the report"
 grep -qE 'src="https?:|href="https?:' "$SYN/report.html" && bad "the report references the network"
 # The log hits were mined and harvested: their assets exist (whether or not the gate let them in).
 [ -s "$OUT/mine/run/manifest.jsonl" ] || bad "no mining run"

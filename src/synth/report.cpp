@@ -175,7 +175,7 @@ std::string SequencePlayer(const std::vector<std::string>& tokens,
 // the real objects of the same image (synth/realism.h): noise over the image's own, edge rise, saturation; the
 // ratios inserted / real (real: the same category where the image has some, else all its real objects).
 std::string RealismTable(const Frame& frame, const FrameOutcome& o, const CameraOutcome& co, const CameraSensor& cam,
-                         const std::filesystem::path& dir, int* img_id) {
+                         const std::filesystem::path& dir, int* img_id, std::vector<ObjectLook>* measured) {
   const CameraLook look = EstimateCameraLook(co.before, std::nullopt);
   std::vector<ObjectLook> real;
   for (const Annotation& a : frame.annotations) {
@@ -183,6 +183,7 @@ std::string RealismTable(const Frame& frame, const FrameOutcome& o, const Camera
     l.category = CanonicalCategory(a.category);
     if (l.pixels >= 24 * 12) real.push_back(l);
   }
+  measured->insert(measured->end(), real.begin(), real.end());
   std::ostringstream h;
   h << "<p>Inserted objects at full resolution (3&times;), with their figures against the " << real.size()
     << " real objects of this image (noise: over the image's own flat-region noise; edge: median 10&ndash;90 % rise; "
@@ -194,6 +195,9 @@ std::string RealismTable(const Frame& frame, const FrameOutcome& o, const Camera
     for (const CameraBox& cb : ob.label.camera_boxes)
       if (cb.channel == co.channel) box = cb.box;
     ObjectLook ins = MeasureObjectLook(co.after, cam, ob.placement.box, look);
+    ins.category = ob.label.category;
+    ins.inserted = true;
+    if (ins.pixels > 0) measured->push_back(ins);
     std::vector<ObjectLook> same = real;
     same.erase(std::remove_if(same.begin(), same.end(), [&](const ObjectLook& l) { return l.category != ob.label.category; }), same.end());
     const std::vector<ObjectLook>& reference = same.empty() ? real : same;
@@ -249,6 +253,7 @@ void WriteSynthReport(const Log& log, const std::vector<FrameOutcome>& frames, c
     row[k] = {before, after};
   };
   std::ostringstream body;
+  std::vector<ObjectLook> measured;  // every real and inserted object of the cameras drawn, for the classifier
   for (size_t fk = 0; fk < frames.size(); ++fk) {
     const FrameOutcome& o = frames[fk];
     const Frame& frame = log.frames[o.frame_index];
@@ -302,7 +307,7 @@ void WriteSynthReport(const Log& log, const std::vector<FrameOutcome>& frames, c
       body << EscapeHtml(co.light) << "</p><div class='pair'><figure><img src='report/" << b_name
            << "'><figcaption>before (real annotations)</figcaption></figure><figure><img src='report/" << a_name
            << "'><figcaption>after</figcaption></figure></div>";
-      if (!co.objects.empty()) body << RealismTable(frame, o, co, *cam, dir, &img_id);
+      if (!co.objects.empty()) body << RealismTable(frame, o, co, *cam, dir, &img_id, &measured);
     }
     if (frame.lidar && o.edit.points) {
       const std::string name = "bev" + std::to_string(img_id++) + ".png";
@@ -328,6 +333,18 @@ void WriteSynthReport(const Log& log, const std::vector<FrameOutcome>& frames, c
     }
     html << SequencePlayer(tokens, player);
   }
+  // Could a detector tell the inserts from the real objects by these statistics alone? (realism.h)
+  const TwoSampleTest test = ClassifyRealVsInserted(measured);
+  html << "<h2>Real or inserted?</h2><p>";
+  if (test.folds > 0)
+    html << "A classifier on each object's noise, edge rise and saturation (cross-validated logistic regression, "
+         << test.folds << " folds) tells the " << test.inserted << " inserted objects from the " << test.real
+         << " real objects of the same images with a balanced accuracy of <b>" << Fixed(test.balanced_accuracy, 2)
+         << "</b> (0.5 = chance: they measure alike; 1 = every one told apart).";
+  else
+    html << "Too few objects to train a real-vs-inserted classifier (" << test.real << " real, " << test.inserted
+         << " inserted; two of each are needed).";
+  html << " Per object below; cast shadows against the real objects' in <code>synthdrive eval realism</code>.</p>";
   html << body.str();
   html << cards.cards;
   html << "</body></html>\n";

@@ -275,6 +275,8 @@ TEST_F(ReportAssetsTest, ReportLinksObjectsToCardsAndHasNoNetworkReference) {
   EXPECT_NE(page.find("<td><a href='#asset-cone'>cone</a></td>"), std::string::npos);
   EXPECT_NE(page.find("<h2 id='" + FrameAnchor(0) + "'>Frame tok-c</h2>"), std::string::npos);
   EXPECT_NE(page.find("<section class='card' id='asset-cone'>"), std::string::npos);
+  // No real object in this frame: the page says the classifier has too little to learn from.
+  EXPECT_NE(page.find("<h2>Real or inserted?</h2><p>Too few objects"), std::string::npos);
   EXPECT_NE(page.find("<h3 id='" + CameraAnchor(0, "CAM_FRONT") + "'>CAM_FRONT</h3><p>Assets: <a href='#asset-cone'>cone</a> &times;2<br>"),
             std::string::npos);
   std::transform(page.begin(), page.end(), page.begin(), [](unsigned char ch) { return std::tolower(ch); });

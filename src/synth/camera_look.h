@@ -95,10 +95,12 @@ double HsvSaturation(double r, double g, double b);
 // per cent.
 double ImageSaturationCeiling(const ImageU8& image);
 
-// The ceiling of one category: its most saturated real object, over how many views (0: none seen).
+// The ceiling of one category over how many views of its real objects (0: none seen): their most saturated, or,
+// for a category with a standard livery seen three times or more, their median (realism.h RealSaturation).
 struct SaturationReference {
   double ceiling = 0;
   int views = 0;
+  std::string statistic = "max";  // "max" or "median"
 };
 struct SaturationCap {
   double before = 0, after = 0, ceiling = 0;

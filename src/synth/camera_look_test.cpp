@@ -2,11 +2,15 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <map>
 #include <numbers>
 #include <random>
 
 #include "io/files.h"
+#include "datasets/categories.h"
+#include "datasets/readers.h"
 #include "geometry/polygon.h"
 #include "io/image_io.h"
 #include "synth/environment.h"
@@ -322,6 +326,42 @@ TEST(Realism, ShadowContrastOfRealAndInsertedObjectsOnASyntheticRoad) {
   // Without a sun-lit shadow drawn, the contrast is 1.
   const ImageF flat(cam.intrinsics.width, cam.intrinsics.height, 3, 0.3f);
   for (const ShadowContrast& s : MeasureShadowContrasts(f, inserted, {flat}, sun)) EXPECT_NEAR(s.contrast, 1.0, 1e-6);
+}
+
+// The colour cap's reference over the repo keyframe's real objects: barriers (a standard livery, 25 views) take
+// their median, so one vivid barrier does not lift the ceiling for all; cars (every paint) their most saturated;
+// the one real cone its own (fewer than three views).
+TEST(Realism, TheColourReferenceIsTheMedianOfAStandardLiveryAndTheMostColourfulCar) {
+  const Log log = OpenLog(testing::RepoData("driving/nuscenes-scene0061-kf0/mmdet3d_info/n015-2018-07-24-11-22-45+0800.json"));
+  const auto ref = RealSaturation(log, {0}, {"barrier", "car", "traffic_cone"});
+  std::map<std::string, std::vector<double>> by_hand;
+  const Frame& frame = log.frames[0];
+  for (const CameraSensor& cam : frame.cameras) {
+    const ImageU8 image = ReadImage(cam.image_path, 3);
+    for (const Annotation& a : frame.annotations) {
+      int pixels = 0;
+      const double sat = MeasureSaturation(image, cam, a.box, &pixels);
+      if (pixels >= 24 * 12) by_hand[CanonicalCategory(a.category)].push_back(sat);
+    }
+  }
+  auto median = [](std::vector<double> v) {  // the middle view (the upper one of an even count)
+    std::sort(v.begin(), v.end());
+    return v[v.size() / 2];
+  };
+  const std::vector<double>& barriers = by_hand["barrier"];
+  ASSERT_GE(barriers.size(), 3u);
+  EXPECT_EQ(ref.at("barrier").statistic, "median");
+  EXPECT_EQ(ref.at("barrier").views, static_cast<int>(barriers.size()));
+  EXPECT_NEAR(ref.at("barrier").ceiling, median(barriers), 1e-12);
+  EXPECT_LT(ref.at("barrier").ceiling, *std::max_element(barriers.begin(), barriers.end()));
+  const std::vector<double>& cars = by_hand["car"];
+  ASSERT_FALSE(cars.empty());
+  EXPECT_EQ(ref.at("car").statistic, "max");
+  EXPECT_NEAR(ref.at("car").ceiling, *std::max_element(cars.begin(), cars.end()), 1e-12);
+  EXPECT_EQ(ref.at("traffic_cone").views, static_cast<int>(by_hand["traffic_cone"].size()));
+  if (by_hand["traffic_cone"].size() < 3) {
+    EXPECT_EQ(ref.at("traffic_cone").statistic, "max");
+  }
 }
 
 }  // namespace

@@ -286,7 +286,8 @@ nlohmann::json CapInsertSaturation(const CameraStageInput& st, const CameraSenso
     const std::string category = CanonicalCategory(placed[k].asset->info.category);
     const auto it = reference.find(category);
     const SaturationReference ref = it == reference.end() ? SaturationReference{} : it->second;
-    nlohmann::json rec = {{"object", k}, {"category", category}, {"reference", scope}, {"real_views", ref.views}};
+    nlohmann::json rec = {{"object", k}, {"category", category}, {"reference", scope}, {"real_views", ref.views},
+                          {"statistic", ref.statistic}};
     double ceiling = ref.ceiling;
     if (ref.views == 0) {  // no real object of the category: the image's own most colourful pixels bound it
       if (image_ceiling < 0) image_ceiling = ImageSaturationCeiling(original);

@@ -134,9 +134,16 @@ LookComparison CompareLooks(const std::vector<ObjectLook>& objects) {
   return c;
 }
 
+bool HasStandardLivery(const std::string& canonical_category) {
+  static const std::set<std::string> kLiveried = {"traffic_cone", "barrier", "warning_tripod", "a_frame_sign",
+                                                  "portable_traffic_light"};
+  return kLiveried.count(canonical_category) > 0;
+}
+
 std::map<std::string, SaturationReference> RealSaturation(const Log& log, const std::vector<size_t>& frames,
                                                           const std::set<std::string>& categories, const FrameImage& image) {
   std::map<std::string, SaturationReference> out;
+  std::map<std::string, std::vector<double>> seen;
   for (const std::string& c : categories) out[c] = {};
   for (size_t fi : frames) {
     const Frame& frame = log.frames.at(fi);
@@ -151,9 +158,20 @@ std::map<std::string, SaturationReference> RealSaturation(const Log& log, const 
         int pixels = 0;
         const double saturation = MeasureSaturation(*photo, cam, a.box, &pixels);
         if (pixels < kMinRealPixels) continue;
-        it->second.ceiling = std::max(it->second.ceiling, saturation);
-        ++it->second.views;
+        seen[it->first].push_back(saturation);
       }
+    }
+  }
+  for (auto& [category, ref] : out) {
+    const std::vector<double>& v = seen[category];
+    ref.views = static_cast<int>(v.size());
+    if (v.empty()) continue;
+    if (HasStandardLivery(category) && v.size() >= 3) {
+      ref.ceiling = Median(v);
+      ref.statistic = "median";
+    } else {
+      ref.ceiling = *std::max_element(v.begin(), v.end());
+      ref.statistic = "max";
     }
   }
   return out;

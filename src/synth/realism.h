@@ -58,12 +58,16 @@ struct LookComparison {
 LookComparison CompareLooks(const std::vector<ObjectLook>& objects);
 
 // The colour reference of the camera look's saturation cap (camera_look.h CapSaturation), for each of
-// `categories` (canonical names): the most saturated real object of the category over `frames` of `log` and all
-// their cameras (MeasureSaturation; projected outlines of at least 288 pixels), and how many views it rests on.
+// `categories` (canonical names), over the real objects of the category in `frames` of `log` and all their cameras
+// (MeasureSaturation; projected outlines of at least 288 pixels), and how many views it rests on: the most
+// saturated of them, since cars and trucks come in every paint; but for categories with a standard livery (cones,
+// barriers, warning tripods, A-frame signs, portable traffic lights: HasStandardLivery) seen in three views or
+// more, their median, since one near, sunlit cone would otherwise set the ceiling for all.
 // Images are read only where such an object is seen. A planned sequence takes one reference over all its frames,
 // so an object's colour does not change between frames that show a real one and frames that do not.
 // `image` (optional): camera `camera` of frame `frame`'s photograph, where the caller has it decoded already.
 using FrameImage = std::function<const ImageU8&(size_t frame, size_t camera)>;
+bool HasStandardLivery(const std::string& canonical_category);
 std::map<std::string, SaturationReference> RealSaturation(const Log& log, const std::vector<size_t>& frames,
                                                           const std::set<std::string>& categories,
                                                           const FrameImage& image = nullptr);

@@ -12,6 +12,7 @@
 //   held PSNR  masked PSNR of the asset's colour there (unlit base colour against the photo's pixels)
 //   p2m        median distance of the object's LiDAR returns (all frames) to the asset's surface, metres
 //   real tex   fraction of the surface textured from real camera pixels
+//   charts     UV atlas charts and the share of the atlas they use (a crumpled surface cuts it into thousands)
 //   s          seconds from the log to the asset (harvest + generate), 2 cores
 // and writes a turntable strip per object (the largest real crop, then 8 unlit views) to
 // bench/results/harvest/, figures to bench/results/harvest.json.
@@ -165,7 +166,7 @@ int main(int argc, char** argv) {
   const fs::path out_dir = root / "bench" / "results" / "harvest";
   fs::create_directories(out_dir);
   std::printf("%-9s %-30s %7s %5s %8s %8s %8s %8s %7s  %s\n", "set", "object", "views", "fr", "held IoU", "held dB",
-              "p2m m", "real tex", "s", "prior");
+              "p2m m", "real tex", "s", "prior / charts, atlas used");
   nlohmann::json results = nlohmann::json::array();
   std::map<std::string, std::vector<double>> iou_by, p2m_by, psnr_by, sec_by;
   for (const Target& t : targets) {
@@ -198,9 +199,12 @@ int main(int argc, char** argv) {
       const double p2m = fig(quality::kLidarPointToMeshMedianM), real = fig(quality::kRealTextureFraction);
       int cut = 0;
       for (const MultiView& v : object.views) cut += !IsWhole(v);
-      std::printf("%-9s %-30s %3zu/%-3d %5d %8.3f %8.2f %8.4f %8.2f %7.2f  %s%s\n", t.set.c_str(), t.label.c_str(),
+      int charts = 0, used = 0;
+      for (const StageReport& st : g.stages)
+        if (st.stage == "texture") std::sscanf(st.method.c_str(), "UV atlas %*d^2, %d charts, %d%% used", &charts, &used);
+      std::printf("%-9s %-30s %3zu/%-3d %5d %8.3f %8.2f %8.4f %8.2f %7.2f  %s%s / %d, %d%%\n", t.set.c_str(), t.label.c_str(),
                   object.views.size(), object.candidate_views, object.frames, iou, psnr, p2m, real, seconds,
-                  ToString(fit.prior), cut ? (" (" + std::to_string(cut) + " cut)").c_str() : "");
+                  ToString(fit.prior), cut ? (" (" + std::to_string(cut) + " cut)").c_str() : "", charts, used);
       std::fflush(stdout);
       const std::string cls = object.category;
       if (iou >= 0) iou_by[cls].push_back(iou), psnr_by[cls].push_back(psnr);
@@ -208,6 +212,7 @@ int main(int argc, char** argv) {
       sec_by[cls].push_back(seconds);
       results.push_back({{"set", t.set}, {"object", t.label}, {"category", cls}, {"views", object.views.size()},
                          {"candidate_views", object.candidate_views}, {"cut_views", cut}, {"frames", object.frames},
+                         {"atlas_charts", charts}, {"atlas_used_percent", used},
                          {"seconds", seconds}, {"quality", q}, {"source", object.source}});
       // Turntable: the largest real crop, then the asset all round.
       const int size = 160;

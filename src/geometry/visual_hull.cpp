@@ -84,6 +84,8 @@ void Validate(const std::vector<SilhouetteView>& views, const VisualHullOptions&
       throw InputError("", Msg() << "VisualHull: view " << i << " mask is " << v.mask.width() << "x" << v.mask.height()
                                  << " but its camera is " << v.camera.width << "x" << v.camera.height);
   }
+  if (options.carved_smoothing_passes < 0 || options.carved_smoothing_passes > 16)
+    throw InputError("", Msg() << "VisualHull: carved smoothing passes must be in [0, 16], got " << options.carved_smoothing_passes);
   if (options.resolution < 2 || options.resolution > 2048)
     throw InputError("", Msg() << "VisualHull: resolution must be in [2, 2048], got " << options.resolution);
   if (!(options.mask_threshold > 0 && options.mask_threshold < 1))
@@ -172,6 +174,25 @@ void CarveFreeSpace(const std::vector<std::pair<Eigen::Vector3f, Eigen::Vector3f
   }
 }
 
+// `passes` of a separable [1 2 1] / 4 filter over the interior nodes (the border layer stays outside, so the mesh
+// stays closed), each axis in turn, slab-parallel.
+void SmoothField(int passes, ScalarGrid* grid) {
+  const Eigen::Vector3i dims = grid->dims;
+  for (int pass = 0; pass < passes; ++pass)
+    for (int axis = 0; axis < 3; ++axis) {
+      const size_t stride = axis == 0 ? 1 : axis == 1 ? size_t(dims.x()) : size_t(dims.x()) * dims.y();
+      std::vector<float> next = grid->values;
+      ParallelFor(1, size_t(std::max(1, dims.z() - 1)), [&](size_t k) {
+        for (int j = 1; j + 1 < dims.y(); ++j)
+          for (int i = 1; i + 1 < dims.x(); ++i) {
+            const size_t n = grid->Index(i, j, int(k));
+            next[n] = 0.25f * grid->values[n - stride] + 0.5f * grid->values[n] + 0.25f * grid->values[n + stride];
+          }
+      });
+      grid->values = std::move(next);
+    }
+}
+
 }  // namespace
 
 TriangleMesh VisualHull(const std::vector<SilhouetteView>& views, const VisualHullOptions& options) {
@@ -228,6 +249,7 @@ TriangleMesh VisualHull(const std::vector<SilhouetteView>& views, const VisualHu
     }
   });
   CarveFreeSpace(options.free_segments, &grid);
+  if (!options.free_segments.empty()) SmoothField(options.carved_smoothing_passes, &grid);
 
   return SignificantComponents(MarchingCubes(grid, options.mask_threshold), options.min_component_fraction);
 }

@@ -35,6 +35,11 @@ struct VisualHullOptions {
   // half a voxel of a segment are outside whatever the silhouettes say (they carve concavities no silhouette
   // shows, and the parts of a box the object does not fill).
   std::vector<std::pair<Eigen::Vector3f, Eigen::Vector3f>> free_segments;
+  // Passes of a [1 2 1] / 4 filter along each axis over the field once beams have carved it (two: a Gaussian of
+  // about one voxel). A beam sets the nodes it passes to 0 outright, so an uncarved surface would keep voxel-sized
+  // pits and steps; refinement turns those into folds, and the UV atlas into thousands of charts (a PandaSet car:
+  // 5891 charts and 9 % of the atlas used without it, 838 and 37 % with it). 0: off; only with free segments.
+  int carved_smoothing_passes = 2;
 };
 
 // Throws InputError when no view is given or a mask's size disagrees with its camera (also: a mask with other

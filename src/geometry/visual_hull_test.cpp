@@ -265,6 +265,35 @@ TEST(VisualHull, FreeSegmentsCarveWhatNoSilhouetteShows) {
   }
 }
 
+// Sparse beams (one every three voxels) that stop just under a cube's top face: each sets the nodes it passes to 0,
+// which left alone would pit the roof voxel by voxel; smoothed, the roof stays a plane.
+TEST(VisualHull, BeamsCarveASmoothSurfaceNotVoxelPits) {
+  const double half = 0.5;
+  const std::vector<SilhouetteView> views = RenderMasks([&](auto& o, auto& d) { return HitsCube(o, d, half); });
+  VisualHullOptions options;
+  const float voxel = 2.0f / 96;
+  for (float x = -0.4f; x <= 0.4f; x += 3 * voxel)
+    for (float y = -0.4f; y <= 0.4f; y += 3 * voxel) options.free_segments.push_back({{x, y, 3.0f}, {x, y, 0.49f}});
+  auto rough_roof = [](const TriangleMesh& m) {  // faces over the roof's middle turned more than 30 deg from +z
+    int rough = 0;
+    for (const auto& f : m.faces) {
+      const Eigen::Vector3f a = m.positions[f[0]], b = m.positions[f[1]], c = m.positions[f[2]];
+      const Eigen::Vector3f centre = (a + b + c) / 3, n = (b - a).cross(c - a).normalized();
+      if (std::abs(centre.x()) < 0.35f && std::abs(centre.y()) < 0.35f && centre.z() > 0.3f && n.z() < std::cos(0.5236f)) ++rough;
+    }
+    return rough;
+  };
+  const TriangleMesh smoothed = VisualHull(views, options);
+  options.carved_smoothing_passes = 0;
+  const TriangleMesh pitted = VisualHull(views, options);
+  ExpectClosedGenusZero(smoothed);
+  std::printf("roof faces turned > 30 deg: %d pitted, %d smoothed\n", rough_roof(pitted), rough_roof(smoothed));
+  EXPECT_GT(rough_roof(pitted), 100);
+  EXPECT_LT(rough_roof(smoothed), rough_roof(pitted) / 10);
+  options.carved_smoothing_passes = -1;
+  EXPECT_THROW(VisualHull(views, options), InputError);
+}
+
 TEST(VisualHull, RejectsBadInput) {
   std::vector<SilhouetteView> views = RenderMasks([](auto& o, auto& d) { return HitsSphere(o, d, 1.0); });
   EXPECT_THROW(VisualHull({}, {}), InputError);

@@ -108,23 +108,32 @@ TEST(SymmetryViews, AMirroredViewSeesTheMirroredPointMirroredInTheImage) {
 
 const char* kKeyframe = "driving/nuscenes-scene0061-kf0/mmdet3d_info/n015-2018-07-24-11-22-45+0800.json";
 
+// The annotation of `category` in `frame` whose harvest scores highest by `score(object)` (nullptr when none can
+// be harvested): the best-observed object of its kind.
+template <typename Score>
+const Annotation* BestHarvested(const Log& log, const Frame& frame, const std::string& category, Score score) {
+  const Annotation* best = nullptr;
+  double best_score = -1;
+  for (const Annotation& a : frame.annotations) {
+    const auto c = FindCategory(a.category);
+    if (!c || c->name != category) continue;
+    try {
+      const double s = score(HarvestObject(log, {frame.token, a.box}));
+      if (s > best_score) best_score = s, best = &a;
+    } catch (const InputError&) {
+    }
+  }
+  return best;
+}
+
 // The repo's nuScenes keyframe: one frame, so a barrier is one or two views, its returns, its box.
 TEST(HarvestObject, ABarrierOfTheRepoKeyframeBecomesAMetricWatertightAsset) {
   const Log log = OpenLog(testing::RepoData(kKeyframe));
   const Frame& frame = log.frames.front();
   // The barrier the most cameras see whole (then the most returns): the best-observed one of the frame.
-  const Annotation* best = nullptr;
-  std::pair<size_t, size_t> most{0, 0};
-  for (const Annotation& a : frame.annotations) {
-    const auto c = FindCategory(a.category);
-    if (!c || c->name != "barrier") continue;
-    try {
-      const HarvestedObject o = HarvestObject(log, {frame.token, a.box});
-      const std::pair<size_t, size_t> seen{o.views.size(), o.points.size()};
-      if (seen > most) most = seen, best = &a;
-    } catch (const InputError&) {
-    }
-  }
+  const Annotation* best = BestHarvested(log, frame, "barrier", [](const HarvestedObject& o) {
+    return 1e6 * static_cast<double>(o.views.size()) + static_cast<double>(o.points.size());
+  });
   ASSERT_NE(best, nullptr);
   const HarvestedObject object = HarvestObject(log, {frame.token, best->box});
   EXPECT_EQ(object.category, "barrier");
@@ -177,17 +186,10 @@ TEST(HarvestObject, ABarrierOfTheRepoKeyframeBecomesAMetricWatertightAsset) {
 TEST(HarvestObject, AnObjectCutByTheImageBorderStillFillsItsBox) {
   Log log = OpenLog(testing::RepoData(kKeyframe));
   Frame& frame = log.frames.front();
-  const Annotation* best = nullptr;
-  size_t most = 0;
-  for (const Annotation& a : frame.annotations) {
-    const auto c = FindCategory(a.category);
-    if (!c || c->name != "barrier") continue;
-    try {
-      const HarvestedObject o = HarvestObject(log, {frame.token, a.box});
-      if (o.views.size() == 1 && o.points.size() > most) most = o.points.size(), best = &a;
-    } catch (const InputError&) {
-    }
-  }
+  // The barrier seen by one camera with the most returns.
+  const Annotation* best = BestHarvested(log, frame, "barrier", [](const HarvestedObject& o) {
+    return o.views.size() == 1 ? static_cast<double>(o.points.size()) : -1.0;
+  });
   ASSERT_NE(best, nullptr);
   const Box3 box = best->box;
   const HarvestedObject uncut = HarvestObject(log, {frame.token, box});
@@ -271,17 +273,8 @@ TEST(HarvestObject, APandaSetConeOverTwelveFramesIsRoundAndOnItsReturns) {
   if (dir.empty()) GTEST_SKIP() << "../shared/data/driving/pandaset-002-f44-55 is absent";
   const Log log = OpenLog(dir);
   const Frame& frame = log.frames[6];
-  const Annotation* cone = nullptr;
-  size_t most = 0;
-  for (const Annotation& a : frame.annotations) {
-    const auto c = FindCategory(a.category);
-    if (!c || c->name != "traffic_cone") continue;
-    try {
-      const HarvestedObject o = HarvestObject(log, {frame.token, a.box});
-      if (o.views.size() > most) most = o.views.size(), cone = &a;
-    } catch (const InputError&) {
-    }
-  }
+  const Annotation* cone = BestHarvested(log, frame, "traffic_cone",
+                                          [](const HarvestedObject& o) { return static_cast<double>(o.views.size()); });
   ASSERT_NE(cone, nullptr);
   const HarvestedObject object = HarvestObject(log, {frame.token, cone->box});
   EXPECT_EQ(object.frames, 12);

@@ -15,6 +15,7 @@
 #include "io/image_io.h"
 #include "synth/environment.h"
 #include "synth/realism.h"
+#include "synth/test_cameras.h"
 #include "testing/testing.h"
 
 namespace sd {
@@ -262,16 +263,7 @@ TEST(Realism, TheRealVsInsertedClassifierIsAtChanceOnlyWhenTheyMeasureAlike) {
 TEST(Realism, ShadowContrastOfRealAndInsertedObjectsOnASyntheticRoad) {
   Frame f;
   f.token = "synthetic";
-  CameraSensor cam;
-  cam.channel = "CAM_FRONT";
-  cam.intrinsics.width = 800;
-  cam.intrinsics.height = 600;
-  cam.intrinsics.fx = cam.intrinsics.fy = 450;
-  cam.intrinsics.cx = 400;
-  cam.intrinsics.cy = 300;
-  Eigen::Matrix3d R;
-  R << 1, 0, 0, 0, -1, 0, 0, 0, -1;
-  cam.T_ego_cam = Rigid3d(R, Eigen::Vector3d(0, 0, 12));
+  const CameraSensor cam = testing::TopDownCamera(12);
   f.cameras.push_back(cam);
   auto box = [](double x, double y, double yaw, const Eigen::Vector3d& size) {
     Box3 b;

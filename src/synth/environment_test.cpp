@@ -14,6 +14,7 @@
 #include "io/image_io.h"
 #include "synth/lighting.h"
 #include "synth/scenario.h"
+#include "synth/test_cameras.h"
 #include "testing/testing.h"
 
 namespace sd {
@@ -269,16 +270,7 @@ TEST(ShadowCheck, RecoversTheSunOfASyntheticScene) {
   // One camera 12 m above the ground looking straight down, four 1.6 m tall boxes on flat ground, rendered
   // with a known sun: lit ground 0.3, shadowed ground 0.05, objects 0.2.
   Frame f;
-  CameraSensor cam;
-  cam.channel = "CAM_FRONT";
-  cam.intrinsics.width = 800;
-  cam.intrinsics.height = 600;
-  cam.intrinsics.fx = cam.intrinsics.fy = 450;
-  cam.intrinsics.cx = 400;
-  cam.intrinsics.cy = 300;
-  Eigen::Matrix3d R;
-  R << 1, 0, 0, 0, -1, 0, 0, 0, -1;
-  cam.T_ego_cam = Rigid3d(R, Eigen::Vector3d(0, 0, 12));
+  const CameraSensor cam = testing::TopDownCamera(12);
   f.cameras.push_back(cam);
   const double yaws[4] = {0.3, -0.7, 1.2, 0.0};
   const Eigen::Vector2d centres[4] = {{4, 3}, {-4, 3.5}, {3.5, -4}, {-3, -3}};

@@ -108,6 +108,17 @@ TEST(SymmetryViews, AMirroredViewSeesTheMirroredPointMirroredInTheImage) {
 
 const char* kKeyframe = "driving/nuscenes-scene0061-kf0/mmdet3d_info/n015-2018-07-24-11-22-45+0800.json";
 
+// A quick build of a harvested box prior: 10 refinement steps, a 48^3 hull, bicubic upscaling, a 512^2 atlas.
+GenerateOptions QuickOptions() {
+  GenerateOptions options;
+  options.refine.steps = 10;
+  options.refine.show_progress = false;
+  options.upscale = "bicubic";
+  options.hull_resolution = 48;
+  options.texture_size = 512;
+  return options;
+}
+
 // The annotation of `category` in `frame` whose harvest scores highest by `score(object)` (nullptr when none can
 // be harvested): the best-observed object of its kind.
 template <typename Score>
@@ -158,12 +169,7 @@ TEST(HarvestObject, ABarrierOfTheRepoKeyframeBecomesAMetricWatertightAsset) {
     EXPECT_FALSE(v.source.empty());
   }
 
-  GenerateOptions options;
-  options.refine.steps = 10;
-  options.refine.show_progress = false;
-  options.upscale = "bicubic";
-  options.hull_resolution = 48;
-  options.texture_size = 512;
+  const GenerateOptions options = QuickOptions();
   HarvestFit fit;
   const GeneratedMesh g = GenerateFromHarvest(object, options, &fit);
   EXPECT_EQ(fit.prior, ShapePrior::kMirror);
@@ -233,12 +239,7 @@ TEST(HarvestObject, AnObjectCutByTheImageBorderStillFillsItsBox) {
       }
   EXPECT_GT(unknown, 256 * 20);
 
-  GenerateOptions options;
-  options.refine.steps = 10;
-  options.refine.show_progress = false;
-  options.upscale = "bicubic";
-  options.hull_resolution = 48;
-  options.texture_size = 512;
+  const GenerateOptions options = QuickOptions();
   HarvestFit fit_uncut, fit_cut;
   const GeneratedMesh whole = GenerateFromHarvest(uncut, options, &fit_uncut);
   const GeneratedMesh cut = GenerateFromHarvest(object, options, &fit_cut);

@@ -49,6 +49,8 @@ using ImageF = Image<float>;
 // sRGB transfer function (IEC 61966-2-1), per channel value in [0, 1].
 float SrgbToLinear(float v);
 float LinearToSrgb(float v);
+// Luminance Y of a linear Rec. 709 / sRGB colour (3 values).
+inline float LinearLuminance(const float* rgb) { return 0.2126f * rgb[0] + 0.7152f * rgb[1] + 0.0722f * rgb[2]; }
 // Colour channels go through the transfer function; a 4th (alpha) channel is only rescaled.
 ImageF ToLinear(const ImageU8& srgb);
 ImageU8 ToSrgb8(const ImageF& linear);

@@ -13,7 +13,7 @@
 #include "datasets/readers.h"
 #include "geometry/polygon.h"
 #include "io/image_io.h"
-#include "synth/environment.h"
+#include "synth/real_shadows.h"
 #include "synth/realism.h"
 #include "synth/test_cameras.h"
 #include "testing/testing.h"
@@ -257,7 +257,7 @@ TEST(Realism, TheRealVsInsertedClassifierIsAtChanceOnlyWhenTheyMeasureAlike) {
 }
 
 // A camera 12 m above flat ground looking straight down at two real cars and two inserted cones, the ground
-// drawn with each box's shadow (a box's shadow with its footprint is exactly environment.h's ShadowHull): the
+// drawn with each box's shadow (a box's shadow with its footprint is exactly real_shadows.h's ShadowHull): the
 // real cars' shadows at a quarter of the lit road, the inserts' at half. The measure reads 4 and 2; the cone
 // standing where a car's shadow covers the road it would be compared with is left out.
 TEST(Realism, ShadowContrastOfRealAndInsertedObjectsOnASyntheticRoad) {

@@ -128,48 +128,6 @@ EnvironmentMap BuildEnvironmentMap(const Frame& frame, const std::vector<ImageU8
 std::optional<Eigen::Vector3d> DetectSunInImages(const Frame& frame, const std::vector<ImageU8>& images,
                                                  int saturated_level = 250, std::string* channel = nullptr);
 
-// ---- Real shadows of annotated objects ----
-
-// Ground polygon (ego frame, z = box bottom, convex, counter-clockwise) covered by the box's footprint and its
-// shadow for a sun direction; `mirrored` reflects the shadow through the footprint (the "no shadow" control).
-std::vector<Eigen::Vector2d> ShadowHull(const Box3& box, const Eigen::Vector3d& sun_dir_ego, bool mirrored = false);
-
-struct ShadowCheckOptions {
-  double min_height_m = 0.8;     // objects shorter than this cast too small a shadow to judge
-  double max_distance_m = 25;
-  double cell_m = 0.1;           // ground sampling step
-  double footprint_margin_m = 0.15;  // ground this close to the footprint is left out (the object's own base)
-  int min_cells = 25;            // visible cells needed on each side
-};
-
-struct ShadowCheckBox {
-  size_t annotation = 0;
-  std::string channel;
-  double shadow_luminance = 0, mirrored_luminance = 0;  // mean linear Y in the predicted / mirrored region
-  double Ratio() const { return shadow_luminance > 0 ? mirrored_luminance / shadow_luminance : 0; }
-  // The 20th percentiles of the same two regions: the shadow's core, which a thin object's shadow (a cone's, a
-  // fraction of its box's shadow hull) still fills, against the same statistic of the road it would darken.
-  double shadow_core_luminance = 0, mirrored_core_luminance = 0;
-  double CoreContrast() const { return shadow_core_luminance > 0 ? mirrored_core_luminance / shadow_core_luminance : 0; }
-};
-struct ShadowCheck {
-  std::vector<ShadowCheckBox> boxes;  // the objects that could be judged
-  double agreement = 0;        // share of them whose predicted shadow is darker than the mirrored region
-  double mean_log_ratio = 0;   // mean of log(mirrored / shadow) clamped to [-1, 1]: > 0 when the sun explains the dark side
-};
-// `linear`: the frame's camera images, linear (ToLinear), parallel to frame.cameras. Each annotated box is
-// judged in the camera that sees it closest to its image centre; ground cells hidden behind any annotated
-// box (ray-box test from the camera) are left out.
-ShadowCheck CheckSunAgainstShadows(const Frame& frame, const std::vector<ImageF>& linear, const Eigen::Vector3d& sun_dir_ego,
-                                   const ShadowCheckOptions& options = {});
-// The sun direction (5 deg azimuth x 10 deg elevation grid, elevation 20..80) whose shadows best explain the
-// images: the largest mean_log_ratio x sqrt(objects judged). With `elevation_deg`, only the azimuth is searched
-// (shadow length is the weak cue; a known elevation, e.g. the ephemeris', makes it an azimuth check). Empty
-// when no box can be judged.
-std::optional<Eigen::Vector3d> EstimateSunFromShadows(const Frame& frame, const std::vector<ImageF>& linear,
-                                                      const ShadowCheckOptions& options = {}, ShadowCheck* best = nullptr,
-                                                      std::optional<double> elevation_deg = std::nullopt);
-
 // ---- Lighting inserted objects from the map ----
 
 // Everything a shading point needs, in map units (divide by a camera's gain for its pixels).

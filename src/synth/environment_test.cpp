@@ -13,6 +13,7 @@
 #include "datasets/readers.h"
 #include "io/image_io.h"
 #include "synth/lighting.h"
+#include "synth/real_shadows.h"
 #include "synth/scenario.h"
 #include "synth/test_cameras.h"
 #include "testing/testing.h"

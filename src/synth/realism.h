@@ -88,7 +88,7 @@ TwoSampleTest ClassifyRealVsInserted(const std::vector<ObjectLook>& objects);
 
 // Cast shadows: how much an object's shadow darkens the road, inserts against the real objects of the same frame.
 // Every object 0.5 m tall or more within 25 m, real or inserted, is judged in the camera that sees it nearest its
-// image centre (environment.h CheckSunAgainstShadows on the final images, with the sun the frame was lit by; the
+// image centre (real_shadows.h CheckSunAgainstShadows on the final images, with the sun the frame was lit by; the
 // road another box hides is left out): the contrast of the road its shadow should cover against the same road
 // mirrored through its footprint, 20th percentiles of linear luminance (ShadowCheckBox::CoreContrast). 1 is no
 // visible shadow; a sunlit scene's real objects read 1.5-4. Objects whose mirrored road another box's shadow or

@@ -269,8 +269,8 @@ int HarmonizeObjects(const models::Harmonizer& harmonizer, const ObjectRender& r
   return harmonized;
 }
 
-// Colour (camera_look.h CapSaturation): each visible insert no more saturated than the most saturated real object
-// of its category (the stage's colour reference: the frame's or the planned sequence's, ColourReference), or,
+// Colour (camera_look.h CapSaturation): each visible insert no more saturated than the real objects of its category
+// (the stage's colour reference, realism.h RealSaturation: the frame's or the planned sequence's), or,
 // where none is seen, than the image's most colourful pixels (ImageSaturationCeiling). Returns one record per
 // insert: its reference, ceiling, saturation before and after, and the chroma scale applied.
 nlohmann::json CapInsertSaturation(const CameraStageInput& st, const CameraSensor& cam, const ImageU8& original, const ObjectRender& r,

@@ -12,7 +12,7 @@
 #include "geometry/polygon.h"
 #include "io/image_io.h"
 #include "io/json.h"
-#include "synth/environment.h"
+#include "synth/real_shadows.h"
 
 namespace sd {
 namespace {
@@ -367,8 +367,8 @@ ShadowComparison CompareShadows(const std::vector<ShadowContrast>& shadows) {
   ShadowComparison c;
   c.real = static_cast<int>(real.size());
   c.inserted = static_cast<int>(inserted.size());
-  c.real_contrast = real.empty() ? 0 : Median(real);
-  c.inserted_contrast = inserted.empty() ? 0 : Median(inserted);
+  c.real_contrast = Median(real);  // 0 with none
+  c.inserted_contrast = Median(inserted);
   return c;
 }
 
@@ -401,26 +401,32 @@ RealismReport EvaluateRealism(const std::filesystem::path& synth_out) {
       b.size = Eigen::Vector3d(o["size_m"][0].Number(), o["size_m"][1].Number(), o["size_m"][2].Number());
       inserted.push_back({o["category"].String(), b});
     }
-    // Shadows: over the frame's final images (untouched cameras are the original ones), with the frame's sun.
-    if (rf.Has("sun_direction_ego")) {
+    // The frame's final images, each read once: a camera synth drew from the output, the others (needed only for
+    // the shadows, which may fall into any camera) are the originals.
+    const bool shadows = rf.Has("sun_direction_ego");
+    std::vector<ImageU8> final_images(frame->cameras.size());
+    for (size_t k = 0; k < frame->cameras.size(); ++k) {
+      const CameraSensor& cam = frame->cameras[k];
+      if (rf["camera_light"].raw().contains(cam.channel)) {
+        const fs::path rel = cam.image_path.lexically_relative(log.data_root);
+        if (rel.empty() || *rel.begin() == "..") throw InputError(cam.image_path, "lies outside the log's data root");
+        final_images[k] = ReadImage(synth_out / rel, 3);
+      } else if (shadows) {
+        final_images[k] = ReadImage(cam.image_path, 3);
+      }
+    }
+    if (shadows) {
       Eigen::Vector3d sun;
       for (int k = 0; k < 3; ++k) sun[k] = rf["sun_direction_ego"][k].Number();
       if (!(sun.norm() > 0.5)) rf["sun_direction_ego"].Fail("is not a direction");
       std::vector<ImageF> linear;
-      for (const CameraSensor& cam : frame->cameras) {
-        const fs::path rel = cam.image_path.lexically_relative(log.data_root);
-        const bool touched = rf["camera_light"].raw().contains(cam.channel);
-        linear.push_back(ToLinear(ReadImage(touched ? synth_out / rel : cam.image_path, 3)));
-      }
-      for (ShadowContrast& s : MeasureShadowContrasts(*frame, inserted, linear, sun)) report.shadows.push_back(std::move(s));
+      for (const ImageU8& image : final_images) linear.push_back(ToLinear(image));
+      for (ShadowContrast& sc : MeasureShadowContrasts(*frame, inserted, linear, sun)) report.shadows.push_back(std::move(sc));
     }
     for (const auto& [channel, light] : rf["camera_light"].raw().items()) {
       const CameraSensor* cam = frame->FindCamera(channel);
       if (!cam) rf["camera_light"].Fail("the original log's frame has no camera " + channel);
-      const fs::path rel = cam->image_path.lexically_relative(log.data_root);
-      const fs::path output_image = synth_out / rel;
-      if (rel.empty() || *rel.begin() == "..") throw InputError(cam->image_path, "lies outside the log's data root");
-      const ImageU8 after = ReadImage(output_image, 3);
+      const ImageU8& after = final_images[static_cast<size_t>(cam - frame->cameras.data())];
       const CameraLook look = EstimateCameraLook(ReadImage(cam->image_path, 3), std::nullopt);
       auto add = [&](ObjectLook o) {
         report.rows.push_back({token, channel, o});

@@ -202,7 +202,6 @@ std::string RealismTable(const Frame& frame, const FrameOutcome& o, const Camera
     same.erase(std::remove_if(same.begin(), same.end(), [&](const ObjectLook& l) { return l.category != ob.label.category; }), same.end());
     const std::vector<ObjectLook>& reference = same.empty() ? real : same;
     std::vector<ObjectLook> both = reference;
-    ins.inserted = true;
     both.push_back(ins);
     const LookComparison c = CompareLooks(both);
     const std::string b_name = "crop" + std::to_string(*img_id) + "_before.png", a_name = "crop" + std::to_string(*img_id) + "_after.png";

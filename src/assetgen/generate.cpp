@@ -296,13 +296,12 @@ GeneratedMesh GenerateFromHarvest(const HarvestedObject& object, GenerateOptions
   if (object.views.empty()) throw InputError({}, "the harvested object has no views");
   // Held out: the middle one of the whole views, else of all (a view cut by the image border is scored on the
   // pixels it sees), when at least two views remain to fit.
-  std::vector<size_t> whole, all;
-  for (size_t i = 0; i < object.views.size(); ++i) {
-    all.push_back(i);
-    if (IsWhole(object.views[i])) whole.push_back(i);
-  }
   if (object.views.size() >= 3) {
-    const std::vector<size_t>& from = whole.empty() ? all : whole;
+    std::vector<size_t> from;
+    for (size_t i = 0; i < object.views.size(); ++i)
+      if (IsWhole(object.views[i])) from.push_back(i);
+    if (from.empty())
+      for (size_t i = 0; i < object.views.size(); ++i) from.push_back(i);
     MultiViewSet candidates;
     for (size_t i : from) candidates.push_back(object.views[i]);
     fit.held_out.push_back(from[MiddleView(candidates)]);

@@ -277,38 +277,31 @@ MultiViewSet LoadViews(const std::filesystem::path& dir) {
       T.Fail("is not a rigid transform (rotation must be orthonormal with determinant +1, last row 0 0 0 1)");
     mv.view.T_world_cam = Rigid3d::FromMatrix(m);
 
-    const std::filesystem::path normal_file = dir / v["normals"].String();
-    const std::filesystem::path mask_file = dir / v["mask"].String();
-    const ImageU8 normals = ReadImage(normal_file, 3);
-    const ImageU8 mask = ReadImage(mask_file, 1);
-    for (const auto& [file, img] : {std::pair{normal_file, &normals}, std::pair{mask_file, &mask}}) {
-      if (img->width() != cam.width || img->height() != cam.height)
-        throw InputError(file, Msg() << "image is " << img->width() << "x" << img->height()
+    // Every image of a view is read at its camera's size.
+    auto read_view_image = [&](const std::string& name, int channels) {
+      const std::filesystem::path file = dir / name;
+      ImageU8 img = ReadImage(file, channels);
+      if (img.width() != cam.width || img.height() != cam.height)
+        throw InputError(file, Msg() << "image is " << img.width() << "x" << img.height()
                                << " but its camera in cameras.json says " << cam.width << "x" << cam.height);
-    }
+      return img;
+    };
+    const ImageU8 normals = read_view_image(v["normals"].String(), 3);
+    const ImageU8 mask = read_view_image(v["mask"].String(), 1);
     if (i > 0 && (cam.width != views[0].view.camera.width || cam.height != views[0].view.camera.height))
       throw InputError(json_path, Msg() << "views[" << i << "] is " << cam.width << "x" << cam.height
                              << " but views[0] is " << views[0].view.camera.width << "x" << views[0].view.camera.height
                              << " (all views of a set must have one size)");
 
     if (v.Has("known")) {
-      const std::filesystem::path known_file = dir / v["known"].String();
-      const ImageU8 known = ReadImage(known_file, 1);
-      if (known.width() != cam.width || known.height() != cam.height)
-        throw InputError(known_file, Msg() << "image is " << known.width() << "x" << known.height()
-                                           << " but its camera in cameras.json says " << cam.width << "x" << cam.height);
+      const ImageU8 known = read_view_image(v["known"].String(), 1);
       mv.known = ImageF(cam.width, cam.height, 1);
       for (size_t k = 0; k < mv.known.vector().size(); ++k) mv.known.vector()[k] = known.data()[k] > 127 ? 1.0f : 0.0f;
     }
     if (v.Has("synthetic")) mv.synthetic = v["synthetic"].Bool();
     if (v.Has("source")) mv.source = v["source"].String();
     if (v.Has("image")) {
-      const std::filesystem::path image_file = dir / v["image"].String();
-      const ImageU8 image = ReadImage(image_file, 3);
-      if (image.width() != cam.width || image.height() != cam.height)
-        throw InputError(image_file, Msg() << "image is " << image.width() << "x" << image.height()
-                                           << " but its camera in cameras.json says " << cam.width << "x" << cam.height);
-      mv.color = ToLinear(image);
+      mv.color = ToLinear(read_view_image(v["image"].String(), 3));
     }
     const Eigen::Matrix3f R_world_frame = frame == "camera" ? Eigen::Matrix3f(mv.view.T_world_cam.Rotation().cast<float>())
                                                             : Eigen::Matrix3f(Eigen::Matrix3f::Identity());

@@ -372,12 +372,11 @@ HarvestedObject HarvestObject(const Log& log, const HarvestTarget& target, const
       c.info.elevation_deg = std::atan2(to_cam.z(), to_cam.head<2>().norm()) / kDeg;
       c.direction = to_cam.normalized();
       // The projected box in crop pixels.
-      c.polygon = geometry::ProjectBoxOutline(cam->intrinsics, cam->T_ego_cam.Inverse(), ann->box, crop_options.near_m);
-      if (c.polygon.size() < 3) continue;
-      c.outline = Box2{1e18, 1e18, -1e18, -1e18};
-      for (const Eigen::Vector2d& p : c.polygon)
-        c.outline = Box2{std::min(c.outline.x1, p.x()), std::min(c.outline.y1, p.y()), std::max(c.outline.x2, p.x()),
-                         std::max(c.outline.y2, p.y())};
+      const std::optional<geometry::BoxInImage> in_image =
+          geometry::ProjectBoxToImage(cam->intrinsics, cam->T_ego_cam.Inverse(), ann->box, crop_options.near_m);
+      if (!in_image) continue;
+      c.polygon = in_image->outline;
+      c.outline = in_image->full;
       for (Eigen::Vector2d& p : c.polygon)
         p = (p - Eigen::Vector2d(crop.item.crop_rect.x1, crop.item.crop_rect.y1)) * crop.item.crop_scale;
       c.view.view = {Msg() << "f" << frame->token << "_" << cam->channel, cam->intrinsics, T_obj_cam};

@@ -59,7 +59,7 @@ Eigen::Vector3f CosineDirection(const Eigen::Vector3f& n, const Eigen::Vector2f&
   return (lx * t + ly * bt + lz * n).normalized();
 }
 
-float Luminance(const Eigen::Vector3f& c) { return 0.2126f * c.x() + 0.7152f * c.y() + 0.0722f * c.z(); }
+float Luminance(const Eigen::Vector3f& c) { return LinearLuminance(c.data()); }
 
 // Offset for secondary rays: floats carry ~7 digits, so the offset grows with the coordinates' magnitude.
 Eigen::Vector3f OffsetPoint(const Eigen::Vector3f& p, const Eigen::Vector3f& n_geom) {

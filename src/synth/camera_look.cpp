@@ -401,7 +401,7 @@ SaturationCap CapSaturation(ImageF* linear, const ImageF& outline, const ImageF&
   cap.scale = lo;
   for (const Pixel& p : inserted) {
     float* c = &linear->at(p.x, p.y, 0);
-    const float luminance = 0.2126f * c[0] + 0.7152f * c[1] + 0.0722f * c[2];
+    const float luminance = LinearLuminance(c);
     for (int ch = 0; ch < 3; ++ch) c[ch] += p.w * static_cast<float>(luminance + cap.scale * (c[ch] - luminance) - c[ch]);
   }
   cap.after = saturation_at(1.0);

@@ -9,7 +9,7 @@
 namespace sd {
 namespace {
 
-float Luma(const Eigen::Vector3f& rgb) { return 0.2126f * rgb[0] + 0.7152f * rgb[1] + 0.0722f * rgb[2]; }
+float Luma(const Eigen::Vector3f& rgb) { return LinearLuminance(rgb.data()); }
 
 // Road irradiance terms (luminance, on a horizontal surface) and the sun visibility that explains `Y_road`.
 struct RoadTerms {

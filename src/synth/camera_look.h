@@ -83,7 +83,7 @@ double OutlineSaturation(std::vector<double> pixel_saturations);
 // Colour: an asset's albedo is a new object's (a cone's pure orange); the camera's colour response, dirt and haze
 // leave the real ones of a log less saturated. Saturation is measured as synth/realism.h measures an object
 // (OutlineSaturation over `outline` > 0.5). When the insert measures above
-// `ceiling` (the most saturated real object of its category in the image), its own pixels (`weight`, 0..1: its
+// `ceiling` (its category's colour reference: realism.h RealSaturation), its own pixels (`weight`, 0..1: its
 // coverage) are moved towards their luminance in linear light, c' = Y + k (c - Y), by the k that brings the
 // outline's measure to the ceiling (k >= `min_scale`). `linear`: the composite, linear light, 3 channels.
 // HSV saturation, (max - min) / max of the three channels in any one scale (8-bit or 0..1 sRGB); 0 for black.

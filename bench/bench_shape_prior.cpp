@@ -450,6 +450,7 @@ int main(int argc, char** argv) {
     ShapePriorOptions prior_options;
     prior_options.category = category;
     prior_options.size = size;
+    prior_options.size_measured = true;  // the object's box, as a log or --size gives it
     std::vector<std::optional<ShapePrior>> priors = {std::nullopt, ShapePrior::kHull};
     if (DefaultShapePrior(category) == ShapePrior::kHull) priors.pop_back();
     for (const bool given : elevation_modes)
@@ -465,10 +466,12 @@ int main(int argc, char** argv) {
           row.elevation_deg = shape.elevation_deg;
           if (!forced && shape.prior != DefaultShapePrior(category)) row.note = shape.prior_reason;
           if (!given) row.note += (row.note.empty() ? "" : "; ") + shape.elevation_method;
+          if (shape.base_plate)
+            row.note += (row.note.empty() ? "" : "; ") + shape.base_plate_note;
           if (moved_back > 0)
             row.note += (row.note.empty() ? "" : "; ") + (Msg() << "framed " << shown_px << " px tall to be whole").str();
           GenerateOptions options;
-                  options.upscale = "bicubic";
+          options.upscale = "bicubic";
           options.canonical.target_size = size;
           const GeneratedMesh g = GenerateFromPhotoShape(shape, options);
           row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

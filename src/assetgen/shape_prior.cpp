@@ -505,7 +505,57 @@ PhotoShape ShapeFromPhoto(const PhotoObservation& photo, const ShapePriorOptions
     out.coarse = SurfaceOfRevolution(kept, 64);
     out.distance_m = (T.translation - Eigen::Vector3d(0, 0, size.z() / 2)).norm();
     out.yaw_deg = 0, out.yaw_method = "facing the camera (a surface of revolution has no heading)";
-    const int k = std::max(1, options.rotated_views);
+    int k = std::max(1, options.rotated_views);
+    // A plate or an oval section has a heading: the shape is turned so that it runs along the asset's axes (x
+    // along the plate's or the box's length, as a box prior's), which puts the photo's camera at azimuth -heading.
+    auto align_heading = [&](double heading) {
+      T = Rigid3d::FromYaw(-heading, Eigen::Vector3d::Zero()) * T;
+      out.yaw_deg = Deg(std::remainder(-heading, 2 * kPi));
+    };
+    if (HasBasePlate(options.category)) {
+      // A cone's box is its plate: a measured box gives the plate's sides, the category's only their ratio.
+      std::optional<Eigen::Vector2d> half_sides;
+      if (options.size_measured) half_sides = size.head<2>() / 2;
+      const BasePlateFit fit = FitBasePlate(kept, {"photo", cam, T}, mask, size.y() / size.x(), half_sides);
+      out.base_plate_note = fit.note;
+      if (fit.plate) {
+        // Grounded at the plate's bottom and back at the metric height, the camera moved and scaled with it
+        // (which keeps every projection).
+        const double rescale = size.z() / fit.body.back().first;
+        std::vector<std::pair<double, double>> body = fit.body;
+        for (auto& [z, r] : body) z *= rescale, r *= rescale;
+        BasePlate plate = *fit.plate;
+        plate.thickness *= rescale;
+        if (!half_sides) plate.half_x *= rescale, plate.half_y *= rescale;
+        T.translation = (T.translation - Eigen::Vector3d(0, 0, fit.ground)) * rescale;
+        align_heading(plate.yaw);
+        plate.yaw = 0;
+        out.base_plate = plate;
+        out.coarse = SurfaceOfRevolutionOnPlate(body, 64, plate);
+        out.distance_m = (T.translation - Eigen::Vector3d(0, 0, size.z() / 2)).norm();
+        // The photo turned by a quarter (a half for an oblong plate) shows the plate as the photo does; turned
+        // by other angles its plate outline would disagree with the mesh's and paint the plate's edge with road.
+        k = std::abs(plate.half_x - plate.half_y) < 1e-6 ? 4 : 2;
+        out.yaw_method = "silhouette: the plate's outline (left/right ambiguous)";
+      }
+    }
+    if (!out.base_plate && options.size_measured && std::abs(size.x() - size.y()) > 0.05 * size.head<2>().maxCoeff()) {
+      // An oval section (a flask-shaped bottle, a flattened drum): a measured box longer than it is wide makes each
+      // ring an ellipse of semi-axes a (along the box's length) and q a (q = width / length). Seen with that length
+      // at psi to the line of sight, the ellipse is sqrt(sin^2 psi + q^2 cos^2 psi) a wide, which the photo's
+      // radius is; the widest ring's a is half the box's length, so its width across the line of sight gives psi
+      // (left/right ambiguous: an oval looks the same turned either way).
+      double widest = 0;
+      for (const auto& ring : kept) widest = std::max(widest, ring.second);
+      const double q = size.y() / size.x(), u = 2 * widest / size.x();
+      const double sin2 = std::clamp((u * u - q * q) / (1 - q * q), 0.0, 1.0);
+      const double stretch = 1 / std::sqrt(sin2 + q * q * (1 - sin2));
+      for (Eigen::Vector3f& p : out.coarse.positions) p.x() *= float(stretch), p.y() *= float(stretch * q);
+      align_heading(std::asin(std::sqrt(sin2)));
+      out.yaw_method = Msg() << "silhouette width against the measured box's length and width (an oval section; "
+                             << "left/right ambiguous)";
+      k = 2;  // an oval looks the same turned half-way
+    }
     for (int i = 0; i < k; ++i) {
       const Rigid3d Rz = Rigid3d::FromYaw(2 * kPi * i / k, Eigen::Vector3d::Zero());
       out.views.push_back(MakeView(i == 0 ? std::string("photo") : (Msg() << "rotated_" << i).str(), cam, Rz * T, color, mask));

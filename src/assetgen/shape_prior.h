@@ -22,6 +22,7 @@
 
 #include <Eigen/Core>
 
+#include "assetgen/base_plate.h"
 #include "assetgen/views.h"
 #include "core/camera.h"
 #include "core/image.h"
@@ -47,6 +48,7 @@ struct ShapePriorOptions {
   std::optional<ShapePrior> prior;       // forced; else DefaultShapePrior, demoted to hull when it cannot fit
   std::string category;
   Eigen::Vector3d size{1, 1, 1};         // length (x), width (y), height (z), metres
+  bool size_measured = false;            // the size is the object's own (--size, a log's box), not its category's
   std::optional<double> yaw_deg;         // camera azimuth about the object, 0 = in front of it (+x), + to its left
   double assumed_vertical_fov_deg = 50;  // when the intrinsics are unknown
   double assumed_elevation_deg = 8;      // when neither given nor measurable (a road camera, objects 5-30 m away)
@@ -69,6 +71,9 @@ struct PhotoShape {
   double yaw_deg = 0;
   std::string yaw_method;                // "given", "silhouette vs box outline ...", "facing the camera"
   double distance_m = 0;                 // camera to the object's centre
+  // Revolve of a category that stands on a plate (HasBasePlate): the plate found under the body, and why or why not.
+  std::optional<BasePlate> base_plate;
+  std::string base_plate_note;
   TriangleMesh coarse;                   // canonical frame, metres; watertight
   // The photo's view first (colour, mask), then the views the prior made (rotated or mirrored photo, same
   // intrinsics); normals are zero (no estimator ran: refinement uses the mask terms only).

@@ -6,6 +6,7 @@
 
 #include "core/error.h"
 #include "geometry/metrics.h"
+#include "geometry/topology.h"
 #include "geometry/test_meshes.h"
 
 namespace sd {
@@ -175,6 +176,135 @@ TEST(ShapeFromPhoto, AssumesTheElevationWhereTheBaseIsNoEllipse) {
   std::printf("cone on a square plate: CD %.4f, elevation %.1f (%s)\n", m.chamfer, shape.elevation_deg,
               shape.elevation_method.c_str());
   EXPECT_LT(m.chamfer, 0.02);
+}
+
+// The truth turned about +z so that the photo's camera has the same azimuth about it as about the prior's shape
+// (a revolve builds with its camera at azimuth 0).
+TriangleMesh InPriorFrame(TriangleMesh truth, const PhotoShape& shape, double truth_azimuth_deg) {
+  const Eigen::Vector3d c = shape.views.front().view.T_world_cam.translation;
+  truth.Transform(Rigid3d::FromYaw(std::atan2(c.y(), c.x()) - truth_azimuth_deg * kPi / 180, Eigen::Vector3d::Zero()));
+  return truth;
+}
+
+TriangleMesh MirroredY(TriangleMesh m) {
+  for (auto& p : m.positions) p.y() = -p.y();
+  for (auto& f : m.faces) std::swap(f[1], f[2]);
+  return m;
+}
+
+double SignedVolume(const TriangleMesh& m) {
+  double v = 0;
+  for (const auto& f : m.faces)
+    v += m.positions[f[0]].cast<double>().dot(m.positions[f[1]].cast<double>().cross(m.positions[f[2]].cast<double>()));
+  return v / 6;
+}
+
+TEST(SurfaceOfRevolutionOnPlate, IsOneClosedOutwardMeshWithTheCornersAsVertices) {
+  const BasePlate plate{0.2, 0.15, 0.03, 0.4};
+  const TriangleMesh m = SurfaceOfRevolutionOnPlate({{0.0, 0.14}, {0.03, 0.14}, {0.4, 0.09}, {0.7, 0.03}}, 62, plate);
+  std::vector<Eigen::Vector3f> positions = m.positions;
+  std::vector<Eigen::Vector3i> faces = m.faces;
+  geometry::WeldVertices(&positions, &faces, 1e-7f);
+  EXPECT_TRUE(geometry::AnalyzeTopology(int(positions.size()), faces).IsWatertight());
+  // The plate's volume (a superellipse, a little under its 0.4 x 0.3 rectangle) plus a frustum's.
+  // The body: the profile's radius where it meets the plate's top (0.14), then its rings, as two frustums.
+  const double frustum = kPi * 0.37 / 3 * (0.14 * 0.14 + 0.14 * 0.09 + 0.09 * 0.09) +
+                         kPi * 0.3 / 3 * (0.09 * 0.09 + 0.09 * 0.03 + 0.03 * 0.03);
+  const double v = SignedVolume(m);
+  EXPECT_GT(v, 0.96 * 0.4 * 0.3 * 0.03 + 0.995 * frustum);  // 64 sides round a circle of 0.998 its area
+  EXPECT_LT(v, 0.4 * 0.3 * 0.03 + frustum);
+  // Each rounded corner's apex is a vertex, on the plate's diagonal at 2^(-1/10) of the sharp corner's distance.
+  const Eigen::Vector2d corner = Eigen::Rotation2Dd(plate.yaw) * Eigen::Vector2d(0.2, 0.15) * std::pow(2.0, -0.1);
+  double nearest = 1;
+  for (const auto& p : m.positions)
+    if (p.z() == 0.0f) nearest = std::min(nearest, (p.head<2>().cast<double>() - corner).norm());
+  EXPECT_LT(nearest, 1e-6);
+}
+
+TEST(ShapeFromPhoto, StandsAConeOnTheSquarePlateItsFootShows) {
+  const TriangleMesh truth = ConeOnPlate();
+  ViewCamera cam;
+  PhotoObservation photo = Photograph(truth, 0.73, 30, 10, 3.0, &cam);
+  photo.camera = cam.camera;
+  photo.elevation_deg = 10;
+  ShapePriorOptions options;
+  options.category = "traffic_cone";
+  options.size = Eigen::Vector3d(0.4, 0.4, 0.73);  // the category's proportions: the plate's size is fitted
+  const PhotoShape cone = ShapeFromPhoto(photo, options);
+  ASSERT_TRUE(cone.base_plate.has_value()) << cone.base_plate_note;
+  const BasePlate& plate = *cone.base_plate;
+  EXPECT_NEAR(plate.half_x, 0.2, 0.02);
+  EXPECT_NEAR(plate.half_y, 0.2, 0.02);
+  EXPECT_GT(plate.thickness, 0.005);
+  EXPECT_LT(plate.thickness, 0.07);
+  // The shape is turned so that its plate runs along the axes, as the truth's does: the photo's camera then has
+  // the truth's azimuth, 30 degrees, modulo the square's quarter turns and the mirror (left/right ambiguous).
+  EXPECT_EQ(plate.yaw, 0.0);
+  const double azimuth = std::fmod(cone.yaw_deg + 360, 90.0);
+  EXPECT_NEAR(std::min(azimuth, 90 - azimuth), 30.0, 4.0) << cone.yaw_deg;
+  EXPECT_EQ(cone.views.size(), 4u);  // quarter turns only: they show the plate as the photo does
+  EXPECT_EQ(cone.yaw_method.rfind("silhouette", 0), 0u);
+
+  // Against the disc a revolve without a plate makes (a barrel's prior, the same photo).
+  options.category = "barrel";
+  const PhotoShape disc = ShapeFromPhoto(photo, options);
+  EXPECT_FALSE(disc.base_plate.has_value());
+  const geometry::GeometryMetrics with = Compare(cone.coarse, InPriorFrame(truth, cone, 30));
+  const geometry::GeometryMetrics without = Compare(disc.coarse, InPriorFrame(truth, disc, 30));
+  std::printf("cone on a plate: CD %.4f IoU %.3f with the plate (%s), %.4f / %.3f as a disc\n", with.chamfer,
+              with.volume_iou, cone.base_plate_note.c_str(), without.chamfer, without.volume_iou);
+  EXPECT_LT(with.chamfer, 0.7 * without.chamfer);
+  EXPECT_GT(with.volume_iou, without.volume_iou);
+
+  // A measured box is the plate.
+  options.category = "traffic_cone";
+  options.size_measured = true;
+  const PhotoShape measured = ShapeFromPhoto(photo, options);
+  ASSERT_TRUE(measured.base_plate.has_value());
+  EXPECT_DOUBLE_EQ(measured.base_plate->half_x, 0.2);
+  EXPECT_LT(Compare(measured.coarse, InPriorFrame(truth, measured, 30)).chamfer, 0.7 * without.chamfer);
+}
+
+TEST(ShapeFromPhoto, KeepsTheDiscUnderAConeWhoseFootIsRound) {
+  // The frustum on a round foot 0.44 m across and 3 cm thick: the foot flares, but a square fits it worse.
+  TriangleMesh truth = SurfaceOfRevolution({{0.0, 0.22}, {0.03, 0.22}, {0.03, 0.16}, {0.73, 0.03}}, 96);
+  ViewCamera cam;
+  PhotoObservation photo = Photograph(truth, 0.73, 30, 10, 3.0, &cam);
+  photo.camera = cam.camera;
+  photo.elevation_deg = 10;
+  ShapePriorOptions options;
+  options.category = "traffic_cone";
+  options.size = Eigen::Vector3d(0.44, 0.44, 0.73);
+  const PhotoShape shape = ShapeFromPhoto(photo, options);
+  EXPECT_FALSE(shape.base_plate.has_value()) << shape.base_plate_note;
+  EXPECT_EQ(shape.views.size(), 8u);
+}
+
+TEST(ShapeFromPhoto, AMeasuredOblongBoxMakesAnOvalSection) {
+  // A flask 10 x 6 cm, 25 cm tall (an elliptic cylinder), seen from 30 degrees off its length.
+  TriangleMesh truth = SurfaceOfRevolution({{0.0, 1.0}, {0.25, 1.0}}, 96);
+  for (auto& p : truth.positions) p.x() *= 0.05f, p.y() *= 0.03f;
+  ViewCamera cam;
+  PhotoObservation photo = Photograph(truth, 0.25, 30, 10, 1.2, &cam);
+  photo.camera = cam.camera;
+  photo.elevation_deg = 10;
+  ShapePriorOptions options;
+  options.category = "bottle";
+  options.size = Eigen::Vector3d(0.1, 0.06, 0.25);
+  const PhotoShape round = ShapeFromPhoto(photo, options);
+  options.size_measured = true;
+  const PhotoShape oval = ShapeFromPhoto(photo, options);
+  EXPECT_EQ(oval.views.size(), 2u);
+  // The oval's length along x, as the truth's, the camera at +-30 degrees (left and right are ambiguous: an oval
+  // turned either way looks the same).
+  EXPECT_NEAR(std::abs(oval.yaw_deg), 30.0, 5.0);
+  TriangleMesh seen = InPriorFrame(truth, oval, 30);
+  if (oval.yaw_deg < 0) seen = InPriorFrame(MirroredY(truth), oval, -30);  // the mirrored reading
+  const double cd_oval = Compare(oval.coarse, seen).chamfer, cd_round = Compare(round.coarse, seen).chamfer;
+  std::printf("oval flask: CD %.4f with the measured box, %.4f round\n", cd_oval, cd_round);
+  EXPECT_LT(cd_oval, 0.5 * cd_round);
+  const AlignedBox3f b = oval.coarse.Bounds();
+  EXPECT_NEAR(b.Size().z(), 0.25f, 2e-3f);
 }
 
 TEST(ShapeFromPhoto, PlacesTheCameraOfALongFlatBoxSeenFromNearby) {

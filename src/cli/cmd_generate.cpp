@@ -169,6 +169,7 @@ void RunPhotoShape(const Args& a, const CategoryInfo& category, GenerateOptions 
   if (a.shape != "auto") prior.prior = ParseShapePrior(a.shape);
   prior.category = category.name;
   prior.size = ObjectSize(a, category);
+  prior.size_measured = !a.size.empty();
   prior.yaw_deg = a.yaw;
   prior.assumed_vertical_fov_deg = a.fov;
   BuiltAsset built = PhotoAsset(photo, prior, options, segmentation, a.image, a.mask, a.image);

@@ -89,6 +89,7 @@ BuiltAsset HitAssetBuilder::Build(const mining::ManifestEntry& entry, const std:
     prior.prior = options_.shape;
     prior.category = category.name;
     prior.size = object.size_lwh.value_or(size);
+    prior.size_measured = object.size_lwh.has_value();
     return PhotoAsset(photo, prior, options_.generate, {"segment", method, Since(start)}, item.crop_file,
                       item.mask_file, object.source);
   }
@@ -163,6 +164,12 @@ BuiltAsset PhotoAsset(const PhotoObservation& photo, ShapePriorOptions prior, co
       {"camera_distance_m", shape.distance_m},
       {"real_views", shape.real_views},
       {"virtual_views", int(shape.views.size()) - shape.real_views}};
+  if (!shape.base_plate_note.empty()) {
+    nlohmann::json plate = {{"found", shape.base_plate.has_value()}, {"how", shape.base_plate_note}};
+    if (shape.base_plate)
+      plate["size_m"] = {2 * shape.base_plate->half_x, 2 * shape.base_plate->half_y, shape.base_plate->thickness};
+    built.quality[quality::kShapePrior]["base_plate"] = plate;
+  }
   built.quality["photo_silhouette_iou"] = agreement.silhouette_iou;
   built.quality["photo_masked_psnr_db"] = agreement.masked_psnr_db;
   built.source = source;

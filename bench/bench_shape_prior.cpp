@@ -119,14 +119,15 @@ int RunPhotos(const fs::path& frames, const fs::path& out_dir) {
   }
   fs::create_directories(out_dir);
   std::printf("\nreal photos (%s): intrinsics assumed 50 deg, traffic_cone size, no model\n", frames.c_str());
-  std::printf("%-38s %4s %6s | %-7s %5s %6s %6s %6s | %6s %6s %6s\n", "photo", "id", "px", "prior", "sym", "elev",
-              "IoU", "PSNR", "GC IoU", "GC sil", "s");
+  std::printf("%-38s %4s %6s | %-7s %5s %6s %6s %6s | %13s %6s\n", "photo", "id", "px", "prior", "sym", "elev",
+              "IoU", "PSNR", "GC IoU  GC sil", "s");
   std::vector<fs::path> photos;
   for (const auto& e : fs::directory_iterator(frames))
     if (e.path().extension() == ".jpg") photos.push_back(e.path());
   std::sort(photos.begin(), photos.end());
   const models::Segmenter grabcut = models::Segmenter::Classical();
   std::vector<double> ious, gc_ious, psnrs, secs;
+  std::vector<std::string> gc_refusals;  // GrabCut-path photos the prior refused, with its one line
   for (const fs::path& photo_file : photos) {
     const fs::path labels = frames / (photo_file.stem().string() + ".labels") / "labels_instance.png";
     if (!fs::exists(labels)) continue;
@@ -172,7 +173,7 @@ int RunPhotos(const fs::path& frames, const fs::path& out_dir) {
         const double gx = 0.1 * (x1 - x0), gy = 0.1 * (y1 - y0);
         const Box2 box{std::max(0.0, x0 - gx), std::max(0.0, y0 - gy), std::min<double>(image.width(), x1 + gx),
                        std::min<double>(image.height(), y1 + gy)};
-        double gc_iou = 0, gc_sil = 0;
+        double gc_iou = -1, gc_sil = -1;
         try {
           PhotoObservation gc = photo;
           gc.mask = grabcut.Segment(image, box).mask;
@@ -180,12 +181,16 @@ int RunPhotos(const fs::path& frames, const fs::path& out_dir) {
           const GeneratedMesh gg = GenerateFromPhotoShape(gshape, options);
           gc_iou = AgreementAtView(gg, gshape.views.front(), CropLike(mask, gshape)).silhouette_iou;
           gc_sil = AgreementAtView(gg, gshape.views.front(), gshape.views.front().mask).silhouette_iou;
-        } catch (const InputError&) {
+        } catch (const InputError& e) {
+          gc_refusals.push_back(Msg() << name << " #" << id << ": " << e.what());
         }
-        std::printf("%-38s %4d %6d | %-7s %5.3f %6.1f %6.3f %6.2f | %6.3f %6.3f %6.2f\n", name.c_str(), id, pixels,
-                    ToString(shape.prior), shape.symmetry_iou, shape.elevation_deg, iou, psnr, gc_iou, gc_sil, seconds);
+        std::printf("%-38s %4d %6d | %-7s %5.3f %6.1f %6.3f %6.2f | %13s %6.2f\n", name.c_str(), id, pixels,
+                    ToString(shape.prior), shape.symmetry_iou, shape.elevation_deg, iou, psnr,
+                    gc_iou < 0 ? "refused" : (Msg() << std::fixed << std::setprecision(3) << gc_iou << " " << gc_sil).str().c_str(),
+                    seconds);
         std::fflush(stdout);
-        ious.push_back(iou), gc_ious.push_back(gc_iou), psnrs.push_back(psnr), secs.push_back(seconds);
+        ious.push_back(iou), psnrs.push_back(psnr), secs.push_back(seconds);
+        if (gc_iou >= 0) gc_ious.push_back(gc_iou);
         // Turntable strip: the photo's crop (scaled to the strip's height), then the asset's 8 views.
         const int size = 160;
         const ImageU8 turn = RenderTurntable(g.mesh, 8, size);
@@ -213,8 +218,10 @@ int RunPhotos(const fs::path& frames, const fs::path& out_dir) {
     std::sort(v.begin(), v.end());
     return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
   };
-  std::printf("median over %zu cones: photo IoU %.3f, PSNR %.2f dB, GrabCut-path IoU %.3f, %.2f s\n", ious.size(),
-              median(ious), median(psnrs), median(gc_ious), median(secs));
+  std::printf("median over %zu cones: photo IoU %.3f, PSNR %.2f dB, %.2f s; GrabCut path: IoU %.3f over %zu built, "
+              "%zu refused\n", ious.size(), median(ious), median(psnrs), median(secs), median(gc_ious), gc_ious.size(),
+              gc_refusals.size());
+  for (const std::string& r : gc_refusals) std::printf("  GrabCut path refused, %s\n", r.c_str());
   std::printf("turntables: %s\n", out_dir.c_str());
   return 0;
 }
@@ -467,7 +474,9 @@ int main(int argc, char** argv) {
           if (!forced && shape.prior != DefaultShapePrior(category)) row.note = shape.prior_reason;
           if (!given) row.note += (row.note.empty() ? "" : "; ") + shape.elevation_method;
           if (shape.base_plate)
-            row.note += (row.note.empty() ? "" : "; ") + shape.base_plate_note;
+            row.note += (row.note.empty() ? "" : "; ") +
+                        (Msg() << "plate " << 2 * shape.base_plate->half_x << " x " << 2 * shape.base_plate->half_y
+                               << " x " << shape.base_plate->thickness << ", " << shape.base_plate_note).str();
           if (moved_back > 0)
             row.note += (row.note.empty() ? "" : "; ") + (Msg() << "framed " << shown_px << " px tall to be whole").str();
           GenerateOptions options;

@@ -221,9 +221,10 @@ BasePlateFit FitBasePlate(const std::vector<std::pair<double, double>>& rings, c
   const auto [plate, body] = make(best);
   out.ground = z0 + best.g * flare;
   out.plate = plate, out.body = body;
-  out.note = Msg() << (half_sides ? "measured" : "fitted") << " plate " << 2 * plate.half_x << " x " << 2 * plate.half_y << " x " << plate.thickness
-                   << " m at " << std::fmod(best.psi * 180 / kPi + 360, 360) << " deg (photo IoU " << out.iou_plate
-                   << " against a disc's " << out.iou_disc << ")";
+  // No sizes here: the caller grounds and rescales the shape after this fit.
+  out.note = Msg() << "square plate, " << (half_sides ? "its sides from the measured box" : "its sides fitted")
+                   << ", at " << std::fmod(best.psi * 180 / kPi + 360, 360) << " deg to the photo's line of sight"
+                   << " (photo IoU " << out.iou_plate << " against a disc's " << out.iou_disc << ")";
   return out;
 }
 

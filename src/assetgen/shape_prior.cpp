@@ -18,6 +18,8 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 double Rad(double deg) { return deg * kPi / 180.0; }
 double Deg(double rad) { return rad * 180.0 / kPi; }
+// A revolve wider than this many times its box's length or width (at the box's height) is refused.
+constexpr double kMaxRevolveWidthToBox = 3.0;
 
 // The silhouette's extent, pixel rows and columns [x0, x1) x [y0, y1).
 struct PixelBounds {
@@ -498,6 +500,18 @@ PhotoShape ShapeFromPhoto(const PhotoObservation& photo, const ShapePriorOptions
     const double z0 = rings.front().first, scale = size.z() / (rings.back().first - z0);
     for (auto& [z, r] : rings) z = (z - z0) * scale, r *= scale;
     T.translation = (T.translation - Eigen::Vector3d(0, 0, z0)) * scale;
+    // A silhouette much wider for its height than any object of the size (a manhole's ellipse on the road, a
+    // fallen cone) is no surface of revolution standing upright: at the metric height it would make a disc metres
+    // across (the bank's gate caught one 14 times its box's width; this says so before any work).
+    double widest = 0;
+    for (const auto& ring : rings) widest = std::max(widest, 2 * ring.second);
+    const double box_width = size.head<2>().maxCoeff();
+    if (widest > kMaxRevolveWidthToBox * box_width)
+      throw InputError({}, Msg() << "revolve cannot fit: standing " << size.z() << " m tall, the silhouette would be "
+                                 << widest << " m across, more than " << kMaxRevolveWidthToBox << " times the "
+                                 << box_width << " m of the object's box (not upright, or not a "
+                                 << (options.category.empty() ? std::string("surface of revolution") : options.category)
+                                 << ")");
     // At most 64 rings, evenly over the rows; 64 segments around.
     std::vector<std::pair<double, double>> kept;
     const size_t n = rings.size(), want = std::min<size_t>(n, 64);

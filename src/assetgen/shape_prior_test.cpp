@@ -420,6 +420,16 @@ TEST(ShapeFromPhoto, RefusesWhatCannotMakeAShapeWithOneLine) {
   const PhotoShape demoted = ShapeFromPhoto(ell, options);
   EXPECT_EQ(demoted.prior, ShapePrior::kHull);
   EXPECT_NE(demoted.prior_reason.find("symmetry"), std::string::npos);
+  // A flat ellipse on the road (a manhole a photo's labels called an object): symmetric, but as a cone standing
+  // 0.7 m tall it would be metres across.
+  PhotoObservation manhole = good;
+  manhole.mask = ImageF(good.mask.width(), good.mask.height(), 1, 0.0f);
+  for (int y = 0; y < manhole.mask.height(); ++y)
+    for (int x = 0; x < manhole.mask.width(); ++x)
+      if (std::pow((x + 0.5 - 320) / 150, 2) + std::pow((y + 0.5 - 300) / 40, 2) <= 1) manhole.mask.at(x, y) = 1.0f;
+  const std::string flat = message(manhole, options);
+  EXPECT_NE(flat.find("revolve cannot fit"), std::string::npos) << flat;
+  EXPECT_NE(flat.find("times the 0.36 m of the object's box"), std::string::npos) << flat;
 }
 
 }  // namespace

@@ -165,7 +165,19 @@ nlohmann::json Row(const Run& r) {
 
 }  // namespace
 
-int main() {
+int main(int argc, char** argv) {
+  // --assets DIR: a folder of generated asset folders (what `synthdrive demo` writes to out/demo/assets, or a
+  // bank's): a third run per log with those assets standing in for the CG meshes of their categories.
+  fs::path generated_dir;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--assets" && i + 1 < argc) {
+      generated_dir = argv[++i];
+    } else {
+      std::fprintf(stderr, "bench_camera_look: unknown argument %s (usage: bench_camera_look [--assets DIR])\n", a.c_str());
+      return 2;
+    }
+  }
   const auto root = sd::bench::FindRepoRoot();
   if (!root) {
     std::fprintf(stderr, "bench_camera_look: cannot find the repo's data/ (set SYNTHDRIVE_SOURCE_DIR)\n");
@@ -176,7 +188,27 @@ int main() {
   std::vector<sd::Asset> assets;
   for (const sd::bench::DemoMesh& m : sd::bench::DemoMeshes())
     assets.push_back(sd::bench::ImportDemoAsset(data, m, tmp / "assets" / m.id));
+  std::vector<sd::Asset> generated;
+  if (!generated_dir.empty()) {
+    std::map<std::string, int> per_category;
+    for (const auto& entry : fs::directory_iterator(generated_dir)) {
+      if (!fs::exists(entry.path() / "asset.json")) continue;
+      generated.push_back(sd::LoadAsset(entry.path()));
+      ++per_category[generated.back().info.category];
+    }
+    // The CG meshes stay for the categories the folder has none of.
+    for (const sd::Asset& a : assets)
+      if (!per_category.count(a.info.category)) generated.push_back(a);
+    for (const auto& [category, n] : per_category) std::printf("generated %s: %d asset(s)\n", category.c_str(), n);
+  }
   const sd::CameraLookOptions off{false, false, false, false}, on{};
+  struct Mode {
+    sd::CameraLookOptions look;
+    const char* name;
+    const std::vector<sd::Asset>* assets;
+  };
+  std::vector<Mode> modes = {{off, "off", &assets}, {on, "blur+noise+jpeg+colour", &assets}};
+  if (!generated.empty()) modes.push_back({on, "look + generated assets", &generated});
   std::printf("| log | camera look | real | ins | noise real | noise ins | ratio | rise real px | rise ins px | ratio | sat real | sat ins | shadow grain (blocks) | classifier | s |\n");
   std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   nlohmann::json rows = nlohmann::json::array();
@@ -189,8 +221,7 @@ int main() {
   {
     const sd::Log log = sd::OpenLog(data / "driving/nuscenes-scene0061-kf0/mmdet3d_info/n015-2018-07-24-11-22-45+0800.json");
     const sd::Scenario scenario = sd::ReadScenario(data / "scenarios/demo.json");
-    for (const auto& [look, mode] : {std::pair{off, "off"}, std::pair{on, "blur+noise+jpeg+colour"}})
-      row(Measure("nuScenes keyframe", log, {0}, assets, scenario, nullptr, look, mode));
+    for (const Mode& m : modes) row(Measure("nuScenes keyframe", log, {0}, *m.assets, scenario, nullptr, m.look, m.name));
   }
   {
     const sd::Log log = sd::OpenLog(data / "driving/kitti-object");
@@ -200,8 +231,7 @@ int main() {
     for (sd::ObjectRequest& r : scenario.objects) r.distance_min = 6, r.distance_max = 20, r.lateral_min = -4, r.lateral_max = 4;
     std::vector<size_t> frames;
     for (size_t i = 0; i < log.frames.size(); ++i) frames.push_back(i);
-    for (const auto& [look, mode] : {std::pair{off, "off"}, std::pair{on, "blur+noise+jpeg+colour"}})
-      row(Measure("KITTI (3 frames)", log, frames, assets, scenario, nullptr, look, mode));
+    for (const Mode& m : modes) row(Measure("KITTI (3 frames)", log, frames, *m.assets, scenario, nullptr, m.look, m.name));
   }
   const fs::path seq = *root / ".." / "shared" / "data" / "driving" / "pandaset-002-f44-55";
   if (fs::is_directory(seq)) {
@@ -211,9 +241,14 @@ int main() {
     const std::vector<size_t> frames = {0, 4, 8, 11};
     std::vector<size_t> all;
     for (size_t i = 0; i < log.frames.size(); ++i) all.push_back(i);
-    const sd::SynthPlan plan = sd::PlanSynthesis(log, all, scenario, assets, scenario_file, true);
-    for (const auto& [look, mode] : {std::pair{off, "off"}, std::pair{on, "blur+noise+jpeg+colour"}})
-      row(Measure("PandaSet 002 (4 frames)", log, frames, assets, scenario, &plan, look, mode));
+    for (const Mode& m : modes) {
+      try {
+        const sd::SynthPlan plan = sd::PlanSynthesis(log, all, scenario, *m.assets, scenario_file, true);
+        row(Measure("PandaSet 002 (4 frames)", log, frames, *m.assets, scenario, &plan, m.look, m.name));
+      } catch (const sd::InputError& e) {
+        std::printf("(PandaSet, %s: no plan: %s)\n", m.name, e.what());
+      }
+    }
   } else {
     std::printf("(PandaSet: %s not present; skipped)\n", seq.string().c_str());
   }

@@ -117,6 +117,36 @@ Eigen::Matrix3d Mat3(const JsonReader& r) {
   return m;
 }
 
+Rigid3d RigidPose(const JsonReader& r, double max_translation_m) {
+  const Eigen::Matrix4d m = Mat4(r);
+  if (!m.allFinite()) r.Fail("a matrix entry is not finite");
+  if ((m.row(3) - Eigen::RowVector4d(0, 0, 0, 1)).cwiseAbs().maxCoeff() > 1e-6)
+    r.Fail(Msg() << "not a rigid transform: the bottom row is [" << m.row(3) << "], not [0 0 0 1]");
+  const Eigen::Matrix3d R = m.topLeftCorner<3, 3>();
+  const double off = (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+  if (off > 1e-3) r.Fail(Msg() << "not a rigid transform: the rotation is not orthonormal (R^T R differs from I by " << off << ")");
+  if (R.determinant() < 0) r.Fail("not a rigid transform: the rotation is a reflection (determinant -1)");
+  const double t = m.topRightCorner<3, 1>().norm();
+  if (t > max_translation_m)
+    r.Fail(Msg() << "the translation is " << t << " m from the origin, beyond the " << max_translation_m << " m a "
+                 << (max_translation_m <= kMaxSensorOffsetM ? "sensor's mounting" : "pose") << " can be");
+  return Rigid3d::FromMatrix(m);
+}
+
+Eigen::Matrix3d CameraMatrix(const JsonReader& r, int width, int height) {
+  const Eigen::Matrix3d K = Mat3(r);
+  if (!K.allFinite()) r.Fail("a camera matrix entry is not finite");
+  if (!(K(0, 0) > 0 && K(1, 1) > 0 && K(0, 0) < 1e6 && K(1, 1) < 1e6))
+    r.Fail(Msg() << "impossible focal lengths fx = " << K(0, 0) << ", fy = " << K(1, 1) << " px (must be > 0 and < 1e6)");
+  if ((K.row(2) - Eigen::RowVector3d(0, 0, 1)).cwiseAbs().maxCoeff() > 1e-6)
+    r.Fail(Msg() << "not a camera matrix: the bottom row is [" << K.row(2) << "], not [0 0 1]");
+  if (width > 0 && height > 0 &&
+      (K(0, 2) < -width || K(0, 2) > 2.0 * width || K(1, 2) < -height || K(1, 2) > 2.0 * height))
+    r.Fail(Msg() << "the principal point (" << K(0, 2) << ", " << K(1, 2) << ") is far outside the " << width << "x"
+                 << height << " image");
+  return K;
+}
+
 std::vector<double> Vec(const JsonReader& r, size_t n) {
   if (r.Size() != n) r.Fail(Msg() << "expected " << n << " numbers, found " << r.Size());
   std::vector<double> v(n);
@@ -131,7 +161,14 @@ Eigen::Vector3d Vec3(const JsonReader& r) {
 
 Rigid3d PoseWxyz(const JsonReader& rotation, const JsonReader& translation) {
   const std::vector<double> q = Vec(rotation, 4);
-  return Rigid3d::FromWxyz(q[0], q[1], q[2], q[3], Vec3(translation));
+  const double norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+  // Normalising a zero or scaled quaternion would hide it (a zero one becomes NaN everywhere downstream).
+  if (!std::isfinite(norm) || std::abs(norm - 1) > 1e-3)
+    rotation.Fail(Msg() << "not a rotation: the quaternion's norm is " << norm << ", not 1");
+  const Eigen::Vector3d t = Vec3(translation);
+  if (!t.allFinite() || t.norm() > kMaxWorldCoordinateM)
+    translation.Fail(Msg() << "impossible translation (" << t.transpose() << ") m");
+  return Rigid3d::FromWxyz(q[0], q[1], q[2], q[3], t);
 }
 
 Eigen::Vector2d RotateVelocity(const Rigid3d& T_ego_sensor, double vx, double vy) {

@@ -48,6 +48,17 @@ double CameraYaw(const Eigen::Matrix3d& R_cam_box);
 // Record fields as the dataset JSON writes them; located InputErrors on the wrong shape.
 Eigen::Matrix4d Mat4(const JsonReader& r);
 Eigen::Matrix3d Mat3(const JsonReader& r);  // the top-left 3x3 of a 3x3 or larger matrix
+// A calibration or pose matrix, checked before anything trusts it (a non-rigid lidar2cam, a zero bottom row or a
+// translation of 1e17 m used to be re-orthonormalised or passed on, and crashed the LiDAR caster or yielded data
+// built on nonsense): every entry finite, the bottom row [0 0 0 1], the rotation orthonormal (to 1e-3) with
+// determinant +1, the translation within `max_translation_m`. A located InputError (file and field) otherwise.
+Rigid3d RigidPose(const JsonReader& r, double max_translation_m);
+inline constexpr double kMaxSensorOffsetM = 100;     // a sensor's mounting relative to the ego (a vehicle's size)
+inline constexpr double kMaxWorldCoordinateM = 1e7;  // a map frame's coordinates (UTM northings stay below)
+// A camera matrix (the top-left 3x3 of cam2img / P2) for an image of `width` x `height` (0: unknown): finite, focal
+// lengths positive and below 1e6 px, the bottom row [0 0 1], the principal point within the image grown by its own
+// size each way. A located InputError otherwise.
+Eigen::Matrix3d CameraMatrix(const JsonReader& r, int width, int height);
 std::vector<double> Vec(const JsonReader& r, size_t n);  // null -> NaN
 Eigen::Vector3d Vec3(const JsonReader& r);
 Rigid3d PoseWxyz(const JsonReader& rotation, const JsonReader& translation);  // quaternion w, x, y, z

@@ -57,7 +57,7 @@ Log ReadMmdet3dV1(const json& j, const fs::path& file, const OpenLogOptions& opt
     Frame f;
     f.token = d.Has("token") ? d["token"].String() : std::to_string(d.Has("sample_idx") ? d["sample_idx"].Integer() : int64_t(i));
     f.timestamp = d.NumberOr("timestamp", 0);
-    f.T_world_ego = d.Has("ego2global") ? Rigid3d::FromMatrix(Mat4(d["ego2global"])) : Rigid3d();
+    f.T_world_ego = d.Has("ego2global") ? RigidPose(d["ego2global"], kMaxWorldCoordinateM) : Rigid3d();
     Rigid3d T_ego_lidar;
     if (d.Has("lidar_points")) {
       const JsonReader lp = d["lidar_points"];
@@ -68,7 +68,7 @@ Log ReadMmdet3dV1(const json& j, const fs::path& file, const OpenLogOptions& opt
       // nuScenes and Lyft sweeps hold 5 float32 per point even where num_pts_feats says how many are used.
       l.layout = PointLayout::NuScenes();
       l.timestamp = f.timestamp;
-      l.T_ego_lidar = Rigid3d::FromMatrix(Mat4(lp["lidar2ego"]));
+      l.T_ego_lidar = RigidPose(lp["lidar2ego"], kMaxSensorOffsetM);
       T_ego_lidar = l.T_ego_lidar;
       f.lidar = l;
     }
@@ -83,11 +83,11 @@ Log ReadMmdet3dV1(const json& j, const fs::path& file, const OpenLogOptions& opt
         cam.image_path = log.data_root / V1RelPath(cam.image_relpath, channel);
         cam.timestamp = c.NumberOr("timestamp", f.timestamp);
         const auto wh = ImageSizeFromHeader(cam.image_path);
-        cam.intrinsics = PinholeCamera::FromK(Mat3(c["cam2img"]), wh[0], wh[1]);
-        cam.T_egocam_cam = Rigid3d::FromMatrix(Mat4(c["cam2ego"]));
+        cam.intrinsics = PinholeCamera::FromK(CameraMatrix(c["cam2img"], wh[0], wh[1]), wh[0], wh[1]);
+        cam.T_egocam_cam = RigidPose(c["cam2ego"], kMaxSensorOffsetM);
         // lidar2cam = inv(cam2ego) inv(E(t_cam)) E(t_lidar) lidar2ego, so lidar2ego inv(lidar2cam) is the
         // camera seen from the LiDAR-time ego pose (log.h's T_ego_cam), ego motion included.
-        const Rigid3d T_cam_lidar = c.Has("lidar2cam") ? Rigid3d::FromMatrix(Mat4(c["lidar2cam"]))
+        const Rigid3d T_cam_lidar = c.Has("lidar2cam") ? RigidPose(c["lidar2cam"], kMaxSensorOffsetM)
                                                        : cam.T_egocam_cam.Inverse() * T_ego_lidar;
         cam.T_ego_cam = T_ego_lidar * T_cam_lidar.Inverse();
         cam.T_world_egocam = f.T_world_ego * cam.T_ego_cam * cam.T_egocam_cam.Inverse();
@@ -186,7 +186,7 @@ Log ReadMmdet3dV0(const json& j, const fs::path& file, const OpenLogOptions& opt
         auto wh = ImageSizeFromHeader(cam.image_path);
         // Files absent: every nuScenes camera image is 1600x900.
         if (wh[0] == 0) wh = {1600, 900};
-        cam.intrinsics = PinholeCamera::FromK(Mat3(c["cam_intrinsic"]), wh[0], wh[1]);
+        cam.intrinsics = PinholeCamera::FromK(CameraMatrix(c["cam_intrinsic"], wh[0], wh[1]), wh[0], wh[1]);
         cam.T_egocam_cam = PoseWxyz(c["sensor2ego_rotation"], c["sensor2ego_translation"]);
         cam.T_world_egocam = PoseWxyz(c["ego2global_rotation"], c["ego2global_translation"]);
         cam.T_ego_cam = f.T_world_ego.Inverse() * cam.T_world_egocam * cam.T_egocam_cam;

@@ -185,7 +185,7 @@ void ReadSampleData(const Tables& t, const std::map<std::string, size_t>& frame_
         w = wh[0];
         h = wh[1];
       }
-      cam.intrinsics = PinholeCamera::FromK(Mat3(K), w, h);
+      cam.intrinsics = PinholeCamera::FromK(CameraMatrix(K, w, h), w, h);
       cam.T_egocam_cam = T_ego_sensor;
       cam.T_world_egocam = T_world_egot;
       frame.cameras.push_back(std::move(cam));

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <functional>
 #include <cmath>
 #include <fstream>
 #include <numbers>
@@ -398,6 +399,69 @@ TEST(BadInput, EachErrorNamesTheFile) {
   fs::create_directories(tables);
   WriteFileAtomic(tables / "sample.json", "[]");
   ExpectInputErrorNaming([&] { OpenLog(tmp.path() / "v1.0-x"); }, tables / "sample_data.json");
+}
+
+// The repo keyframe's info with one calibration field broken, read where the keyframe's files are (so that only
+// the calibration is wrong): each is refused with one line naming the file, the field and what is wrong. Before,
+// a zero focal length aborted inside Embree, a LiDAR 1e17 m up crashed the road model, and a non-rigid lidar2cam
+// (re-orthonormalised), a zero bottom row and a negative focal length produced a "successful" dataset.
+TEST(BadInput, ImpossibleCalibrationIsRefusedWithItsField) {
+  TempDir tmp;
+  const fs::path info = RepoData(kKf0Info);
+  const json original = ReadJsonFile(info);
+  struct Case {
+    const char* name;
+    std::function<void(json&)> corrupt;
+    const char* field;
+    const char* problem;
+  };
+  const std::vector<Case> cases = {
+      {"focal_zero", [](json& d) { d["data_list"][0]["images"]["CAM_FRONT"]["cam2img"][0][0] = 0; },
+       "CAM_FRONT.cam2img", "impossible focal lengths"},
+      {"focal_negative", [](json& d) { d["data_list"][0]["images"]["CAM_BACK"]["cam2img"][1][1] = -809.2; },
+       "CAM_BACK.cam2img", "impossible focal lengths"},
+      {"principal_point", [](json& d) { d["data_list"][0]["images"]["CAM_BACK"]["cam2img"][0][2] = 1e5; },
+       "CAM_BACK.cam2img", "principal point"},
+      {"lidar_far", [](json& d) { d["data_list"][0]["lidar_points"]["lidar2ego"][2][3] = 1e17; },
+       "lidar_points.lidar2ego", "translation is 1e+17 m"},
+      {"lidar_null", [](json& d) { d["data_list"][0]["lidar_points"]["lidar2ego"][0][3] = nullptr; },
+       "lidar_points.lidar2ego[0][3]", "expected a number"},
+      {"bottom_row", [](json& d) { d["data_list"][0]["lidar_points"]["lidar2ego"][3] = {0, 0, 0, 0}; },
+       "lidar_points.lidar2ego", "bottom row"},
+      {"scaled_rotation",
+       [](json& d) {
+         json& m = d["data_list"][0]["images"]["CAM_FRONT"]["lidar2cam"];
+         for (int i = 0; i < 3; ++i)
+           for (int j = 0; j < 3; ++j) m[i][j] = m[i][j].get<double>() * 2;
+       },
+       "CAM_FRONT.lidar2cam", "not orthonormal"},
+      {"reflection",
+       [](json& d) {
+         json& m = d["data_list"][0]["images"]["CAM_FRONT"]["cam2ego"];
+         for (int i = 0; i < 3; ++i) m[i][0] = -m[i][0].get<double>();
+       },
+       "CAM_FRONT.cam2ego", "reflection"},
+      {"ego_pose", [](json& d) { d["data_list"][0]["ego2global"][0][3] = 1e12; }, "ego2global", "translation"},
+  };
+  for (const Case& c : cases) {
+    json broken = original;
+    c.corrupt(broken);
+    // In a temporary folder, its sensor paths resolved against the keyframe's own.
+    const fs::path file = tmp / (std::string("broken_") + c.name + ".json");
+    WriteJsonFile(file, broken);
+    std::string message;
+    try {
+      OpenLogOptions options;
+      options.data_root = RepoData(kKf0);
+      OpenLog(file, options);
+    } catch (const InputError& e) {
+      message = e.what();
+    }
+    EXPECT_NE(message.find(file.filename().string()), std::string::npos) << c.name << ": " << message;
+    EXPECT_NE(message.find(c.field), std::string::npos) << c.name << ": " << message;
+    EXPECT_NE(message.find(c.problem), std::string::npos) << c.name << ": " << message;
+  }
+  EXPECT_NO_THROW(OpenLog(info));
 }
 
 }  // namespace

@@ -37,6 +37,8 @@ std::string HexToken(const std::string& seed) {
 }
 
 std::array<int, 2> ImageSizeFromHeader(const fs::path& path) {
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) return {0, 0};  // a FIFO would block here; ReadImage says what it is
   std::ifstream in(path, std::ios::binary);
   if (!in) return {0, 0};
   std::string head(64 * 1024, '\0');
@@ -140,10 +142,9 @@ Eigen::Matrix3d CameraMatrix(const JsonReader& r, int width, int height) {
     r.Fail(Msg() << "impossible focal lengths fx = " << K(0, 0) << ", fy = " << K(1, 1) << " px (must be > 0 and < 1e6)");
   if ((K.row(2) - Eigen::RowVector3d(0, 0, 1)).cwiseAbs().maxCoeff() > 1e-6)
     r.Fail(Msg() << "not a camera matrix: the bottom row is [" << K.row(2) << "], not [0 0 1]");
-  if (width > 0 && height > 0 &&
-      (K(0, 2) < -width || K(0, 2) > 2.0 * width || K(1, 2) < -height || K(1, 2) > 2.0 * height))
-    r.Fail(Msg() << "the principal point (" << K(0, 2) << ", " << K(1, 2) << ") is far outside the " << width << "x"
-                 << height << " image");
+  if (width > 0 && height > 0 && (K(0, 2) < 0 || K(0, 2) > width || K(1, 2) < 0 || K(1, 2) > height))
+    r.Fail(Msg() << "the principal point (" << K(0, 2) << ", " << K(1, 2) << ") lies outside the " << width << "x"
+                 << height << " image: the image is not the size this calibration was made for (resized or cropped?)");
   return K;
 }
 

@@ -56,8 +56,9 @@ Rigid3d RigidPose(const JsonReader& r, double max_translation_m);
 inline constexpr double kMaxSensorOffsetM = 100;     // a sensor's mounting relative to the ego (a vehicle's size)
 inline constexpr double kMaxWorldCoordinateM = 1e7;  // a map frame's coordinates (UTM northings stay below)
 // A camera matrix (the top-left 3x3 of cam2img / P2) for an image of `width` x `height` (0: unknown): finite, focal
-// lengths positive and below 1e6 px, the bottom row [0 0 1], the principal point within the image grown by its own
-// size each way. A located InputError otherwise.
+// lengths positive and below 1e6 px, the bottom row [0 0 1], the principal point inside the image (a driving
+// camera's is near its centre; outside, the image was resized or cropped after calibration). A located InputError
+// otherwise.
 Eigen::Matrix3d CameraMatrix(const JsonReader& r, int width, int height);
 std::vector<double> Vec(const JsonReader& r, size_t n);  // null -> NaN
 Eigen::Vector3d Vec3(const JsonReader& r);

@@ -45,6 +45,10 @@ void CheckSensorGeometry(const Log& log) {
       if (!(std::isfinite(k.fx) && std::isfinite(k.fy) && k.fx > 0 && k.fy > 0 && std::isfinite(k.cx) && std::isfinite(k.cy)))
         fail(Msg() << "camera " << c.channel << ": impossible intrinsics fx = " << k.fx << ", fy = " << k.fy << ", cx = "
                    << k.cx << ", cy = " << k.cy);
+      if (k.width > 0 && k.height > 0 && (k.cx < 0 || k.cx > k.width || k.cy < 0 || k.cy > k.height))
+        fail(Msg() << "camera " << c.channel << ": the principal point (" << k.cx << ", " << k.cy << ") lies outside its "
+                   << k.width << "x" << k.height << " image " << c.image_path.filename().string()
+                   << " (resized or cropped after calibration?)");
       if (!finite(c.T_ego_cam) || c.T_ego_cam.translation.norm() > kMaxSensorOffsetM)
         fail(Msg() << "camera " << c.channel << " mounted at (" << c.T_ego_cam.translation.transpose()
                    << ") m from the ego origin (at most " << kMaxSensorOffsetM << " m)");

@@ -12,6 +12,7 @@
 #include "core/error.h"
 #include "datasets/internal.h"
 #include "io/files.h"
+#include "io/image_io.h"
 #include "io/json.h"
 #include "testing/testing.h"
 
@@ -421,7 +422,7 @@ TEST(BadInput, ImpossibleCalibrationIsRefusedWithItsField) {
       {"focal_negative", [](json& d) { d["data_list"][0]["images"]["CAM_BACK"]["cam2img"][1][1] = -809.2; },
        "CAM_BACK.cam2img", "impossible focal lengths"},
       {"principal_point", [](json& d) { d["data_list"][0]["images"]["CAM_BACK"]["cam2img"][0][2] = 1e5; },
-       "CAM_BACK.cam2img", "principal point"},
+       "CAM_BACK.cam2img", "principal point (100000, 481.778) lies outside the 1600x900 image"},
       {"lidar_far", [](json& d) { d["data_list"][0]["lidar_points"]["lidar2ego"][2][3] = 1e17; },
        "lidar_points.lidar2ego", "translation is 1e+17 m"},
       {"lidar_null", [](json& d) { d["data_list"][0]["lidar_points"]["lidar2ego"][0][3] = nullptr; },
@@ -462,6 +463,28 @@ TEST(BadInput, ImpossibleCalibrationIsRefusedWithItsField) {
     EXPECT_NE(message.find(c.problem), std::string::npos) << c.name << ": " << message;
   }
   EXPECT_NO_THROW(OpenLog(info));
+
+  // CAM_FRONT's image at half the size its calibration was made for (the other images absent: only the sizes
+  // the file headers give are compared).
+  const std::string front = original["data_list"][0]["images"]["CAM_FRONT"]["img_path"].get<std::string>();
+  const fs::path front_image = RepoData(kKf0) / "samples" / "CAM_FRONT" / fs::path(front).filename();
+  const ImageU8 full = ReadImage(front_image, 3);
+  ImageU8 half(full.width() / 2, full.height() / 2, 3);
+  for (int y = 0; y < half.height(); ++y)
+    for (int x = 0; x < half.width(); ++x)
+      for (int c = 0; c < 3; ++c) half.at(x, y, c) = full.at(2 * x, 2 * y, c);
+  const fs::path resized_root = tmp / "resized";
+  WriteImage(resized_root / "samples" / "CAM_FRONT" / fs::path(front).filename(), half);
+  std::string message;
+  try {
+    OpenLogOptions options;
+    options.data_root = resized_root;
+    OpenLog(info, options);
+  } catch (const InputError& e) {
+    message = e.what();
+  }
+  EXPECT_NE(message.find("CAM_FRONT.cam2img: the principal point"), std::string::npos) << message;
+  EXPECT_NE(message.find("outside the 800x450 image"), std::string::npos) << message;
 }
 
 }  // namespace

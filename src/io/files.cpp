@@ -19,6 +19,10 @@ std::string ReadFileToString(const fs::path& path) {
   std::error_code ec;
   if (!fs::exists(path, ec)) throw InputError(path, "file not found");
   if (fs::is_directory(path, ec)) throw InputError(path, "is a directory, expected a file");
+  // Data is read from regular files only: a FIFO blocks for ever and /dev/zero or /dev/urandom never end (they
+  // ended in std::bad_alloc with no file named).
+  if (!fs::is_regular_file(path, ec))
+    throw InputError(path, "is not a regular file (a FIFO, device or socket): not read as data");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(path, std::string("cannot open: ") + std::strerror(errno));
   std::ostringstream ss;

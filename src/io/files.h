@@ -8,7 +8,8 @@
 
 namespace sd {
 
-// Whole file as bytes; InputError naming the file when missing or unreadable.
+// Whole file as bytes; InputError naming the file when missing, unreadable, or not a regular file (a FIFO or a
+// device is never read as data).
 std::string ReadFileToString(const std::filesystem::path& path);
 // Writes `bytes` to `path` via a temporary sibling + fsync + rename. Creates parent directories.
 void WriteFileAtomic(const std::filesystem::path& path, std::string_view bytes);

@@ -1,5 +1,7 @@
 #include "io/files.h"
 
+#include <sys/stat.h>
+
 #include <gtest/gtest.h>
 
 #include "core/error.h"
@@ -37,6 +39,22 @@ TEST(Files, ReadMissingFileNamesIt) {
     EXPECT_EQ(e.where(), tmp / "missing.txt");
   }
   EXPECT_THROW(ReadFileToString(tmp.path()), InputError);  // a directory
+}
+
+TEST(Files, AFifoOrADeviceIsNotReadAsData) {
+  // A FIFO named as a sweep blocked for ever; /dev/zero ended in std::bad_alloc with no file named.
+  testing::TempDir tmp;
+  const fs::path fifo = tmp / "sweep.pcd.bin";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  for (const fs::path& p : {fifo, fs::path("/dev/zero")}) {
+    try {
+      ReadFileToString(p);
+      ADD_FAILURE() << p;
+    } catch (const InputError& e) {
+      EXPECT_EQ(e.where(), p);
+      EXPECT_NE(std::string(e.what()).find("not a regular file"), std::string::npos) << e.what();
+    }
+  }
 }
 
 TEST(Files, TemporarySiblingsAreDistinct) {

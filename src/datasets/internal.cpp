@@ -85,13 +85,7 @@ json ReadPythonJson(const fs::path& path) {
     if (text.compare(i, 9, "-Infinity") == 0) { clean += "null"; i += 8; continue; }
     clean += c;
   }
-  try {
-    return json::parse(clean);
-  } catch (const json::parse_error& e) {
-    const std::string what = e.what();
-    const size_t pos = what.find("] ");
-    throw InputError(path, "malformed JSON: " + (pos == std::string::npos ? what : what.substr(pos + 2)));
-  }
+  return ParseJsonText(clean, path);
 }
 
 double CameraYaw(const Eigen::Matrix3d& R_cam_box) {

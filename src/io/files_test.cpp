@@ -164,6 +164,28 @@ TEST(Files, OutputOverInputsIsRefused) {
   EXPECT_EQ(OverInputs(photo, {photo}).rfind(photo.string(), 0), 0u);
 }
 
+TEST(Json, DeepNestingAndOutOfRangeNumbersAreLocatedErrors) {
+  // 100,000-deep lists in a scenario comment parsed, then overflowed the stack when synth.json was written;
+  // 1e999 printed the JSON library's own message with no file.
+  testing::TempDir tmp;
+  const fs::path deep = tmp / "deep.json", huge = tmp / "huge.json", fine = tmp / "fine.json";
+  WriteFileAtomic(deep, "{\"_c\": " + std::string(100000, '[') + std::string(100000, ']') + "}");
+  WriteFileAtomic(huge, R"({"m": [[1e999]]})");
+  WriteFileAtomic(fine, "{\"a\": \"[[[[ \\\" {{\", \"b\": " + std::string(kMaxJsonDepth - 1, '[') +
+                            std::string(kMaxJsonDepth - 1, ']') + "}");
+  for (const auto& [file, problem] : {std::pair{deep, "nested deeper than 512 levels"}, std::pair{huge, "number overflow"}}) {
+    try {
+      ReadJsonFile(file);
+      ADD_FAILURE() << file;
+    } catch (const InputError& e) {
+      EXPECT_EQ(e.where(), file);
+      EXPECT_NE(std::string(e.what()).find(problem), std::string::npos) << e.what();
+      EXPECT_EQ(std::string(e.what()).find("json.exception"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_NO_THROW(ReadJsonFile(fine));  // brackets inside strings, escaped quotes, and nesting at the limit
+}
+
 TEST(JsonLines, CallsBackPerLineAndNamesTheBadLine) {
   sd::testing::TempDir tmp;
   const fs::path file = tmp / "x.jsonl";

@@ -8,17 +8,37 @@
 
 namespace sd {
 
-nlohmann::json ReadJsonFile(const std::filesystem::path& path) {
-  const std::string text = ReadFileToString(path);
+nlohmann::json ParseJsonText(std::string_view text, const std::filesystem::path& where) {
+  // Nesting first: nothing downstream is written for 100,000-deep lists (a scenario comment holding them parsed,
+  // then overflowed the stack when synth.json was written).
+  int depth = 0;
+  bool in_string = false;
+  for (size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (in_string) {
+      if (c == '\\') ++i;
+      else if (c == '"') in_string = false;
+    } else if (c == '"') {
+      in_string = true;
+    } else if (c == '[' || c == '{') {
+      if (++depth > kMaxJsonDepth)
+        throw InputError(where, Msg() << "malformed JSON: nested deeper than " << kMaxJsonDepth << " levels (at byte " << i << ")");
+    } else if (c == ']' || c == '}') {
+      --depth;
+    }
+  }
   try {
     return nlohmann::json::parse(text);
-  } catch (const nlohmann::json::parse_error& e) {
-    // nlohmann's message starts with "[json.exception.parse_error.101] parse error at line 3, column 5: ..."
+  } catch (const nlohmann::json::exception& e) {
+    // nlohmann's message starts with "[json.exception.parse_error.101] parse error at line 3, column 5: ..." (or
+    // out_of_range.406 for a number such as 1e999): the file is named, the library's tag is not.
     std::string what = e.what();
     const auto pos = what.find("] ");
-    throw InputError(path, "malformed JSON: " + (pos == std::string::npos ? what : what.substr(pos + 2)));
+    throw InputError(where, "malformed JSON: " + (pos == std::string::npos ? what : what.substr(pos + 2)));
   }
 }
+
+nlohmann::json ReadJsonFile(const std::filesystem::path& path) { return ParseJsonText(ReadFileToString(path), path); }
 
 void ForEachJsonLine(const std::filesystem::path& path,
                      const std::function<void(const nlohmann::json& value, const std::string& where)>& fn) {
@@ -27,15 +47,7 @@ void ForEachJsonLine(const std::filesystem::path& path,
   for (int n = 1; std::getline(lines, line); ++n) {
     if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
     const std::string where = path.string() + ":" + std::to_string(n);
-    nlohmann::json value;
-    try {
-      value = nlohmann::json::parse(line);
-    } catch (const nlohmann::json::parse_error& e) {
-      std::string what = e.what();
-      const auto pos = what.find("] ");
-      throw InputError(where, "malformed JSON: " + (pos == std::string::npos ? what : what.substr(pos + 2)));
-    }
-    fn(value, where);
+    fn(ParseJsonText(line, where), where);
   }
 }
 

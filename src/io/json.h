@@ -3,11 +3,17 @@
 #include <filesystem>
 #include <functional>
 #include <string>
+#include <string_view>
 
 #include <nlohmann/json.hpp>
 
 namespace sd {
 
+// JSON nested deeper than this is refused (no dataset, scenario or asset record comes near it).
+inline constexpr int kMaxJsonDepth = 512;
+// Parses JSON text; InputError naming `where` for malformed text, a number out of range (1e999) or nesting deeper
+// than kMaxJsonDepth.
+nlohmann::json ParseJsonText(std::string_view text, const std::filesystem::path& where);
 // Parses a JSON file; throws InputError naming the file and the parse error position.
 nlohmann::json ReadJsonFile(const std::filesystem::path& path);
 // A JSON Lines file (one value per line, blank lines skipped): calls fn(value, "<file>:<line>") in order, so

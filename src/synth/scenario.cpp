@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include <cmath>
+#include <initializer_list>
 
 #include "core/error.h"
 #include "datasets/categories.h"
@@ -67,7 +68,23 @@ double PositiveOr(const JsonReader& o, const std::string& key, double fallback) 
   return v;
 }
 
+// A misspelt key ("cuont") was silently ignored, and the run placed the default count: an unknown key is refused,
+// naming the keys that are read there. Keys starting with '_' are comments.
+void RefuseUnknownKeys(const JsonReader& o, std::initializer_list<const char*> known) {
+  if (!o.raw().is_object()) return;
+  for (const auto& [key, value] : o.raw().items()) {
+    if (!key.empty() && key[0] == '_') continue;
+    if (std::any_of(known.begin(), known.end(), [&](const char* k) { return key == k; })) continue;
+    std::string list;
+    for (const char* k : known) list += (list.empty() ? "" : ", ") + std::string(k);
+    o[key].Fail("unknown key (read here: " + list + "; a key starting with '_' is a comment)");
+  }
+}
+
 Arrangement ReadArrangement(const JsonReader& o) {
+  RefuseUnknownKeys(o, {"type", "category", "asset", "count", "lane_width_m", "lane_offset_m", "spacing_m", "distance_m",
+                        "lateral_m", "side", "categories", "assets", "vehicle", "warning", "position", "setting",
+                        "warning_distance_m", "allow_shoulder", "yaw"});
   Arrangement a;
   const std::string type = o["type"].String();
   using K = Arrangement::Kind;
@@ -165,10 +182,14 @@ const char* ToString(Arrangement::Kind kind) {
   return "?";
 }
 
+constexpr double kMaxMarginM = 10;
+
 Scenario ReadScenario(const std::filesystem::path& path) {
   const nlohmann::json j = ReadJsonFile(path);
   const JsonReader r(j, path);
   if (!j.is_object()) r.Fail("expected a JSON object");
+  RefuseUnknownKeys(r, {"seed", "margin_m", "world_fixed", "sun", "location", "assets_from_bank", "arrangements",
+                        "objects", "description"});
   Scenario s;
   if (r.Has("seed")) {
     const int64_t seed = r["seed"].Integer();
@@ -176,9 +197,13 @@ Scenario ReadScenario(const std::filesystem::path& path) {
     s.seed = static_cast<uint32_t>(seed);
   }
   s.margin_m = r.NumberOr("margin_m", s.margin_m);
-  if (s.margin_m < 0) r["margin_m"].Fail("margin must be non-negative");
+  // Placement tests every candidate against the margin's area; a margin of kilometres leaves no room on any road
+  // and made placement run for ever (1e6 m). 10 m is more than any clearance a scene asks for.
+  if (!(s.margin_m >= 0 && s.margin_m <= kMaxMarginM))
+    r["margin_m"].Fail(Msg() << "margin must be between 0 and " << kMaxMarginM << " m, not " << s.margin_m);
   if (r.Has("world_fixed")) s.world_fixed = r["world_fixed"].Bool();
   if (r.Has("sun") && !(j["sun"].is_string() && j["sun"] == "auto")) {
+    RefuseUnknownKeys(r["sun"], {"azimuth_deg", "elevation_deg"});
     SunSpec sun;
     sun.azimuth_deg = r["sun"]["azimuth_deg"].Number();
     sun.elevation_deg = r["sun"]["elevation_deg"].Number();
@@ -186,6 +211,7 @@ Scenario ReadScenario(const std::filesystem::path& path) {
     s.sun = sun;
   }
   if (r.Has("location")) {
+    RefuseUnknownKeys(r["location"], {"latitude_deg", "longitude_deg", "name"});
     GeoLocation loc;
     loc.latitude_deg = r["location"]["latitude_deg"].Number();
     loc.longitude_deg = r["location"]["longitude_deg"].Number();
@@ -211,6 +237,7 @@ Scenario ReadScenario(const std::filesystem::path& path) {
   if (objects.Size() == 0 && s.arrangements.empty()) objects.Fail("no objects requested");
   for (size_t i = 0; i < objects.Size(); ++i) {
     const JsonReader o = objects[i];
+    RefuseUnknownKeys(o, {"asset", "category", "count", "distance_m", "lateral_m", "yaw"});
     ObjectRequest req;
     req.asset_id = o.StringOr("asset", "");
     req.category = o.StringOr("category", "");

@@ -146,6 +146,15 @@ TEST(Scenario, BadInputNamesTheFileAndTheProblem) {
   ExpectError(R"({"location":{"latitude_deg":95,"longitude_deg":0},"objects":[{"category":"car"}]})", "latitude_deg");
   ExpectError(R"({"seed":-1,"objects":[{"category":"car"}]})", "seed");
   ExpectError(R"({"margin_m":"wide","objects":[{"category":"car"}]})", "expected a number");
+  // Placement never returned with a margin of 1e6 m.
+  ExpectError(R"({"margin_m":1e6,"objects":[{"category":"car"}]})", ".margin_m: margin must be between 0 and 10 m");
+  // A misspelt key was ignored and the default used instead.
+  ExpectError(R"({"objects":[{"category":"car","cuont":3}]})", ".objects[0].cuont: unknown key (read here: asset, category, count");
+  ExpectError(R"({"sead":3,"objects":[{"category":"car"}]})", ".sead: unknown key");
+  ExpectError(R"({"arrangements":[{"type":"lane_closure","spaceing_m":2}]})", ".arrangements[0].spaceing_m: unknown key");
+  ExpectError(R"({"sun":{"azimuth_deg":0,"elevation":30},"objects":[{"category":"car"}]})", ".sun.elevation: unknown key");
+  testing::TempDir dir;
+  EXPECT_NO_THROW(ReadScenario(Write(dir, R"({"_comment":"keys starting with _ are comments","objects":[{"category":"car","_why":"x"}]})")));
 }
 
 }  // namespace

@@ -19,29 +19,6 @@ constexpr double kCornerExponent = 10;
 
 using Ring = std::vector<Eigen::Vector2d>;
 
-// Closed rings stacked along z (each `segments` points, the same angular order), a fan at each end.
-TriangleMesh Loft(const std::vector<Ring>& rings, const std::vector<double>& z) {
-  TriangleMesh m;
-  const int n = static_cast<int>(rings.size()), segments = static_cast<int>(rings.front().size());
-  for (int i = 0; i < n; ++i)
-    for (const Eigen::Vector2d& p : rings[i]) m.positions.emplace_back(float(p.x()), float(p.y()), float(z[i]));
-  const int bottom = static_cast<int>(m.positions.size());
-  m.positions.emplace_back(0.0f, 0.0f, float(z.front()));
-  const int top = bottom + 1;
-  m.positions.emplace_back(0.0f, 0.0f, float(z.back()));
-  auto at = [&](int i, int j) { return i * segments + (j % segments); };
-  for (int i = 0; i + 1 < n; ++i)
-    for (int j = 0; j < segments; ++j) {
-      m.faces.emplace_back(at(i, j), at(i, j + 1), at(i + 1, j + 1));
-      m.faces.emplace_back(at(i, j), at(i + 1, j + 1), at(i + 1, j));
-    }
-  for (int j = 0; j < segments; ++j) {
-    m.faces.emplace_back(bottom, at(0, j + 1), at(0, j));
-    m.faces.emplace_back(top, at(n - 1, j), at(n - 1, j + 1));
-  }
-  return m;
-}
-
 // Soft IoU of a coverage image with the mask.
 double SoftIou(const ImageF& a, const ImageF& b) {
   double inter = 0, uni = 0;
@@ -96,7 +73,7 @@ TriangleMesh SurfaceOfRevolutionOnPlate(const std::vector<std::pair<double, doub
   for (const auto& [zi, r] : rings)
     if (zi > plate.thickness + 1e-9) loft.push_back(circle(r)), z.push_back(zi);
   SD_CHECK(loft.size() >= 4);  // a body above the plate
-  return Loft(loft, z);
+  return LoftRings(loft, z);
 }
 
 BasePlateFit FitBasePlate(const std::vector<std::pair<double, double>>& rings, const ViewCamera& photo,

@@ -222,19 +222,19 @@ ImageF OutlineCoverageKept(const ImageF& given, const ImageF& binary) {
 
 }  // namespace
 
-TriangleMesh SurfaceOfRevolution(const std::vector<std::pair<double, double>>& rings, int segments,
-                                 const Eigen::Vector2d& axis) {
+TriangleMesh LoftRings(const std::vector<std::vector<Eigen::Vector2d>>& rings, const std::vector<double>& z,
+                       const Eigen::Vector2d& centre) {
+  SD_CHECK(rings.size() == z.size() && !rings.empty());
   TriangleMesh m;
-  const int n = static_cast<int>(rings.size());
-  for (const auto& [z, r] : rings)
-    for (int j = 0; j < segments; ++j) {
-      const double a = 2 * kPi * j / segments;
-      m.positions.emplace_back(float(axis.x() + r * std::cos(a)), float(axis.y() + r * std::sin(a)), float(z));
-    }
+  const int n = static_cast<int>(rings.size()), segments = static_cast<int>(rings.front().size());
+  for (int i = 0; i < n; ++i) {
+    SD_CHECK(static_cast<int>(rings[i].size()) == segments);
+    for (const Eigen::Vector2d& p : rings[i]) m.positions.emplace_back(float(p.x()), float(p.y()), float(z[i]));
+  }
   const int bottom = static_cast<int>(m.positions.size());
-  m.positions.emplace_back(float(axis.x()), float(axis.y()), float(rings.front().first));
+  m.positions.emplace_back(float(centre.x()), float(centre.y()), float(z.front()));
   const int top = bottom + 1;
-  m.positions.emplace_back(float(axis.x()), float(axis.y()), float(rings.back().first));
+  m.positions.emplace_back(float(centre.x()), float(centre.y()), float(z.back()));
   auto at = [&](int i, int j) { return i * segments + (j % segments); };
   for (int i = 0; i + 1 < n; ++i)
     for (int j = 0; j < segments; ++j) {
@@ -246,6 +246,21 @@ TriangleMesh SurfaceOfRevolution(const std::vector<std::pair<double, double>>& r
     m.faces.emplace_back(top, at(n - 1, j), at(n - 1, j + 1));
   }
   return m;
+}
+
+TriangleMesh SurfaceOfRevolution(const std::vector<std::pair<double, double>>& rings, int segments,
+                                 const Eigen::Vector2d& axis) {
+  std::vector<std::vector<Eigen::Vector2d>> circles;
+  std::vector<double> z;
+  for (const auto& [zi, r] : rings) {
+    std::vector<Eigen::Vector2d>& c = circles.emplace_back(segments);
+    for (int j = 0; j < segments; ++j) {
+      const double a = 2 * kPi * j / segments;
+      c[j] = axis + r * Eigen::Vector2d(std::cos(a), std::sin(a));
+    }
+    z.push_back(zi);
+  }
+  return LoftRings(circles, z, axis);
 }
 
 const char* ToString(ShapePrior prior) {

@@ -87,6 +87,12 @@ struct PhotoShape {
 // silhouette (symmetry_iou below min_revolve_symmetry).
 PhotoShape ShapeFromPhoto(const PhotoObservation& photo, const ShapePriorOptions& options);
 
+// A closed surface through horizontal rings (each the same number of points, in the same counter-clockwise angular
+// order about `centre`, seen from above) at heights z (ascending), capped by a fan about `centre` at each end;
+// watertight, outward-facing.
+TriangleMesh LoftRings(const std::vector<std::vector<Eigen::Vector2d>>& rings, const std::vector<double>& z,
+                       const Eigen::Vector2d& centre = Eigen::Vector2d::Zero());
+
 // A closed surface of revolution about the vertical through `axis`: rings (z ascending, radius), `segments` around,
 // capped at both ends; watertight, outward-facing.
 TriangleMesh SurfaceOfRevolution(const std::vector<std::pair<double, double>>& rings, int segments,

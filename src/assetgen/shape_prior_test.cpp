@@ -79,6 +79,16 @@ PhotoObservation Photograph(TriangleMesh mesh, double height, double azimuth_deg
   return photo;
 }
 
+// Photograph() as a log gives it: the camera's intrinsics and its elevation above the object known.
+PhotoObservation PhotographKnownCamera(const TriangleMesh& mesh, double height, double azimuth_deg,
+                                       double elevation_deg, double distance) {
+  ViewCamera cam;
+  PhotoObservation photo = Photograph(mesh, height, azimuth_deg, elevation_deg, distance, &cam);
+  photo.camera = cam.camera;
+  photo.elevation_deg = elevation_deg;
+  return photo;
+}
+
 geometry::GeometryMetrics Compare(const TriangleMesh& pred, const TriangleMesh& truth) {
   geometry::GeometryMetricsOptions o;
   o.num_samples = 30000;
@@ -223,10 +233,7 @@ TEST(SurfaceOfRevolutionOnPlate, IsOneClosedOutwardMeshWithTheCornersAsVertices)
 
 TEST(ShapeFromPhoto, StandsAConeOnTheSquarePlateItsFootShows) {
   const TriangleMesh truth = ConeOnPlate();
-  ViewCamera cam;
-  PhotoObservation photo = Photograph(truth, 0.73, 30, 10, 3.0, &cam);
-  photo.camera = cam.camera;
-  photo.elevation_deg = 10;
+  const PhotoObservation photo = PhotographKnownCamera(truth, 0.73, 30, 10, 3.0);
   ShapePriorOptions options;
   options.category = "traffic_cone";
   options.size = Eigen::Vector3d(0.4, 0.4, 0.73);  // the category's proportions: the plate's size is fitted
@@ -268,10 +275,7 @@ TEST(ShapeFromPhoto, StandsAConeOnTheSquarePlateItsFootShows) {
 TEST(ShapeFromPhoto, KeepsTheDiscUnderAConeWhoseFootIsRound) {
   // The frustum on a round foot 0.44 m across and 3 cm thick: the foot flares, but a square fits it worse.
   TriangleMesh truth = SurfaceOfRevolution({{0.0, 0.22}, {0.03, 0.22}, {0.03, 0.16}, {0.73, 0.03}}, 96);
-  ViewCamera cam;
-  PhotoObservation photo = Photograph(truth, 0.73, 30, 10, 3.0, &cam);
-  photo.camera = cam.camera;
-  photo.elevation_deg = 10;
+  const PhotoObservation photo = PhotographKnownCamera(truth, 0.73, 30, 10, 3.0);
   ShapePriorOptions options;
   options.category = "traffic_cone";
   options.size = Eigen::Vector3d(0.44, 0.44, 0.73);
@@ -284,10 +288,7 @@ TEST(ShapeFromPhoto, AMeasuredOblongBoxMakesAnOvalSection) {
   // A flask 10 x 6 cm, 25 cm tall (an elliptic cylinder), seen from 30 degrees off its length.
   TriangleMesh truth = SurfaceOfRevolution({{0.0, 1.0}, {0.25, 1.0}}, 96);
   for (auto& p : truth.positions) p.x() *= 0.05f, p.y() *= 0.03f;
-  ViewCamera cam;
-  PhotoObservation photo = Photograph(truth, 0.25, 30, 10, 1.2, &cam);
-  photo.camera = cam.camera;
-  photo.elevation_deg = 10;
+  const PhotoObservation photo = PhotographKnownCamera(truth, 0.25, 30, 10, 1.2);
   ShapePriorOptions options;
   options.category = "bottle";
   options.size = Eigen::Vector3d(0.1, 0.06, 0.25);

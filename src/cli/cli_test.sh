@@ -245,10 +245,11 @@ env SYNTHDRIVE_MODELS="$T/no_models" "$BIN" -q mine query --index "$T/mi" --prom
   && ok || bad "generate --manifest without models: harvested log assets with quality figures"
 # The bank's gate: a figure below the bar refuses the asset in one line naming it; --no-gate admits it.
 G6=$(ls -d "$T"/g6/*/ | head -1)
-expect_error "bank add: below the quality gate" "below the bank's quality gate: lidar_p2m_median_m" "" -- "$BIN" -q bank add --bank "$T/gate.sqlite" --gate "lidar_p2m_median_m<=0.00001" "$G6"
+# A bank the failed run would have created is not left behind empty.
+expect_error "bank add: below the quality gate" "below the bank's quality gate: lidar_p2m_median_m" "$T/gate.sqlite" -- "$BIN" -q bank add --bank "$T/gate.sqlite" --gate "lidar_p2m_median_m<=0.00001" "$G6"
 "$BIN" -q bank add --bank "$T/gate.sqlite" --no-gate "$G6" && "$BIN" -q bank list --bank "$T/gate.sqlite" | grep -q barrier \
   && ok || bad "bank add --no-gate"
-expect_error "bank add: malformed gate" "--gate 'watertight=1'" "" -- "$BIN" -q bank add --bank "$T/gate2.sqlite" --gate watertight=1 "$G6"
+expect_error "bank add: malformed gate" "--gate 'watertight=1'" "$T/gate2.sqlite" -- "$BIN" -q bank add --bank "$T/gate2.sqlite" --gate watertight=1 "$G6"
 
 # Synth as a batch on the 3-frame KITTI log: shards 0/2 + 1/2 + --merge write what a plain run writes; each
 # shard logs its frames; a bad --shard and a merge with a missing part are refused, creating nothing.

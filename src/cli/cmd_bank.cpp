@@ -148,10 +148,14 @@ Runner AddAdd(CLI::App& app) {
     for (size_t i = 0; i < all.size(); ++i)
       if (shard.Owns(i)) mine.push_back(all[i]);
     const std::optional<models::ClipEncoder> clip = LoadBankClip(a->clip, a->device);
-    bank::Bank b = bank::Bank::Open(BankPath(a->bank), true);
+    // Everything that can be refused before the bank file exists is (a bad --gate left an empty bank.sqlite).
     bank::QualityGate gate = bank::DefaultQualityGate();
     for (const std::string& rule : a->gate) bank::ParseGateRule(rule, "--gate", &gate);
     if (a->no_gate && !a->gate.empty()) throw InputError({}, "--gate and --no-gate contradict each other");
+    const fs::path bank_path = BankPath(a->bank);
+    const bool created = !fs::exists(bank_path);
+    std::optional<bank::Bank> opened = bank::Bank::Open(bank_path, true);
+    bank::Bank& b = *opened;
     bank::AddOptions options;
     options.replace = a->replace;
     if (!a->no_gate) options.gate = &gate;
@@ -175,6 +179,15 @@ Runner AddAdd(CLI::App& app) {
     for (const std::string& f : failures) SD_LOG(Error, f);
     SD_LOG(Info, b.path().string() << ": " << added << " added, " << unchanged << " unchanged, " << replaced
                                    << " replaced, " << failures.size() << " failed");
+    if (created && added + replaced == 0) {
+      // A bank this run created and put nothing in is not left behind as an empty file.
+      opened.reset();
+      for (const char* suffix : {"", "-journal", "-wal", "-shm"}) {
+        std::error_code ec;
+        fs::remove(bank_path.string() + suffix, ec);
+      }
+      SD_LOG(Info, bank_path.string() << ": nothing catalogued, not created");
+    }
     return failures.empty() ? 0 : 1;
   };
 }

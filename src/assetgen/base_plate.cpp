@@ -81,7 +81,6 @@ BasePlateFit FitBasePlate(const std::vector<std::pair<double, double>>& rings, c
   BasePlateFit out;
   aspect = half_sides ? half_sides->y() / half_sides->x() : std::clamp(aspect, 0.2, 5.0);
   auto iou_of = [&](const TriangleMesh& mesh) { return SoftIou(RenderAlbedo(mesh, photo, 2).mask, mask); };
-  out.iou_disc = iou_of(SurfaceOfRevolution(rings, 64));
   if (rings.size() < 8) {
     out.note = "too few profile rows to look for a plate";
     return out;
@@ -117,6 +116,7 @@ BasePlateFit FitBasePlate(const std::vector<std::pair<double, double>>& rings, c
     out.note = "no flare at the foot";
     return out;
   }
+  out.iou_disc = iou_of(SurfaceOfRevolution(rings, 64));
 
   // Candidates: the plate's heading psi, its thickness t and its bottom g (both in units of the flare's height
   // above the profile's lowest ring: the revolve grounds the object at its lowest side row, which for a plate seen
@@ -127,23 +127,29 @@ BasePlateFit FitBasePlate(const std::vector<std::pair<double, double>>& rings, c
   struct Candidate {
     double psi = 0, t = 0.5, g = 0, k = 1, iou = -1;
   } best;
-  // The plate and the body above it, in a frame grounded at the plate's bottom (z = 0 there).
+  // The plate, the body above it in a frame grounded at the plate's bottom (z = 0 there), and where that bottom
+  // lies in the rings' z.
+  struct Model {
+    BasePlate plate;
+    std::vector<std::pair<double, double>> body;
+    double ground = 0;
+  };
   auto make = [&](const Candidate& c) {
+    Model m;
     const double beta = c.psi - camera_azimuth;
     const double half_x =
         half_sides ? half_sides->x() : c.k * r_foot / (std::abs(std::sin(beta)) + aspect * std::abs(std::cos(beta)));
-    BasePlate plate{half_x, aspect * half_x, c.t * flare, c.psi};
-    const double ground = z0 + c.g * flare;
-    std::vector<std::pair<double, double>> body;
+    m.plate = {half_x, aspect * half_x, c.t * flare, c.psi};
+    m.ground = z0 + c.g * flare;
     for (const auto& [z, r] : rings)
-      if (z - ground > plate.thickness) body.emplace_back(z - ground, z <= z_flare ? body_r(z) : r);
-    return std::make_pair(plate, body);
+      if (z - m.ground > m.plate.thickness) m.body.emplace_back(z - m.ground, z <= z_flare ? body_r(z) : r);
+    return m;
   };
   auto score = [&](Candidate c) {
-    const auto [plate, body] = make(c);
-    if (body.size() < 2) return;
-    TriangleMesh mesh = SurfaceOfRevolutionOnPlate(body, 64, plate);
-    for (Eigen::Vector3f& p : mesh.positions) p.z() += float(z0 + c.g * flare);
+    const Model m = make(c);
+    if (m.body.size() < 2) return;
+    TriangleMesh mesh = SurfaceOfRevolutionOnPlate(m.body, 64, m.plate);
+    for (Eigen::Vector3f& p : mesh.positions) p.z() += float(m.ground);
     c.iou = iou_of(mesh);
     if (c.iou > best.iou) best = c;
   };
@@ -195,9 +201,8 @@ BasePlateFit FitBasePlate(const std::vector<std::pair<double, double>>& rings, c
                      << " < " << out.iou_disc << ")";
     return out;
   }
-  const auto [plate, body] = make(best);
-  out.ground = z0 + best.g * flare;
-  out.plate = plate, out.body = body;
+  Model m = make(best);
+  out.plate = m.plate, out.body = std::move(m.body), out.ground = m.ground;
   // No sizes here: the caller grounds and rescales the shape after this fit.
   out.note = Msg() << "square plate, " << (half_sides ? "its sides from the measured box" : "its sides fitted")
                    << ", at " << std::fmod(best.psi * 180 / kPi + 360, 360) << " deg to the photo's line of sight"

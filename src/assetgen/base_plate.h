@@ -38,6 +38,7 @@ struct BasePlateFit {
   double ground = 0;                             // with a plate: the plate's bottom in the rings' z (the object
                                                  // stands there; `body` is measured from it)
   double iou_disc = 0, iou_plate = 0;            // the photo's mask against each model redrawn at its camera
+                                                 // (0 where the foot does not flare: no plate was tried)
   std::string note;                              // why, in words (for asset.json)
 };
 

@@ -136,7 +136,7 @@ Eigen::Matrix3d CameraMatrix(const JsonReader& r, int width, int height) {
     r.Fail(Msg() << "impossible focal lengths fx = " << K(0, 0) << ", fy = " << K(1, 1) << " px (must be > 0 and < 1e6)");
   if ((K.row(2) - Eigen::RowVector3d(0, 0, 1)).cwiseAbs().maxCoeff() > 1e-6)
     r.Fail(Msg() << "not a camera matrix: the bottom row is [" << K.row(2) << "], not [0 0 1]");
-  if (width > 0 && height > 0 && (K(0, 2) < 0 || K(0, 2) > width || K(1, 2) < 0 || K(1, 2) > height))
+  if (!PrincipalPointInImage(K(0, 2), K(1, 2), width, height))
     r.Fail(Msg() << "the principal point (" << K(0, 2) << ", " << K(1, 2) << ") lies outside the " << width << "x"
                  << height << " image: the image is not the size this calibration was made for (resized or cropped?)");
   return K;

@@ -60,6 +60,10 @@ inline constexpr double kMaxWorldCoordinateM = 1e7;  // a map frame's coordinate
 // camera's is near its centre; outside, the image was resized or cropped after calibration). A located InputError
 // otherwise.
 Eigen::Matrix3d CameraMatrix(const JsonReader& r, int width, int height);
+// The principal point lies inside a width x height image; true where the size is unknown (0).
+inline bool PrincipalPointInImage(double cx, double cy, int width, int height) {
+  return width <= 0 || height <= 0 || (cx >= 0 && cx <= width && cy >= 0 && cy <= height);
+}
 std::vector<double> Vec(const JsonReader& r, size_t n);  // null -> NaN
 Eigen::Vector3d Vec3(const JsonReader& r);
 Rigid3d PoseWxyz(const JsonReader& rotation, const JsonReader& translation);  // quaternion w, x, y, z

@@ -4,6 +4,7 @@
 
 #include "core/error.h"
 #include "datasets/format.h"
+#include "datasets/internal.h"
 #include "io/pointcloud_io.h"
 
 namespace fs = std::filesystem;
@@ -29,7 +30,7 @@ namespace {
 // sensors mounted on the vehicle, cameras with positive focal lengths. A zero focal length aborted inside Embree
 // and a LiDAR mounted 1e17 m up crashed the road model; here they are one line naming the log, frame and sensor.
 void CheckSensorGeometry(const Log& log) {
-  constexpr double kMaxSensorOffsetM = 100, kMaxWorldCoordinateM = 1e7;
+  using datasets_internal::kMaxSensorOffsetM, datasets_internal::kMaxWorldCoordinateM;
   auto finite = [](const Rigid3d& T) { return T.rotation.coeffs().allFinite() && T.translation.allFinite(); };
   for (const Frame& f : log.frames) {
     auto fail = [&](const std::string& what) {
@@ -45,7 +46,7 @@ void CheckSensorGeometry(const Log& log) {
       if (!(std::isfinite(k.fx) && std::isfinite(k.fy) && k.fx > 0 && k.fy > 0 && std::isfinite(k.cx) && std::isfinite(k.cy)))
         fail(Msg() << "camera " << c.channel << ": impossible intrinsics fx = " << k.fx << ", fy = " << k.fy << ", cx = "
                    << k.cx << ", cy = " << k.cy);
-      if (k.width > 0 && k.height > 0 && (k.cx < 0 || k.cx > k.width || k.cy < 0 || k.cy > k.height))
+      if (!datasets_internal::PrincipalPointInImage(k.cx, k.cy, k.width, k.height))
         fail(Msg() << "camera " << c.channel << ": the principal point (" << k.cx << ", " << k.cy << ") lies outside its "
                    << k.width << "x" << k.height << " image " << c.image_path.filename().string()
                    << " (resized or cropped after calibration?)");

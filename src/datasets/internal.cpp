@@ -136,10 +136,30 @@ Eigen::Matrix3d CameraMatrix(const JsonReader& r, int width, int height) {
     r.Fail(Msg() << "impossible focal lengths fx = " << K(0, 0) << ", fy = " << K(1, 1) << " px (must be > 0 and < 1e6)");
   if ((K.row(2) - Eigen::RowVector3d(0, 0, 1)).cwiseAbs().maxCoeff() > 1e-6)
     r.Fail(Msg() << "not a camera matrix: the bottom row is [" << K.row(2) << "], not [0 0 1]");
-  if (!PrincipalPointInImage(K(0, 2), K(1, 2), width, height))
-    r.Fail(Msg() << "the principal point (" << K(0, 2) << ", " << K(1, 2) << ") lies outside the " << width << "x"
-                 << height << " image: the image is not the size this calibration was made for (resized or cropped?)");
+  if (!PrincipalPointNearCentre(K(0, 2), K(1, 2), width, height)) r.Fail(PrincipalPointProblem(K(0, 2), K(1, 2), width, height));
   return K;
+}
+
+std::string PrincipalPointProblem(double cx, double cy, int width, int height) {
+  const bool inside = cx >= 0 && cx <= width && cy >= 0 && cy <= height;
+  return Msg() << "the principal point (" << cx << ", " << cy << ") lies " << (inside ? "far from the centre of" : "outside")
+               << " the " << width << "x" << height << " image (a driving camera's lies in its middle half): the image "
+               << "is not the size this calibration was made for (resized or cropped?)";
+}
+
+void AssumptionTally::Note(const std::string& what, const std::string& frame_token) {
+  for (Kind& k : kinds_) {
+    if (k.what != what) continue;
+    // A frame counts once however many of its sensors lack the field; readers note frame by frame.
+    if (k.last_token != frame_token) ++k.frames, k.last_token = frame_token;
+    return;
+  }
+  kinds_.push_back({what, 1, frame_token, frame_token});
+}
+
+void AssumptionTally::AppendTo(std::vector<std::string>& assumptions, size_t frames) const {
+  for (const Kind& k : kinds_)
+    assumptions.push_back(Msg() << k.what << " (in " << k.frames << " of " << frames << " frames, first: " << k.first_token << ")");
 }
 
 std::vector<double> Vec(const JsonReader& r, size_t n) {

@@ -2,6 +2,7 @@
 // Helpers shared by the dataset formats (one file per format: nuscenes.cpp, mmdet3d.cpp, kitti.cpp,
 // argoverse2.cpp); not part of the module's public interface.
 #include <array>
+#include <cmath>
 #include <filesystem>
 #include <initializer_list>
 #include <optional>
@@ -56,14 +57,35 @@ Rigid3d RigidPose(const JsonReader& r, double max_translation_m);
 inline constexpr double kMaxSensorOffsetM = 100;     // a sensor's mounting relative to the ego (a vehicle's size)
 inline constexpr double kMaxWorldCoordinateM = 1e7;  // a map frame's coordinates (UTM northings stay below)
 // A camera matrix (the top-left 3x3 of cam2img / P2) for an image of `width` x `height` (0: unknown): finite, focal
-// lengths positive and below 1e6 px, the bottom row [0 0 1], the principal point inside the image (a driving
-// camera's is near its centre; outside, the image was resized or cropped after calibration). A located InputError
-// otherwise.
+// lengths positive and below 1e6 px, the bottom row [0 0 1], the principal point near the image's centre. A located
+// InputError otherwise.
 Eigen::Matrix3d CameraMatrix(const JsonReader& r, int width, int height);
-// The principal point lies inside a width x height image; true where the size is unknown (0).
-inline bool PrincipalPointInImage(double cx, double cy, int width, int height) {
-  return width <= 0 || height <= 0 || (cx >= 0 && cx <= width && cy >= 0 && cy <= height);
+// A driving camera's principal point lies near its image's centre: within 0.45-0.55 of the width and height in
+// every camera of nuScenes, Lyft, KITTI, Argoverse 2 and PandaSet. Beyond a quarter of the image from the centre
+// (outside its middle half), the image is not the one the calibration was made for: resized (a half-size nuScenes
+// image puts it outside the image) or cropped (1600x900 cut to 1600x600 puts it at 82 % of the height). True
+// where the size is unknown (0).
+inline bool PrincipalPointNearCentre(double cx, double cy, int width, int height) {
+  if (width <= 0 || height <= 0) return true;
+  return std::abs(cx - 0.5 * width) <= 0.25 * width && std::abs(cy - 0.5 * height) <= 0.25 * height;
 }
+// "the principal point (cx, cy) is not near the centre of the WxH image ..." for the errors of the rule above.
+std::string PrincipalPointProblem(double cx, double cy, int width, int height);
+// Optional fields a reader defaulted, tallied per kind over a log's frames so each kind becomes one line of
+// Log::assumptions ("<what> (in 3 of 81 frames, first: <token>)") instead of one per frame.
+class AssumptionTally {
+ public:
+  void Note(const std::string& what, const std::string& frame_token);
+  void AppendTo(std::vector<std::string>& assumptions, size_t frames) const;
+
+ private:
+  struct Kind {
+    std::string what;
+    size_t frames = 0;
+    std::string first_token, last_token;
+  };
+  std::vector<Kind> kinds_;
+};
 std::vector<double> Vec(const JsonReader& r, size_t n);  // null -> NaN
 Eigen::Vector3d Vec3(const JsonReader& r);
 Rigid3d PoseWxyz(const JsonReader& rotation, const JsonReader& translation);  // quaternion w, x, y, z

@@ -119,6 +119,9 @@ struct Log {
   // Facts about the frames their reader knows:
   bool sequential = true;            // frames are a time series with world poses (KITTI object frames are not)
   bool ego_origin_on_ground = true;  // the ego origin lies on the road (nuScenes' rear axle); KITTI's Velodyne frame does not
+  // What the reader assumed for optional fields the file left out, one line per kind ("ego2global missing in 3 of
+  // 81 frames (first: <token>): ..."); OpenLog reports each once, so a run never rests on a silent default.
+  std::vector<std::string> assumptions;
 };
 
 }  // namespace sd

@@ -52,12 +52,20 @@ Log ReadMmdet3dV1(const json& j, const fs::path& file, const OpenLogOptions& opt
     log.categories = InfoClasses(meta);
   }
   const JsonReader list = root["data_list"];
+  AssumptionTally assumed;
   for (size_t i = 0; i < list.Size(); ++i) {
     const JsonReader d = list[i];
     Frame f;
     f.token = d.Has("token") ? d["token"].String() : std::to_string(d.Has("sample_idx") ? d["sample_idx"].Integer() : int64_t(i));
-    f.timestamp = d.NumberOr("timestamp", 0);
-    f.T_world_ego = d.Has("ego2global") ? RigidPose(d["ego2global"], kMaxWorldCoordinateM) : Rigid3d();
+    if (d.Has("timestamp")) f.timestamp = d["timestamp"].Number();
+    else assumed.Note("timestamp missing: 0 s assumed (no ego motion can be derived from time)", f.token);
+    if (d.Has("ego2global")) {
+      f.T_world_ego = RigidPose(d["ego2global"], kMaxWorldCoordinateM);
+    } else {
+      // Without its pose a frame cannot be placed in a sequence: every frame is synthesised on its own.
+      assumed.Note("ego2global missing: the ego pose taken as the world origin, frames synthesised one by one", f.token);
+      log.sequential = false;
+    }
     Rigid3d T_ego_lidar;
     if (d.Has("lidar_points")) {
       const JsonReader lp = d["lidar_points"];
@@ -65,17 +73,32 @@ Log ReadMmdet3dV1(const json& j, const fs::path& file, const OpenLogOptions& opt
       l.channel = "LIDAR_TOP";
       l.relpath = lp["lidar_path"].String();
       l.path = log.data_root / V1RelPath(l.relpath, l.channel);
-      // nuScenes and Lyft sweeps hold 5 float32 per point even where num_pts_feats says how many are used.
+      // nuScenes and Lyft sweeps hold 5 float32 per point; num_pts_feats says how many of them a model uses
+      // (Lyft's infos say 4 of the 5), so it bounds the layout rather than setting it. Anything else (Waymo's 6,
+      // a string) is a file this reader would read with the wrong stride: refused, not guessed.
       l.layout = PointLayout::NuScenes();
+      if (lp.Has("num_pts_feats")) {
+        const int64_t used = lp["num_pts_feats"].Integer();
+        if (used < 3 || used > l.layout.num_features)
+          lp["num_pts_feats"].Fail(Msg() << used << " features per point: this reader takes sweeps of "
+                                         << l.layout.num_features << " float32 per point (x y z intensity ring), of which 3 to "
+                                         << l.layout.num_features << " are used");
+      }
       l.timestamp = f.timestamp;
       l.T_ego_lidar = RigidPose(lp["lidar2ego"], kMaxSensorOffsetM);
       T_ego_lidar = l.T_ego_lidar;
       f.lidar = l;
+    } else {
+      assumed.Note("lidar_points missing: no LiDAR sweep (cameras only)", f.token);
     }
+    if (!d.Has("images")) assumed.Note("images missing: no cameras (LiDAR only)", f.token);
     if (d.Has("images")) {
       for (const auto& [channel, rec] : d["images"].raw().items()) {
         const JsonReader c = d["images"][channel];
-        if (!c.Has("img_path")) continue;
+        // mmdet3d's KITTI-style infos keep R0_rect, a matrix, among the cameras; a camera without its image is
+        // another matter: dropping it silently moved its objects to other cameras.
+        if (!rec.is_object()) continue;
+        if (!c.Has("img_path")) c.Fail("a camera without img_path: its image cannot be read");
         CameraSensor cam;
         cam.channel = channel;
         cam.token = c.StringOr("sample_data_token", "");
@@ -87,6 +110,9 @@ Log ReadMmdet3dV1(const json& j, const fs::path& file, const OpenLogOptions& opt
         cam.T_egocam_cam = RigidPose(c["cam2ego"], kMaxSensorOffsetM);
         // lidar2cam = inv(cam2ego) inv(E(t_cam)) E(t_lidar) lidar2ego, so lidar2ego inv(lidar2cam) is the
         // camera seen from the LiDAR-time ego pose (log.h's T_ego_cam), ego motion included.
+        if (!c.Has("lidar2cam"))
+          assumed.Note("lidar2cam missing: derived from cam2ego and lidar2ego (the ego's motion between the LiDAR "
+                       "and camera times ignored)", f.token);
         const Rigid3d T_cam_lidar = c.Has("lidar2cam") ? RigidPose(c["lidar2cam"], kMaxSensorOffsetM)
                                                        : cam.T_egocam_cam.Inverse() * T_ego_lidar;
         cam.T_ego_cam = T_ego_lidar * T_cam_lidar.Inverse();
@@ -148,6 +174,7 @@ Log ReadMmdet3dV1(const json& j, const fs::path& file, const OpenLogOptions& opt
     }
     log.frames.push_back(std::move(f));
   }
+  assumed.AppendTo(log.assumptions, log.frames.size());
   return log;
 }
 

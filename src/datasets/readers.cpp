@@ -1,8 +1,11 @@
 #include "datasets/readers.h"
 
 #include <cmath>
+#include <map>
+#include <string>
 
 #include "core/error.h"
+#include "core/log.h"
 #include "datasets/format.h"
 #include "datasets/internal.h"
 #include "io/pointcloud_io.h"
@@ -46,13 +49,80 @@ void CheckSensorGeometry(const Log& log) {
       if (!(std::isfinite(k.fx) && std::isfinite(k.fy) && k.fx > 0 && k.fy > 0 && std::isfinite(k.cx) && std::isfinite(k.cy)))
         fail(Msg() << "camera " << c.channel << ": impossible intrinsics fx = " << k.fx << ", fy = " << k.fy << ", cx = "
                    << k.cx << ", cy = " << k.cy);
-      if (!datasets_internal::PrincipalPointInImage(k.cx, k.cy, k.width, k.height))
-        fail(Msg() << "camera " << c.channel << ": the principal point (" << k.cx << ", " << k.cy << ") lies outside its "
-                   << k.width << "x" << k.height << " image " << c.image_path.filename().string()
-                   << " (resized or cropped after calibration?)");
+      if (!datasets_internal::PrincipalPointNearCentre(k.cx, k.cy, k.width, k.height))
+        fail(Msg() << "camera " << c.channel << " (" << c.image_path.filename().string()
+                   << "): " << datasets_internal::PrincipalPointProblem(k.cx, k.cy, k.width, k.height));
       if (!finite(c.T_ego_cam) || c.T_ego_cam.translation.norm() > kMaxSensorOffsetM)
         fail(Msg() << "camera " << c.channel << " mounted at (" << c.T_ego_cam.translation.transpose()
                    << ") m from the ego origin (at most " << kMaxSensorOffsetM << " m)");
+    }
+  }
+}
+
+// Each frame once, each sensor file in one place only. A sample listed twice used to be synthesised twice into one
+// image: labels for objects that are not in its pixels.
+void CheckFramesDistinct(const Log& log) {
+  std::map<std::string, size_t> frame_of_token, frame_of_file;
+  for (size_t i = 0; i < log.frames.size(); ++i) {
+    const Frame& f = log.frames[i];
+    if (auto [it, fresh] = frame_of_token.emplace(f.token, i); !fresh)
+      throw InputError(log.source, Msg() << "frame " << i << ": the sample " << f.token << " is listed twice (also frame "
+                                         << it->second << "): each sample must appear once");
+    auto once = [&](const fs::path& file, const std::string& sensor) {
+      if (auto [it, fresh] = frame_of_file.emplace(file.lexically_normal().string(), i); !fresh)
+        throw InputError(log.source, Msg() << "frame " << f.token << ": " << sensor << "'s file " << file.string()
+                                           << " is also frame " << log.frames[it->second].token
+                                           << "'s: one recording cannot be two samples");
+    };
+    if (f.lidar) once(f.lidar->path, f.lidar->channel);
+    for (const CameraSensor& c : f.cameras) once(c.image_path, c.channel);
+  }
+}
+
+// Sensor paths come from the info file, and an info file can name anything ("/etc/passwd", "../../.."). Only what
+// lies under the data root is read; a layout that keeps its files elsewhere names a root that holds them
+// (--data-root). Lexical, so a data root whose samples/ is a symlink to another disk still works.
+void CheckPathsInsideDataRoot(const Log& log) {
+  if (log.data_root.empty()) return;
+  const fs::path root = fs::absolute(log.data_root).lexically_normal();
+  auto inside = [&](const fs::path& p) {
+    const fs::path rel = fs::absolute(p).lexically_normal().lexically_relative(root);
+    return !rel.empty() && *rel.begin() != "..";
+  };
+  for (const Frame& f : log.frames) {
+    auto check = [&](const fs::path& p, const std::string& sensor, const std::string& recorded) {
+      if (!inside(p))
+        throw InputError(log.source, Msg() << "frame " << f.token << ": " << sensor << "'s path '" << recorded
+                                           << "' leads outside the data root " << root.string()
+                                           << " (pass --data-root with a folder that holds it)");
+    };
+    if (f.lidar) check(f.lidar->path, f.lidar->channel, f.lidar->relpath.empty() ? f.lidar->path.string() : f.lidar->relpath);
+    for (const CameraSensor& c : f.cameras)
+      check(c.image_path, c.channel, c.image_relpath.empty() ? c.image_path.string() : c.image_relpath);
+  }
+}
+
+// A camera's images all have one size: one image of another size than the others its calibration was used with
+// was resized or cropped afterwards, even where its principal point still lies near the centre. Compared per
+// channel and camera matrix: KITTI's frames come from drives calibrated apart, at 1224x370 and 1242x375.
+void CheckImageSizesPerCalibration(const Log& log) {
+  struct FirstSeen {
+    int width, height;
+    std::string token;
+  };
+  std::map<std::string, FirstSeen> size_of_camera;
+  for (const Frame& f : log.frames) {
+    for (const CameraSensor& c : f.cameras) {
+      const PinholeCamera& k = c.intrinsics;
+      if (k.width <= 0 || k.height <= 0) continue;  // no image file to measure
+      const std::string camera = Msg() << c.channel << ' ' << k.fx << ' ' << k.fy << ' ' << k.cx << ' ' << k.cy;
+      auto [it, fresh] = size_of_camera.emplace(camera, FirstSeen{k.width, k.height, f.token});
+      if (!fresh && (it->second.width != k.width || it->second.height != k.height))
+        throw InputError(log.source, Msg() << "frame " << f.token << ": camera " << c.channel << "'s image "
+                                           << c.image_path.filename().string() << " is " << k.width << "x" << k.height
+                                           << " where frame " << it->second.token << "'s, of the same calibration, is "
+                                           << it->second.width << "x" << it->second.height
+                                           << " (resized or cropped after calibration?)");
     }
   }
 }
@@ -75,6 +145,10 @@ Log ReadAnyFormat(const fs::path& path, const OpenLogOptions& options) {
 Log OpenLog(const fs::path& path, const OpenLogOptions& options) {
   Log log = ReadAnyFormat(path, options);
   CheckSensorGeometry(log);
+  CheckFramesDistinct(log);
+  CheckPathsInsideDataRoot(log);
+  CheckImageSizesPerCalibration(log);
+  for (const std::string& a : log.assumptions) SD_LOG(Warn, log.source.string() << ": " << a);
   return log;
 }
 

@@ -20,9 +20,11 @@ struct OpenLogOptions {
 // version directory (or, Lyft, version/version) that does -> ReadNuScenesTables; calib/ + label_2/ (or
 // training/) -> ReadKitti; a directory holding city_SE3_egovehicle.json and annotations.json ->
 // ReadArgoverse2; camera/, lidar/ and annotations/cuboids/ -> ReadPandaSet. InputError (naming the path) when no reader recognises it. docs/datasets.md
-// tabulates every format's conventions. Every log is then checked for sensor geometry synthesis can trust
-// (finite poses, sensors mounted within 100 m of the ego, cameras with positive focal lengths): InputError
-// naming the log, the frame and the sensor otherwise.
+// tabulates every format's conventions. Every log is then checked for what synthesis must trust, whatever its
+// format: finite poses, sensors mounted within 100 m of the ego, cameras with positive focal lengths and the
+// principal point near the image's centre, each sample and each sensor file once, sensor paths under the data
+// root, one image size per camera calibration: InputError naming the log, the frame and the sensor otherwise. The optional
+// fields the reader defaulted (Log::assumptions) are logged once each (Warn).
 Log OpenLog(const std::filesystem::path& path, const OpenLogOptions& options = {});
 
 // nuScenes devkit tables (also Lyft Level 5, which uses the nuScenes schema). `path` is the dataset root

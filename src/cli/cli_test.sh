@@ -432,5 +432,25 @@ done
 printf '\x80\x02cos\nsystem\nq\x00X\x02\x00\x00\x00idq\x01\x85q\x02Rq\x03.' > "$T/evil.pkl"
 expect_error "synth: pickle naming a disallowed global" "evil.pkl: byte 2: refusing to load global 'os.system'" "$T/evil_out" -- synth --log "$T/evil.pkl" --asset "$T/cone" --scenario "$T/one_cone.json" --out "$T/evil_out"
 
+# Exit status (README): 2 for a refused argument, 1 for a batch with failed items (the rest kept).
+"$BIN" -q synth --no-such-flag >/dev/null 2>&1; rc=$?
+[ $rc -eq 2 ] && ok || bad "an unknown flag exits $rc, not 2"
+mkdir -p "$T/mine_imgs" && cp "$DATA"/images/roadanomaly-cones/frames/*.jpg "$T/mine_imgs/"
+GOOD=$(ls "$T"/mine_imgs/*.jpg | head -1)
+head -c 300 "$GOOD" > "$T/mine_imgs/truncated.jpg"
+"$BIN" -q mine index --images "$T/mine_imgs" --out "$T/mi_trunc" --clip none >/dev/null 2>"$T/stderr"; rc=$?
+[ $rc -eq 1 ] && [ -d "$T/mi_trunc/shards" ] && grep -q "could not be read" "$T/stderr" && ok \
+  || bad "mine index with a truncated image: exit $rc (want 1, the rest indexed): $(cat "$T/stderr")"
+
+# What a killed run left is cleaned up by the next: a parts folder with only a run log, and a dead writer's
+# temporary output folder (pid 4194302 above any live one's here; the kernel's pid_max is 4194304).
+mkdir -p "$T/stale.parts" "$T/stale.tmp-4194302-0/half" && echo '{}' > "$T/stale.parts/log-0-of-1.jsonl"
+synth --log "$INFO" --asset "$T/cone" --scenario "$T/one_cone.json" --out "$T/stale" \
+  && [ -f "$T/stale/synth.json" ] && [ ! -e "$T/stale.parts" ] && [ ! -e "$T/stale.tmp-4194302-0" ] && ok \
+  || bad "stale parts and a dead writer's temporary output are removed by the next run: $(ls "$T" | grep stale)"
+# A run refused on the way in leaves no parts folder.
+expect_error "synth: no parts folder after a refused frame" "not a whole number of 20-byte records" "$T/o_parts" -- synth --log "$T/trunc/mmdet3d_info/n015-2018-07-24-11-22-45+0800.json" --asset "$T/cone" --scenario "$T/one_cone.json" --out "$T/o_parts"
+[ ! -e "$T/o_parts.parts" ] && ok || bad "a failed synth left $T/o_parts.parts"
+
 echo "$pass passed, $fail failed"
 [ $fail -eq 0 ]

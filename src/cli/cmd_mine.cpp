@@ -112,9 +112,15 @@ void AddIndexCommand(CLI::App& app, std::function<int()>& run) {
     SD_LOG(Info, "mine index: " << r.items << " object images in " << r.chunks_built << " new chunks ("
                                 << r.chunks_skipped << " already done, " << r.failures << " failures) in "
                                 << r.seconds << " s; " << a->out);
+    // The batch convention (README, "Exit status"): 1 when any item of this run failed, the others kept.
     if (!r.failed_chunks.empty()) {
       for (const std::string& f : r.failed_chunks) SD_LOG(Error, "mine index: chunk " << f);
       SD_LOG(Error, "mine index: " << r.failed_chunks.size() << " chunk(s) failed; a rerun builds only those");
+      return 1;
+    }
+    if (r.failures > 0) {
+      SD_LOG(Error, "mine index: " << r.failures << " image(s) could not be read or cropped and are not in the index; "
+                                   "each chunk's chunk.json lists them with the reason");
       return 1;
     }
     return 0;

@@ -55,12 +55,14 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    // --help and --version are not errors; any other refused argument is status 2, as every refused input is.
+    const int status = app.exit(e);
+    return status == 0 ? 0 : 2;
   }
   sd::SetLogLevel(quiet ? sd::LogLevel::kError : verbose ? sd::LogLevel::kDebug : sd::LogLevel::kInfo);
   if (threads > 0) sd::SetMaxThreads(threads);
-  if (!device.empty()) sd::SetDevice(sd::ParseDevice(device));
   try {
+    if (!device.empty()) sd::SetDevice(sd::ParseDevice(device));
     for (auto& [sub, run] : runners)
       if (sub->parsed()) return run();
   } catch (const sd::InputError& e) {

@@ -1,6 +1,7 @@
 #include "io/files.h"
 
 #include <fcntl.h>
+#include <signal.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -118,9 +119,34 @@ void RefuseOutputOverInputs(const fs::path& out, const std::vector<fs::path>& in
   }
 }
 
+namespace {
+
+// A "<name>.tmp-<pid>-<n>" sibling of `path` whose writer is no longer running on this machine: what a killed
+// run (SIGKILL, a crash, a power cut) left. A live writer's (another run writing the same output) is left alone.
+bool IsDeadWritersTemporary(const fs::path& candidate, const fs::path& path) {
+  const std::string prefix = path.filename().string() + ".tmp-";
+  const std::string name = candidate.filename().string();
+  if (name.rfind(prefix, 0) != 0) return false;
+  const size_t dash = name.find('-', prefix.size());
+  if (dash == std::string::npos || dash == prefix.size()) return false;
+  const std::string pid_text = name.substr(prefix.size(), dash - prefix.size());
+  if (pid_text.find_first_not_of("0123456789") != std::string::npos || pid_text.size() > 9) return false;
+  const pid_t pid = static_cast<pid_t>(std::stol(pid_text));
+  return pid != getpid() && ::kill(pid, 0) != 0 && errno == ESRCH;
+}
+
+void RemoveDeadWritersTemporaries(const fs::path& path) {
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(path.parent_path(), ec))
+    if (IsDeadWritersTemporary(e.path(), path)) fs::remove_all(e.path(), ec);
+}
+
+}  // namespace
+
 StagingDirectory::StagingDirectory(const fs::path& final_dir, bool overwrite)
     : final_(fs::absolute(final_dir).lexically_normal()), overwrite_(overwrite) {
   if (final_.filename().empty()) final_ = final_.parent_path();
+  RemoveDeadWritersTemporaries(final_);
   std::error_code ec;
   if (fs::exists(final_, ec) && !overwrite_)
     throw InputError(final_, "output already exists (pass --overwrite to replace it)");

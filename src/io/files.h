@@ -26,7 +26,8 @@ void RefuseOutputOverInputs(const std::filesystem::path& out, const std::vector<
 // An output directory built under a temporary name and published by Commit():
 //   StagingDirectory out(dir, overwrite);  ...write under out.path()...;  out.Commit();
 // If the object dies without Commit() (error, exception), the temporary tree is removed and `dir` is left
-// exactly as it was. An existing `dir` is refused (InputError) unless `overwrite`; with overwrite it is
+// exactly as it was; what a killed writer of `dir` left ("<dir>.tmp-<pid>-*" of a process no longer running) is
+// removed when the next one starts. An existing `dir` is refused (InputError) unless `overwrite`; with overwrite it is
 // replaced only at Commit().
 class StagingDirectory {
  public:

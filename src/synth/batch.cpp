@@ -64,6 +64,14 @@ ShardRun SynthesizeParts(const SynthInputs& in, const SynthRequest& request, con
   return run;
 }
 
+// True when `parts` holds no finished part: only run logs, or what a killed writer left half-written.
+bool HoldsNoPart(const fs::path& parts) {
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(parts, ec))
+    if (e.is_directory(ec) && e.path().filename().string().find(".tmp-") == std::string::npos) return false;
+  return true;
+}
+
 json PlanFileJson(const SynthInputs& in, const SynthRequest& request) {
   json j = {{"tool", "synthdrive synth"}, {"log", fs::absolute(request.log).string()}, {"scenario", ReadJsonFile(request.scenario)}};
   j.update(SynthPlanToJson(in.plan));
@@ -181,8 +189,18 @@ SynthSummary MergeSynthParts(const SynthRequest& request) {
 SynthSummary RunSynth(const SynthRequest& request) {
   const SynthInputs in = LoadSynthInputs(request);
   CheckOutputFree(request, in);
-  const ShardRun run = SynthesizeParts(in, request, ShardSpec{}, false);
+  // A local run owns "<out>.parts": one that holds no finished part (a run killed before its first frame, or
+  // one that failed on the way in) is of no use to resume from and is not left behind.
+  const fs::path parts = SynthPartsDir(request.out);
   std::error_code ec;
+  if (fs::exists(parts, ec) && HoldsNoPart(parts)) fs::remove_all(parts, ec);
+  ShardRun run;
+  try {
+    run = SynthesizeParts(in, request, ShardSpec{}, false);
+  } catch (...) {
+    if (HoldsNoPart(parts)) fs::remove_all(parts, ec);
+    throw;
+  }
   if (!run.failures.empty()) {
     for (size_t i = 1; i < run.failures.size(); ++i) {
       try {

@@ -4,11 +4,13 @@
 #include <array>
 #include <cctype>
 #include <cmath>
+#include <cstdlib>
 #include <fstream>
 #include <limits>
 #include <cstring>
 #include <functional>
 #include <map>
+#include <string_view>
 #include <tuple>
 #include <unordered_map>
 
@@ -60,10 +62,43 @@ Material DefaultMaterial() {
 // ---------------------------------------------------------------------------------------------------------
 // OBJ
 
+// tinyobjloader reads a number it cannot parse ("v nan 0 0", "v 1e999 0 0", "v x y z") as 0 and says nothing: a
+// vertex silently moved to the origin. Every number of the geometry lines (v, vt, vn) must parse whole and be finite.
+void CheckObjNumbers(const fs::path& path) {
+  const std::string text = ReadFileToString(path);
+  size_t line_no = 0;
+  for (size_t begin = 0; begin < text.size();) {
+    size_t end = text.find('\n', begin);
+    if (end == std::string::npos) end = text.size();
+    ++line_no;
+    const std::string_view line(text.data() + begin, end - begin);
+    begin = end + 1;
+    if (!(line.starts_with("v ") || line.starts_with("v\t") || line.starts_with("vt ") || line.starts_with("vn ")))
+      continue;
+    std::string numbers(line.substr(line.find_first_of(" \t")));
+    const char* p = numbers.c_str();
+    while (true) {
+      while (*p == ' ' || *p == '\t' || *p == '\r') ++p;
+      if (*p == '\0' || *p == '#') break;
+      char* after = nullptr;
+      const double value = std::strtod(p, &after);  // overflow gives inf; underflow a harmless 0
+      const bool whole = after != p && (*after == '\0' || *after == ' ' || *after == '\t' || *after == '\r');
+      if (!whole || !std::isfinite(value)) {
+        const char* token_end = p;
+        while (*token_end && *token_end != ' ' && *token_end != '\t' && *token_end != '\r') ++token_end;
+        throw InputError(path, Msg() << "line " << line_no << ": '" << std::string(p, token_end)
+                                     << "' is not a finite number (" << line.substr(0, line.find_first_of(" \t")) << " line)");
+      }
+      p = after;
+    }
+  }
+}
+
 }  // namespace
 
 TriangleMesh LoadObj(const fs::path& path) {
   RequireFile(path);
+  CheckObjNumbers(path);
   tinyobj::attrib_t attrib;
   std::vector<tinyobj::shape_t> shapes;
   std::vector<tinyobj::material_t> obj_materials;
@@ -498,7 +533,12 @@ TriangleMesh LoadGltf(const fs::path& path) {
     while (!why.empty() && (why.back() == '\n' || why.back() == ' ')) why.pop_back();
     throw InputError(path, "cannot parse glTF: " + why);
   }
-  return GltfReader(path, model).Read();
+  TriangleMesh mesh = GltfReader(path, model).Read();
+  // Binary accessors hold any float: a NaN or infinite position would reach the ray tracer as a NaN bound.
+  for (size_t i = 0; i < mesh.positions.size(); ++i)
+    if (!mesh.positions[i].allFinite())
+      throw InputError(path, Msg() << "vertex " << i << " of the mesh is not finite (" << mesh.positions[i].transpose() << ")");
+  return mesh;
 }
 
 TriangleMesh LoadMesh(const fs::path& path) {

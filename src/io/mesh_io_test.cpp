@@ -275,5 +275,31 @@ TEST(MeshIo, ErrorsNameTheFile) {
   }
 }
 
+// tinyobjloader reads a number it cannot parse as 0: "v nan 0 0" used to put a vertex at the origin unseen.
+TEST(MeshIo, ObjNumbersThatAreNotFiniteAreRefusedWithTheirLine) {
+  TempDir tmp;
+  const std::string faces = "f 1 2 3\n";
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"v 0 0 0\nv nan 0 0\nv 0 1 0\n", "line 2: 'nan'"},
+      {"v 0 0 0\nv 1 0 0\nv 0 1e999 0\n", "line 3: '1e999'"},
+      {"v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 x\n", "line 4: 'x' is not a finite number (vn line)"},
+      {"v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0.5 inf\n", "line 4: 'inf'"},
+      {"v 0 0 0\nv 1,5 0 0\nv 0 1 0\n", "line 2: '1,5'"},
+  };
+  for (const auto& [text, expected] : cases) {
+    WriteFileAtomic(tmp / "bad.obj", text + faces);
+    try {
+      LoadObj(tmp / "bad.obj");
+      ADD_FAILURE() << "accepted: " << text;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("bad.obj"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(expected), std::string::npos) << e.what();
+    }
+  }
+  // Comments, tabs, CRLF line ends, vertex colours and a w coordinate are all numbers as OBJ has them.
+  WriteFileAtomic(tmp / "ok.obj", "# a triangle\r\nv 0 0 0 1 0 0\r\nv\t1 0 0 0 1 0\r\nv 0 1 0 0 0 1 # top\r\nvt 0 0 0\r\nf 1 2 3\r\n");
+  EXPECT_EQ(LoadObj(tmp / "ok.obj").NumFaces(), 1u);
+}
+
 }  // namespace
 }  // namespace sd

@@ -96,6 +96,10 @@ TEST(ReaderChecks, FieldsThatCannotBeGuessedAreRefused) {
        {"lidar_points.num_pts_feats"}},
       {"num_pts_feats_six", [](json& d) { d["data_list"][0]["lidar_points"]["num_pts_feats"] = 6; },
        {"lidar_points.num_pts_feats", "6 features per point"}},
+      {"box_size_null", [](json& d) { d["data_list"][0]["instances"][0]["bbox_3d"][3] = nullptr; },
+       {"frame ", "annotation 0", "impossible box size (nan, 0.621, 1.642)"}},
+      {"box_far", [](json& d) { d["data_list"][0]["instances"][2]["bbox_3d"][0] = 1e308; },
+       {"annotation 2", "impossible box centre"}},
       {"camera_without_image", [](json& d) { d["data_list"][0]["images"]["CAM_BACK"].erase("img_path"); },
        {"images.CAM_BACK", "a camera without img_path"}},
   });

@@ -28,12 +28,16 @@ PointCloud ReadLidar(const LidarSensor& lidar) {
 
 namespace {
 
+std::string Listed(const Eigen::Vector3d& v) { return Msg() << v.x() << ", " << v.y() << ", " << v.z(); }
+
 // What every format's reader must have produced before synthesis trusts it, whatever the format checked on the
 // way (the mmdet3d and nuScenes readers check each matrix where they read it, with its field): finite poses,
 // sensors mounted on the vehicle, cameras with positive focal lengths. A zero focal length aborted inside Embree
 // and a LiDAR mounted 1e17 m up crashed the road model; here they are one line naming the log, frame and sensor.
 void CheckSensorGeometry(const Log& log) {
   using datasets_internal::kMaxSensorOffsetM, datasets_internal::kMaxWorldCoordinateM;
+  constexpr double kMaxBoxDistanceM = 1e5;  // far beyond any sensor's range; an annotation beyond is a broken number
+  constexpr double kMaxBoxSizeM = 100;      // longer than any road vehicle or structure a dataset boxes
   auto finite = [](const Rigid3d& T) { return T.rotation.coeffs().allFinite() && T.translation.allFinite(); };
   for (const Frame& f : log.frames) {
     auto fail = [&](const std::string& what) {
@@ -55,6 +59,18 @@ void CheckSensorGeometry(const Log& log) {
       if (!finite(c.T_ego_cam) || c.T_ego_cam.translation.norm() > kMaxSensorOffsetM)
         fail(Msg() << "camera " << c.channel << " mounted at (" << c.T_ego_cam.translation.transpose()
                    << ") m from the ego origin (at most " << kMaxSensorOffsetM << " m)");
+    }
+    // An annotated box is what placement keeps clear of and what the labels are compared with: a null or 1e308
+    // entry used to surface as an "impossible scenario", far from its cause.
+    for (size_t k = 0; k < f.annotations.size(); ++k) {
+      const Box3& b = f.annotations[k].box;
+      const Eigen::Vector3d c = b.center();
+      if (!finite(b.T_frame_box) || !c.allFinite() || c.norm() > kMaxBoxDistanceM)
+        fail(Msg() << "annotation " << k << " (" << f.annotations[k].category << "): impossible box centre (" << Listed(c)
+                   << ") m in the ego frame (at most " << kMaxBoxDistanceM << " m away)");
+      if (!b.size.allFinite() || b.size.minCoeff() <= 0 || b.size.maxCoeff() >= kMaxBoxSizeM)
+        fail(Msg() << "annotation " << k << " (" << f.annotations[k].category << "): impossible box size ("
+                   << Listed(b.size) << ") m (each must be > 0 and < " << kMaxBoxSizeM << " m)");
     }
   }
 }

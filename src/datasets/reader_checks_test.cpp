@@ -77,6 +77,8 @@ TEST(ReaderChecks, PathsLeadingOutsideTheDataRootAreRefused) {
   ExpectRefused({
       {"absolute", [](json& d) { d["data_list"][0]["images"]["CAM_FRONT"]["img_path"] = "/etc/passwd"; },
        {"CAM_FRONT's path '/etc/passwd' leads outside the data root", "--data-root"}},
+      {"nul", [](json& d) { d["data_list"][0]["images"]["CAM_BACK"]["img_path"] = std::string("samples/CAM_BACK/a.jpg") + '\0' + "/../x"; },
+       {"CAM_BACK's path holds a NUL character"}},
       {"dotdot",
        [](json& d) { d["data_list"][0]["lidar_points"]["lidar_path"] = "samples/LIDAR_TOP/../../../../../../etc/passwd"; },
        {"LIDAR_TOP's path", "leads outside the data root"}},

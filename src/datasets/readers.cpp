@@ -107,6 +107,9 @@ void CheckPathsInsideDataRoot(const Log& log) {
   };
   for (const Frame& f : log.frames) {
     auto check = [&](const fs::path& p, const std::string& sensor, const std::string& recorded) {
+      // The system calls stop at a NUL: "a.jpg\u0000../../x" would open a.jpg while every check saw the rest.
+      if (p.native().find('\0') != std::string::npos)
+        throw InputError(log.source, Msg() << "frame " << f.token << ": " << sensor << "'s path holds a NUL character");
       if (!inside(p))
         throw InputError(log.source, Msg() << "frame " << f.token << ": " << sensor << "'s path '" << recorded
                                            << "' leads outside the data root " << root.string()

@@ -24,6 +24,7 @@ Asset LoadAsset(const fs::path& dir_or_json) {
   Asset a;
   a.dir = json_path.parent_path();
   a.info.id = r["id"].String();
+  if (const std::string problem = AssetIdProblem(a.info.id); !problem.empty()) r["id"].Fail(problem);
   a.info.name = r.StringOr("name", a.info.id);
   a.info.category = r["category"].String();
   const JsonReader extent = r["extent_m"];
@@ -50,6 +51,16 @@ Asset LoadAsset(const fs::path& dir_or_json) {
                                         << size.transpose());
   if (a.mesh.normals.empty()) a.mesh.ComputeVertexNormals();
   return a;
+}
+
+std::string AssetIdProblem(const std::string& id) {
+  if (id.empty()) return "an asset id cannot be empty";
+  if (id.size() > 200) return Msg() << "an asset id of " << id.size() << " characters (at most 200)";
+  if (id == "." || id == "..") return "'" + id + "' cannot be an asset id";
+  for (const char c : id)
+    if (c == '/' || c == '\\' || static_cast<unsigned char>(c) < 0x20 || c == 0x7f)
+      return "an asset id cannot hold a path separator or a control character ('" + std::string(1, c == '/' || c == '\\' ? c : '?') + "' in it)";
+  return "";
 }
 
 void SaveAsset(const Asset& asset, const fs::path& dir, bool overwrite, const MultiViewSet* views) {

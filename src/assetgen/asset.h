@@ -53,6 +53,9 @@ struct Asset {
 // a missing or unloadable mesh, an extent that disagrees with the mesh by more than 5%, or a mesh that is
 // not canonical (not resting on z = 0).
 Asset LoadAsset(const std::filesystem::path& dir_or_json);
+// Why `id` cannot be an asset id, or "" when it can. An id names the asset in labels, the bank and file names
+// derived from it: 1-200 characters, none of them a path separator or a control character, and not "." or "..".
+std::string AssetIdProblem(const std::string& id);
 // Writes asset.json + mesh.glb + preview.png into `dir` atomically (staging directory). Refuses an
 // existing `dir` unless `overwrite`. With `views`, also <dir>/views/ (the views folder format of views.h, in the
 // views' own frame; the generate stage in asset.json records "views_to_asset", how it maps to the asset's).

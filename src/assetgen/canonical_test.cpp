@@ -111,6 +111,19 @@ TEST(Asset, SaveLoadRoundTripKeepsTheCanonicalTexturedMesh) {
   ASSERT_FALSE(back.mesh.materials.empty());
   EXPECT_TRUE(back.mesh.materials[0].base_color_texture != nullptr);
   EXPECT_TRUE(std::filesystem::exists(dir / "cone" / "preview.png"));
+
+  // An id names files the report and the bank derive: "../../evil" is refused where asset.json is read.
+  for (const std::string& bad : std::vector<std::string>{"../../evil", "a/b", "..", "", "tab\there"}) {
+    a.info.id = bad;
+    SaveAsset(a, dir / "bad", true);
+    try {
+      LoadAsset(dir / "bad");
+      ADD_FAILURE() << "accepted id '" << bad << "'";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("asset.json: .id: "), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_EQ(AssetIdProblem("roadanomaly_cones02-0.v2"), "");
 }
 
 // --- Automatic frame estimation --------------------------------------------------------------------------

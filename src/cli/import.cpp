@@ -25,6 +25,7 @@ Asset ImportAsset(const ImportRequest& r) {
   a.mesh = std::move(c.mesh);
   if (a.mesh.normals.empty()) a.mesh.ComputeVertexNormals();
   a.info.id = r.id.empty() ? std::filesystem::absolute(r.out).lexically_normal().filename().string() : r.id;
+  if (const std::string problem = AssetIdProblem(a.info.id); !problem.empty()) throw InputError(r.out, "--id: " + problem);
   a.info.name = r.name.empty() ? a.info.id : r.name;
   a.info.category = category->name;
   a.info.extent = c.extent;

@@ -56,6 +56,7 @@ Eigen::Matrix3d Mat3(const JsonReader& r);  // the top-left 3x3 of a 3x3 or larg
 Rigid3d RigidPose(const JsonReader& r, double max_translation_m);
 inline constexpr double kMaxSensorOffsetM = 100;     // a sensor's mounting relative to the ego (a vehicle's size)
 inline constexpr double kMaxWorldCoordinateM = 1e7;  // a map frame's coordinates (UTM northings stay below)
+inline constexpr int kMaxImageSidePx = 1 << 15;      // a camera image's side: 32768 px, 6x the largest driving cameras'
 // A camera matrix (the top-left 3x3 of cam2img / P2) for an image of `width` x `height` (0: unknown): finite, focal
 // lengths positive and below 1e6 px, the bottom row [0 0 1], the principal point near the image's centre. A located
 // InputError otherwise.

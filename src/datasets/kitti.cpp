@@ -47,6 +47,29 @@ std::vector<double> ParseNumbers(const std::string& text) {
   return v;
 }
 
+// What the reader trusts of a calib file, as RigidPose and CameraMatrix check an info file's matrices: finite
+// entries, P2's camera matrix with positive focal lengths below 1e6 px and the bottom row [0 0 1], R0_rect and
+// Tr_velo_to_cam's rotation orthonormal (to 1e-3) with determinant +1, the Velodyne within 100 m of the camera.
+void CheckKittiCalib(const KittiCalib& c, const fs::path& path) {
+  if (!c.P2.allFinite() || !c.R0_rect.allFinite() || !c.Tr_velo_to_cam.allFinite())
+    throw InputError(path, "a calib entry is not a finite number");
+  const Eigen::Matrix3d K = c.K2();
+  if (!(K(0, 0) > 0 && K(1, 1) > 0 && K(0, 0) < 1e6 && K(1, 1) < 1e6))
+    throw InputError(path, Msg() << "P2: impossible focal lengths fx = " << K(0, 0) << ", fy = " << K(1, 1) << " px (must be > 0 and < 1e6)");
+  if ((K.row(2) - Eigen::RowVector3d(0, 0, 1)).cwiseAbs().maxCoeff() > 1e-6)
+    throw InputError(path, Msg() << "P2: not a camera matrix: its bottom row starts [" << K.row(2) << "], not [0 0 1]");
+  auto check_rotation = [&](const char* key, const Eigen::Matrix3d& R) {
+    const double off = (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+    if (off > 1e-3) throw InputError(path, Msg() << key << ": not a rotation (R^T R differs from I by " << off << ")");
+    if (R.determinant() < 0) throw InputError(path, Msg() << key << ": the rotation is a reflection (determinant -1)");
+  };
+  check_rotation("R0_rect", c.R0_rect);
+  check_rotation("Tr_velo_to_cam", c.Tr_velo_to_cam.leftCols<3>());
+  if (c.Tr_velo_to_cam.col(3).norm() > kMaxSensorOffsetM)
+    throw InputError(path, Msg() << "Tr_velo_to_cam: the translation is " << c.Tr_velo_to_cam.col(3).norm()
+                                 << " m, beyond the " << kMaxSensorOffsetM << " m a sensor's mounting can be");
+}
+
 // InputError naming the file and line when a required key is missing or has the wrong number of values.
 KittiCalib ReadKittiCalib(const fs::path& path) {
   if (!fs::exists(path)) throw InputError(path, "missing KITTI calib file");
@@ -82,6 +105,7 @@ KittiCalib ReadKittiCalib(const fs::path& path) {
   const std::vector<double> tr = get("Tr_velo_to_cam", 12);
   for (int r = 0; r < 3; ++r)
     for (int k = 0; k < 4; ++k) c.Tr_velo_to_cam(r, k) = tr[r * 4 + k];
+  CheckKittiCalib(c, path);
   return c;
 }
 
@@ -119,6 +143,7 @@ Log ReadKitti(const fs::path& root, const OpenLogOptions& options) {
   for (const auto& e : fs::directory_iterator(split / "calib"))
     if (e.path().extension() == ".txt") ids.push_back(e.path().stem().string());
   std::sort(ids.begin(), ids.end());
+  AssumptionTally assumed;
   for (const std::string& id : ids) {
     const KittiCalib calib = ReadKittiCalib(split / "calib" / (id + ".txt"));
     const Rigid3d T_rect0_velo = calib.T_rect0_velo();
@@ -139,11 +164,19 @@ Log ReadKitti(const fs::path& root, const OpenLogOptions& options) {
     cam.channel = "image_2";
     cam.image_relpath = "image_2/" + id + ".png";
     cam.image_path = split / cam.image_relpath;
-    const auto wh = ImageSizeFromHeader(cam.image_path);
-    cam.intrinsics = PinholeCamera::FromK(calib.K2(), wh[0], wh[1]);
-    cam.T_ego_cam = (calib.T_cam2_rect0() * T_rect0_velo).Inverse();
-    cam.T_egocam_cam = cam.T_ego_cam;
-    f.cameras.push_back(cam);
+    // A layout without image_2/ is LiDAR only; one frame's image missing from it is a broken copy, and without
+    // it the frame's objects would be placed where no camera looks.
+    if (!fs::exists(cam.image_path) && fs::is_directory(split / "image_2"))
+      throw InputError(cam.image_path, "missing KITTI image (its calib and velodyne files are there)");
+    if (fs::exists(cam.image_path)) {
+      const auto wh = ImageSizeFromHeader(cam.image_path);
+      cam.intrinsics = PinholeCamera::FromK(calib.K2(), wh[0], wh[1]);
+      cam.T_ego_cam = (calib.T_cam2_rect0() * T_rect0_velo).Inverse();
+      cam.T_egocam_cam = cam.T_ego_cam;
+      f.cameras.push_back(cam);
+    } else {
+      assumed.Note("image_2/ missing: no camera (LiDAR only)", id);
+    }
 
     const fs::path label_file = split / "label_2" / (id + ".txt");
     if (fs::exists(label_file)) {
@@ -165,6 +198,11 @@ Log ReadKitti(const fs::path& root, const OpenLogOptions& options) {
           throw InputError(label_file, Msg() << "line " << line_no << ": expected 15 fields (type + 14 numbers), got '" << line << "'");
         // v: truncated occluded alpha x1 y1 x2 y2 h w l x y z ry
         const double h = v[7], w = v[8], len = v[9], ry = v[13];
+        for (size_t k = 0; k < 14; ++k)
+          if (!std::isfinite(v[k])) throw InputError(label_file, Msg() << "line " << line_no << ": field " << k + 2 << " is not a finite number");
+        if (!(h > 0 && w > 0 && len > 0 && h < 100 && w < 100 && len < 100))
+          throw InputError(label_file, Msg() << "line " << line_no << ": impossible dimensions h w l = " << h << " " << w << " " << len
+                                             << " m (each must be > 0 and < 100)");
         const Eigen::Vector3d bottom(v[10], v[11], v[12]);
         const double c = std::cos(ry), s = std::sin(ry);
         Eigen::Matrix3d R_rect0_box;
@@ -184,6 +222,7 @@ Log ReadKitti(const fs::path& root, const OpenLogOptions& options) {
     }
     log.frames.push_back(std::move(f));
   }
+  assumed.AppendTo(log.assumptions, log.frames.size());
   return log;
 }
 

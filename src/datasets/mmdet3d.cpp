@@ -119,6 +119,7 @@ Log ReadMmdet3dV1(const json& j, const fs::path& file, const OpenLogOptions& opt
         f.cameras.push_back(std::move(cam));
       }
     }
+    if (!d.Has("instances")) assumed.Note("instances missing: an unannotated frame (objects kept clear of LiDAR obstacles only)", f.token);
     if (d.Has("instances")) {
       f.has_annotations = true;
       const JsonReader inst = d["instances"];

@@ -178,8 +178,16 @@ void ReadSampleData(const Tables& t, const std::map<std::string, size_t>& frame_
       cam.timestamp = time;
       const JsonReader K = c["camera_intrinsic"];
       if (K.Size() != 3) K.Fail("expected a 3x3 camera_intrinsic for a camera");
-      int w = r.Has("width") ? static_cast<int>(r["width"].Integer()) : 0;
-      int h = r.Has("height") ? static_cast<int>(r["height"].Integer()) : 0;
+      // The record's size, where it gives one, is what the calibration is checked against: bounded here so
+      // that a broken number is blamed on sample_data, not on the camera matrix.
+      auto dimension = [&](const char* key) -> int {
+        if (!r.Has(key)) return 0;
+        const int64_t v = r[key].Integer();
+        if (v < 0 || v > kMaxImageSidePx) r[key].Fail(Msg() << "an image " << key << " of " << v << " px (at most " << kMaxImageSidePx << ")");
+        return static_cast<int>(v);
+      };
+      int w = dimension("width");
+      int h = dimension("height");
       if (w <= 0 || h <= 0) {
         const auto wh = ImageSizeFromHeader(cam.image_path);
         w = wh[0];

@@ -173,7 +173,14 @@ std::vector<Cuboid> ReadCuboids(const fs::path& file) {
       throw InputError(file, Msg() << "row " << i << " (" << c.uuid << "): position, dimensions or yaw not finite");
     c.T_world_box = Rigid3d::FromYaw(heading, centre);
     c.size = Eigen::Vector3d(dims.y(), dims.x(), dims.z());
-    if (sensor) c.sensor_id = static_cast<int>(sensor->values.AsDouble(i));
+    if (sensor) {
+      // -1 outside the LiDARs' overlap, else which LiDAR annotated this row (the cast needs the range check).
+      const double id = sensor->values.AsDouble(i);
+      if (!(id == -1 || id == 0 || id == 1))
+        throw InputError(file, Msg() << "row " << i << " (" << c.uuid << "): cuboids.sensor_id " << id
+                                     << " is not -1, 0 or 1");
+      c.sensor_id = static_cast<int>(id);
+    }
     if (sibling) c.sibling = ObjectString(*sibling, i);
     out.push_back(std::move(c));
   }

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <functional>
+#include <sstream>
 #include <string>
 
 #include "core/error.h"
@@ -104,7 +105,63 @@ TEST(ReaderChecks, FieldsThatCannotBeGuessedAreRefused) {
        {"annotation 2", "impossible box centre"}},
       {"camera_without_image", [](json& d) { d["data_list"][0]["images"]["CAM_BACK"].erase("img_path"); },
        {"images.CAM_BACK", "a camera without img_path"}},
+      {"timestamp_huge", [](json& d) { d["data_list"][0]["timestamp"] = 1e300; },
+       {"frame ", "impossible timestamp 1e+300 s"}},
   });
+}
+
+// KITTI's text files, each corrupted in a copy of the repo's three frames: the calib matrices, a missing image,
+// a label's numbers. Before, NaN calibrations and labels flowed into the geometry and a missing image silently
+// made its frame LiDAR-only.
+TEST(ReaderChecks, KittiCalibImagesAndLabelsAreChecked) {
+  TempDir tmp;
+  const fs::path original = RepoData("driving/kitti-object");
+  struct Case {
+    const char* name;
+    std::function<void(const fs::path& training)> corrupt;
+    const char* expected;
+  };
+  // Replaces the numbers of `key`'s line in frame 000001's calib (or label, when key is "Car" etc.).
+  auto set_line = [](const fs::path& file, const std::string& key, const std::string& numbers) {
+    std::istringstream in(ReadFileToString(file));
+    std::string out, line;
+    while (std::getline(in, line)) out += (line.rfind(key, 0) == 0 ? key + " " + numbers : line) + "\n";
+    WriteFileAtomic(file, out);
+  };
+  const std::vector<Case> cases = {
+      {"p2_nan", [&](const fs::path& t) { set_line(t / "calib/000001.txt", "P2:", "nan 0 600 0 0 707 180 0 0 0 1 0"); },
+       "not a finite number"},
+      {"p2_zero_focal", [&](const fs::path& t) { set_line(t / "calib/000001.txt", "P2:", "0 0 600 0 0 707 180 0 0 0 1 0"); },
+       "P2: impossible focal lengths fx = 0"},
+      {"p2_bottom_row", [&](const fs::path& t) { set_line(t / "calib/000001.txt", "P2:", "707 0 600 0 0 707 180 0 0 0 0 0"); },
+       "P2: not a camera matrix"},
+      {"r0_scaled", [&](const fs::path& t) { set_line(t / "calib/000001.txt", "R0_rect:", "2 0 0 0 2 0 0 0 2"); },
+       "R0_rect: not a rotation"},
+      {"tr_reflection", [&](const fs::path& t) { set_line(t / "calib/000001.txt", "Tr_velo_to_cam:", "1 0 0 0 0 1 0 0 0 0 -1 0"); },
+       "Tr_velo_to_cam: the rotation is a reflection"},
+      {"tr_far", [&](const fs::path& t) { set_line(t / "calib/000001.txt", "Tr_velo_to_cam:", "1 0 0 0 0 1 0 0 0 0 1 1e17"); },
+       "Tr_velo_to_cam: the translation is 1e+17 m"},
+      {"image_missing", [](const fs::path& t) { fs::remove(t / "image_2/000001.png"); }, "missing KITTI image"},
+      {"label_nan", [&](const fs::path& t) { set_line(t / "label_2/000001.txt", "Truck", "0.00 0 -1.57 599.41 156.40 629.75 189.25 2.85 nan 5.12 4.59 1.32 45.84 -1.55"); },
+       "field 10 is not a finite number"},
+      {"label_zero_size", [&](const fs::path& t) { set_line(t / "label_2/000001.txt", "Truck", "0.00 0 -1.57 599.41 156.40 629.75 189.25 2.85 0 5.12 4.59 1.32 45.84 -1.55"); },
+       "impossible dimensions h w l = 2.85 0 5.12"},
+  };
+  for (const Case& c : cases) {
+    const fs::path root = tmp / c.name;
+    fs::copy(original, root, fs::copy_options::recursive);
+    c.corrupt(root / "training");
+    std::string message;
+    try {
+      OpenLog(root);
+    } catch (const InputError& e) {
+      message = e.what();
+    }
+    EXPECT_NE(message.find("000001"), std::string::npos) << c.name << ": '" << message << "'";
+    EXPECT_NE(message.find(c.expected), std::string::npos) << c.name << ": '" << message << "'";
+    EXPECT_EQ(message.find('\n'), std::string::npos) << c.name << ": " << message;
+  }
+  EXPECT_NO_THROW(OpenLog(original));
 }
 
 TEST(ReaderChecks, DefaultedFieldsAreReportedOnce) {

@@ -38,11 +38,20 @@ void CheckSensorGeometry(const Log& log) {
   using datasets_internal::kMaxSensorOffsetM, datasets_internal::kMaxWorldCoordinateM;
   constexpr double kMaxBoxDistanceM = 1e5;  // far beyond any sensor's range; an annotation beyond is a broken number
   constexpr double kMaxBoxSizeM = 100;      // longer than any road vehicle or structure a dataset boxes
+  constexpr double kMaxTimestampS = 1e10;
   auto finite = [](const Rigid3d& T) { return T.rotation.coeffs().allFinite() && T.translation.allFinite(); };
   for (const Frame& f : log.frames) {
     auto fail = [&](const std::string& what) {
       throw InputError(log.source, Msg() << "frame " << f.token << ": " << what);
     };
+    // Seconds: Unix time or from the log's start. Ego motion, sequences and the sun's position are derived from it.
+    auto check_time = [&](double t, const std::string& what) {
+      if (!std::isfinite(t) || std::abs(t) > kMaxTimestampS)
+        fail(Msg() << "impossible " << what << "timestamp " << t << " s (at most " << kMaxTimestampS << " s, the year 2286)");
+    };
+    check_time(f.timestamp, "");
+    if (f.lidar) check_time(f.lidar->timestamp, f.lidar->channel + " ");
+    for (const CameraSensor& c : f.cameras) check_time(c.timestamp, c.channel + " ");
     if (!finite(f.T_world_ego) || f.T_world_ego.translation.norm() > kMaxWorldCoordinateM)
       fail(Msg() << "impossible ego pose (translation " << f.T_world_ego.translation.transpose() << " m)");
     if (f.lidar && (!finite(f.lidar->T_ego_lidar) || f.lidar->T_ego_lidar.translation.norm() > kMaxSensorOffsetM))

@@ -1,6 +1,8 @@
 #include "io/json.h"
 
+#include <cmath>
 #include <fstream>
+#include <limits>
 #include <sstream>
 
 #include "core/error.h"
@@ -8,9 +10,7 @@
 
 namespace sd {
 
-nlohmann::json ParseJsonText(std::string_view text, const std::filesystem::path& where) {
-  // Nesting first: nothing downstream is written for 100,000-deep lists (a scenario comment holding them parsed,
-  // then overflowed the stack when synth.json was written).
+void CheckJsonNesting(std::string_view text, const std::filesystem::path& where) {
   int depth = 0;
   bool in_string = false;
   for (size_t i = 0; i < text.size(); ++i) {
@@ -27,6 +27,16 @@ nlohmann::json ParseJsonText(std::string_view text, const std::filesystem::path&
       --depth;
     }
   }
+}
+
+nlohmann::json ParseJsonText(std::string_view text, const std::filesystem::path& where) {
+  // RFC 8259 forbids a byte-order mark, Python's json refuses one, and the info writer's splice cannot place
+  // its additions after one: said here, not as "data_list is not an array" after the frames were rendered.
+  if (text.starts_with("\xEF\xBB\xBF"))
+    throw InputError(where, "malformed JSON: starts with a UTF-8 byte-order mark (JSON forbids it; save the file without a BOM)");
+  // Nesting first: nothing downstream is written for 100,000-deep lists (a scenario comment holding them parsed,
+  // then overflowed the stack when synth.json was written).
+  CheckJsonNesting(text, where);
   try {
     return nlohmann::json::parse(text);
   } catch (const nlohmann::json::exception& e) {
@@ -87,12 +97,23 @@ double JsonReader::NumberOr(const std::string& key, double fallback) const {
 }
 
 int64_t JsonReader::Integer() const {
+  if (j_.is_number_unsigned() && j_.get<uint64_t>() > static_cast<uint64_t>(std::numeric_limits<int64_t>::max()))
+    Fail("integer " + j_.dump() + " is out of range");
   if (!j_.is_number_integer()) {
-    if (j_.is_number_float() && j_.get<double>() == static_cast<double>(static_cast<int64_t>(j_.get<double>())))
-      return static_cast<int64_t>(j_.get<double>());
-    Fail(std::string("expected an integer, found ") + j_.type_name());
+    // Range first: casting a double outside int64's range is undefined behaviour, not a wrapped value.
+    if (j_.is_number_float()) {
+      const double v = j_.get<double>();
+      if (std::abs(v) < 9.2e18 && v == std::trunc(v)) return static_cast<int64_t>(v);
+    }
+    Fail(std::string("expected an integer, found ") + (j_.is_number_float() ? j_.dump() : j_.type_name()));
   }
   return j_.get<int64_t>();
+}
+
+int64_t JsonReader::IntegerIn(int64_t lo, int64_t hi) const {
+  const int64_t v = Integer();
+  if (v < lo || v > hi) Fail(Msg() << "integer " << v << " outside [" << lo << ", " << hi << "]");
+  return v;
 }
 
 std::string JsonReader::String() const {

@@ -11,9 +11,12 @@ namespace sd {
 
 // JSON nested deeper than this is refused (no dataset, scenario or asset record comes near it).
 inline constexpr int kMaxJsonDepth = 512;
-// Parses JSON text; InputError naming `where` for malformed text, a number out of range (1e999) or nesting deeper
-// than kMaxJsonDepth.
+// Parses JSON text; InputError naming `where` for malformed text, a leading UTF-8 byte-order mark, a number out of
+// range (1e999) or nesting deeper than kMaxJsonDepth.
 nlohmann::json ParseJsonText(std::string_view text, const std::filesystem::path& where);
+// InputError naming `where` when `text` nests deeper than kMaxJsonDepth; for JSON another library parses
+// recursively (glTF through tinygltf), before it overflows the stack.
+void CheckJsonNesting(std::string_view text, const std::filesystem::path& where);
 // Parses a JSON file; throws InputError naming the file and the parse error position.
 nlohmann::json ReadJsonFile(const std::filesystem::path& path);
 // A JSON Lines file (one value per line, blank lines skipped): calls fn(value, "<file>:<line>") in order, so
@@ -35,6 +38,9 @@ class JsonReader {
   double Number() const;
   double NumberOr(const std::string& key, double fallback) const;
   int64_t Integer() const;
+  // An integer within [lo, hi] (a JSON float holding a whole number counts); InputError naming the bound otherwise,
+  // so a caller can narrow it to int without an overflowing cast.
+  int64_t IntegerIn(int64_t lo, int64_t hi) const;
   std::string String() const;
   std::string StringOr(const std::string& key, const std::string& fallback) const;
   bool Bool() const;

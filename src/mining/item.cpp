@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cinttypes>
 #include <cstdio>
+#include <limits>
 
 #include <nlohmann/json.hpp>
 
@@ -45,6 +46,9 @@ std::string StableId(const std::string& key) {
 }
 
 namespace {
+
+// No camera or crop comes near this; a larger number in a manifest is corruption, refused before it sizes a buffer.
+constexpr int64_t kMaxImageSide = 1 << 15;
 
 json BoxJson(const Box2& b) { return json::array({b.x1, b.y1, b.x2, b.y2}); }
 
@@ -141,16 +145,18 @@ MinedItem ItemFromJson(const json& j, const std::string& where) {
     item.camera = r["camera"].String();
     item.annotation_token = r.StringOr("annotation", "");
     item.instance_token = r.StringOr("instance", "");
-    item.visibility_level = static_cast<int>(r.NumberOr("visibility_level", -1));
-    item.lidar_points = static_cast<int>(r.NumberOr("lidar_points", -1));
+    // -1: the log does not say.
+    item.visibility_level = r.Has("visibility_level") ? static_cast<int>(r["visibility_level"].IntegerIn(-1, 100)) : -1;
+    item.lidar_points =
+        r.Has("lidar_points") ? static_cast<int>(r["lidar_points"].IntegerIn(-1, std::numeric_limits<int>::max())) : -1;
   }
   if (r.Has("box_ego")) item.box_ego = ReadBox3(r["box_ego"]);
   if (r.Has("box_camera")) item.box_camera = ReadBox3(r["box_camera"]);
   if (r.Has("intrinsics")) {
     const JsonReader k = r["intrinsics"];
     PinholeCamera cam;
-    cam.width = static_cast<int>(k["width"].Integer());
-    cam.height = static_cast<int>(k["height"].Integer());
+    cam.width = static_cast<int>(k["width"].IntegerIn(1, kMaxImageSide));
+    cam.height = static_cast<int>(k["height"].IntegerIn(1, kMaxImageSide));
     cam.fx = k["fx"].Number();
     cam.fy = k["fy"].Number();
     cam.cx = k["cx"].Number();
@@ -163,8 +169,8 @@ MinedItem ItemFromJson(const json& j, const std::string& where) {
   item.crop_scale = r.NumberOr("crop_scale", 1);
   const JsonReader size = r["crop_size"];
   if (size.Size() != 2) size.Fail("expected [width, height]");
-  item.crop_width = static_cast<int>(size[0].Integer());
-  item.crop_height = static_cast<int>(size[1].Integer());
+  item.crop_width = static_cast<int>(size[0].IntegerIn(1, kMaxImageSide));
+  item.crop_height = static_cast<int>(size[1].IntegerIn(1, kMaxImageSide));
   item.truncation = r.NumberOr("truncation", -1);
   item.occlusion = r.NumberOr("occlusion", -1);
   item.sharpness = r.NumberOr("sharpness", -1);

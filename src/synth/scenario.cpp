@@ -12,6 +12,10 @@
 namespace sd {
 namespace {
 
+// Every range of a scenario is in metres from the ego: beyond 1 km no sensor sees an object and placement would
+// search a road it does not have (distance_m 1e308 used to end as an "impossible scenario", far from its cause).
+constexpr double kMaxScenarioRangeM = 1000;
+
 void ReadRange(const JsonReader& o, const std::string& key, double* lo, double* hi) {
   if (!o.Has(key)) return;
   const JsonReader r = o[key];
@@ -19,6 +23,8 @@ void ReadRange(const JsonReader& o, const std::string& key, double* lo, double* 
   *lo = r[0].Number();
   *hi = r[1].Number();
   if (!(*lo <= *hi)) r.Fail("min must not exceed max");
+  if (!(std::abs(*lo) <= kMaxScenarioRangeM && std::abs(*hi) <= kMaxScenarioRangeM))
+    r.Fail(Msg() << "[" << *lo << ", " << *hi << "] m: a range must lie within " << kMaxScenarioRangeM << " m of the ego");
 }
 
 ObjectRequest::Yaw ReadYaw(const JsonReader& o, double* yaw_deg, ObjectRequest::Yaw fallback) {

@@ -143,6 +143,9 @@ TEST(Scenario, BadInputNamesTheFileAndTheProblem) {
   ExpectError(R"({"objects":[{"category":"car","asset":"x"}]})", "exactly one");
   ExpectError(R"({"objects":[{"category":"car","distance_m":[30,10]}]})", "min must not exceed max");
   ExpectError(R"({"objects":[{"category":"car","yaw":"sideways"}]})", "yaw");
+  // 1e308 m used to reach placement and come back as an "impossible scenario".
+  ExpectError(R"({"objects":[{"category":"car","distance_m":[10,1e308]}]})",
+              ".objects[0].distance_m: [10, 1e+308] m: a range must lie within 1000 m of the ego");
   ExpectError(R"({"location":{"latitude_deg":95,"longitude_deg":0},"objects":[{"category":"car"}]})", "latitude_deg");
   ExpectError(R"({"seed":-1,"objects":[{"category":"car"}]})", "seed");
   ExpectError(R"({"margin_m":"wide","objects":[{"category":"car"}]})", "expected a number");

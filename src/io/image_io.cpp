@@ -20,6 +20,44 @@ std::string LowerExtension(const std::filesystem::path& p) {
   return ext;
 }
 
+// stb_image 2.27 (Debian 12) builds a JPEG Huffman table from its 16 code counts without checking that they sum
+// to at most 256, the size of its tables: a DHT segment declaring more writes past them inside the decoder's
+// state (found by fuzz/image_fuzzer; upstream checks since 2.28). Every DHT stb would read is checked first,
+// walking the markers as stb does, including those between the scans of a progressive JPEG.
+void RefuseOversizedJpegHuffmanTables(std::string_view bytes, const std::string& what) {
+  if (bytes.size() < 4 || static_cast<unsigned char>(bytes[0]) != 0xFF || static_cast<unsigned char>(bytes[1]) != 0xD8)
+    return;
+  const auto byte_at = [&](size_t i) { return i < bytes.size() ? static_cast<unsigned char>(bytes[i]) : 0u; };
+  size_t at = 2;
+  while (at + 4 <= bytes.size()) {
+    if (byte_at(at) != 0xFF) {  // entropy-coded data after a scan: on to the next marker
+      ++at;
+      continue;
+    }
+    const unsigned marker = byte_at(at + 1);
+    if (marker == 0xFF || marker == 0x00 || (marker >= 0xD0 && marker <= 0xD8)) {  // fill, stuffing, RSTn, SOI
+      ++at;
+      continue;
+    }
+    if (marker == 0xD9) return;  // EOI
+    const size_t length = byte_at(at + 2) << 8 | byte_at(at + 3);
+    if (marker == 0xC4) {
+      long left = static_cast<long>(length) - 2;
+      size_t table = at + 4;
+      while (left > 0 && table + 17 <= bytes.size()) {
+        size_t codes = 0;
+        for (size_t i = 1; i <= 16; ++i) codes += byte_at(table + i);
+        if (codes > 256)
+          throw InputError(what, Msg() << "cannot decode image: corrupt JPEG: a Huffman table declares " << codes
+                                       << " codes (at most 256)");
+        table += 17 + codes;
+        left -= static_cast<long>(17 + codes);
+      }
+    }
+    at += 2 + std::max<size_t>(length, 2);
+  }
+}
+
 void AppendToString(void* context, void* data, int size) {
   static_cast<std::string*>(context)->append(static_cast<const char*>(data), static_cast<size_t>(size));
 }
@@ -31,6 +69,7 @@ ImageU8 DecodeImage(std::string_view bytes, const std::string& what, int channel
   // stb_image takes an int length; anything larger is not an image we can hold anyway.
   if (bytes.size() > static_cast<size_t>(std::numeric_limits<int>::max()))
     throw InputError(what, Msg() << "cannot decode image: " << bytes.size() << " bytes is too large");
+  RefuseOversizedJpegHuffmanTables(bytes, what);
   int w = 0, h = 0, n = 0;
   unsigned char* pixels = stbi_load_from_memory(reinterpret_cast<const stbi_uc*>(bytes.data()),
                                                 static_cast<int>(bytes.size()), &w, &h, &n, channels);

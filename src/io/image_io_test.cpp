@@ -126,6 +126,25 @@ TEST(ImageIo, DecodesFromMemoryAndNamesTheSource) {
   }
 }
 
+// stb_image 2.27 writes past its Huffman tables when a DHT segment declares more than 256 codes (found by
+// fuzz/image_fuzzer): refused before stb sees it, in a baseline JPEG of our own encoder with its first table's
+// 16 counts raised to 255 each. The unchanged JPEG still decodes.
+TEST(ImageIo, JpegHuffmanTablesDeclaringMoreThan256CodesAreRefused) {
+  const std::string jpeg = EncodeImage(Pattern(32, 16, 3), "jpg", 90);
+  ASSERT_NO_THROW(DecodeImage(jpeg, "good.jpg"));
+  const size_t dht = jpeg.find("\xFF\xC4");
+  ASSERT_NE(dht, std::string::npos);
+  std::string broken = jpeg;
+  for (size_t i = 1; i <= 16; ++i) broken[dht + 4 + i] = static_cast<char>(0xFF);
+  try {
+    DecodeImage(broken, "bad.jpg");
+    FAIL() << "decoded";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("bad.jpg: cannot decode image: corrupt JPEG: a Huffman table declares 4080 codes"),
+              std::string::npos) << e.what();
+  }
+}
+
 // The quality a JPEG was written at, read back from its quantisation table: our own encoder's (stb, IJG scaling)
 // and the repo's nuScenes keyframe (what synth matches inserted pixels to).
 TEST(ImageIo, EstimatesTheJpegQualityFromItsQuantisationTable) {

@@ -23,6 +23,7 @@
 #include "core/error.h"
 #include "io/files.h"
 #include "io/image_io.h"
+#include "io/json.h"
 
 namespace sd {
 namespace fs = std::filesystem;
@@ -39,6 +40,8 @@ void RequireFile(const fs::path& path) {
   std::error_code ec;
   if (!fs::exists(path, ec)) throw InputError(path, "file not found");
   if (fs::is_directory(path, ec)) throw InputError(path, "is a directory, expected a mesh file");
+  // tinyobjloader and tinygltf open the file themselves: a FIFO would block them forever.
+  if (!fs::is_regular_file(path, ec)) throw InputError(path, "is not a regular file (a FIFO, device or socket): not read as data");
 }
 
 // Pads every optional attribute that is in use to one entry per vertex (neutral values).
@@ -412,8 +415,10 @@ class GltfReader {
         idx.resize(acc.count);
         for (size_t i = 0; i < acc.count; ++i) {
           ReadElement(acc, i, buf, 1);
+          // Checked as a double: a float or negative "index" (a malformed accessor) must not reach the cast.
+          if (!(buf[0] >= 0 && buf[0] < static_cast<double>(n)))
+            throw InputError(path_, Msg() << "index " << buf[0] << " out of range (" << n << " vertices)");
           idx[i] = static_cast<uint32_t>(buf[0]);
-          if (idx[i] >= n) throw InputError(path_, Msg() << "index " << idx[i] << " out of range (" << n << " vertices)");
         }
       } else {
         idx.resize(n);
@@ -520,14 +525,26 @@ TriangleMesh LoadGltf(const fs::path& path) {
   tinygltf::Model model;
   std::string err, warn;
   bool ok = false;
-  // GLB is recognised by its magic, not the extension.
-  char magic[4] = {};
-  {
-    std::ifstream in(path, std::ios::binary);
-    in.read(magic, 4);
+  // GLB is recognised by its magic, not the extension. tinygltf parses the JSON recursively: its nesting is
+  // bounded first (a glTF whose extras held 100,000-deep lists overflowed the stack).
+  const std::string bytes = ReadFileToString(path);
+  if (bytes.size() > std::numeric_limits<unsigned int>::max())
+    throw InputError(path, Msg() << bytes.size() << " bytes: larger than a glTF file can be (4 GiB)");
+  const bool binary = bytes.size() >= 4 && std::memcmp(bytes.data(), "glTF", 4) == 0;
+  std::string_view json_text = bytes;
+  if (binary) {
+    // Header (12 bytes), then the JSON chunk's length and type (8 bytes) and its text.
+    uint32_t json_length = 0;
+    if (bytes.size() >= 20) std::memcpy(&json_length, bytes.data() + 12, 4);
+    json_text = std::string_view(bytes).substr(std::min<size_t>(20, bytes.size()), json_length);
   }
-  if (std::memcmp(magic, "glTF", 4) == 0) ok = loader.LoadBinaryFromFile(&model, &err, &warn, path.string());
-  else ok = loader.LoadASCIIFromFile(&model, &err, &warn, path.string());
+  CheckJsonNesting(json_text, path);
+  const fs::path base_dir = path.parent_path().empty() ? fs::path(".") : path.parent_path();
+  if (binary)
+    ok = loader.LoadBinaryFromMemory(&model, &err, &warn, reinterpret_cast<const unsigned char*>(bytes.data()),
+                                     static_cast<unsigned int>(bytes.size()), base_dir.string());
+  else
+    ok = loader.LoadASCIIFromString(&model, &err, &warn, bytes.data(), static_cast<unsigned int>(bytes.size()), base_dir.string());
   if (!ok) {
     std::string why = err.empty() ? warn : err;
     while (!why.empty() && (why.back() == '\n' || why.back() == ' ')) why.pop_back();

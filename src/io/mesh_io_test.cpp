@@ -1,6 +1,7 @@
 #include "io/mesh_io.h"
 
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <algorithm>
 #include <cstring>
@@ -272,6 +273,30 @@ TEST(MeshIo, ErrorsNameTheFile) {
     FAIL();
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("bad.gltf"), std::string::npos) << e.what();
+  }
+}
+
+// The mesh readers open files themselves: a FIFO (or device) would block them, deep JSON would overflow
+// tinygltf's recursive parser. Both refused with the file named.
+TEST(MeshIo, OnlyRegularFilesAndBoundedGltfJsonAreRead) {
+  TempDir tmp;
+  const fs::path fifo = tmp / "pipe.obj";
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  try {
+    LoadMesh(fifo);
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("pipe.obj: is not a regular file"), std::string::npos) << e.what();
+  }
+  std::string deep = R"({"asset": {"version": "2.0"}, "extras": )";
+  deep += std::string(100000, '[') + std::string(100000, ']') + "}";
+  WriteFileAtomic(tmp / "deep.gltf", deep);
+  try {
+    LoadGltf(tmp / "deep.gltf");
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("deep.gltf"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("nest"), std::string::npos) << e.what();
   }
 }
 

@@ -204,6 +204,21 @@ TEST(ReaderChecks, ImagesOfAnotherSizeThanTheirCalibrationAreRefused) {
   EXPECT_NE(cropped.find("CAM_FRONT.cam2img: the principal point"), std::string::npos) << cropped;
   EXPECT_NE(cropped.find("far from the centre of the 1600x600 image"), std::string::npos) << cropped;
 
+  // nuScenes' calibration for 1600x900 with CAM_FRONT padded to 1920x1080: the principal point, at 43 % and 46 %,
+  // passes the general check; every nuScenes v1.0 camera image is 1600x900.
+  const fs::path padded_root = tmp / "padded";
+  fs::create_directories(padded_root);
+  fs::copy(RepoData(kKf0) / "samples", padded_root / "samples", fs::copy_options::recursive);
+  ImageU8 padded(1920, 1080, 3);
+  for (int y = 0; y < full.height(); ++y)
+    for (int x = 0; x < full.width(); ++x)
+      for (int c = 0; c < 3; ++c) padded.at(x, y, c) = full.at(x, y, c);
+  WriteImage(padded_root / "samples" / "CAM_FRONT" / fs::path(front).filename(), padded);
+  const std::string wider = OpenError(RepoData(kKf0Info), padded_root);
+  EXPECT_NE(wider.find("camera CAM_FRONT's image"), std::string::npos) << wider;
+  EXPECT_NE(wider.find("is 1920x1080, but its calibration (principal point"), std::string::npos) << wider;
+  EXPECT_NE(wider.find("is nuScenes' for 1600x900 images"), std::string::npos) << wider;
+
   // Frame 2: the same calibration with its own copies of the files, CAM_FRONT's cut to 1600x800 (principal point
   // at 61 % of the height: near enough the centre to pass on its own).
   const fs::path two_root = tmp / "two";

@@ -130,6 +130,24 @@ void CheckPathsInsideDataRoot(const Log& log) {
   }
 }
 
+// Every nuScenes camera records 1600x900 (devkit, all v1.0-* releases) and is calibrated for it: a camera matrix
+// whose principal point lies within 10 % of that image's centre, used with an image of another size, is the
+// original calibration on a resized or cropped image (1920x1080 or 1600x800 keep the principal point in their
+// middle half, so the general check passes them). A resized copy with its calibration scaled along passes.
+void CheckNuScenesImageSizes(const Log& log) {
+  if (log.version.rfind("v1.0-", 0) != 0) return;
+  for (const Frame& f : log.frames)
+    for (const CameraSensor& c : f.cameras) {
+      const PinholeCamera& k = c.intrinsics;
+      const bool calibrated_for_1600x900 = std::abs(k.cx - 800) < 80 && std::abs(k.cy - 450) < 45;
+      if (k.width > 0 && (k.width != 1600 || k.height != 900) && calibrated_for_1600x900)
+        throw InputError(log.source, Msg() << "frame " << f.token << ": camera " << c.channel << "'s image "
+                                           << c.image_path.filename().string() << " is " << k.width << "x" << k.height
+                                           << ", but its calibration (principal point " << k.cx << ", " << k.cy
+                                           << ") is nuScenes' for 1600x900 images (resized or cropped?)");
+    }
+}
+
 // A camera's images all have one size: one image of another size than the others its calibration was used with
 // was resized or cropped afterwards, even where its principal point still lies near the centre. Compared per
 // channel and camera matrix: KITTI's frames come from drives calibrated apart, at 1224x370 and 1242x375.
@@ -176,6 +194,7 @@ Log OpenLog(const fs::path& path, const OpenLogOptions& options) {
   CheckFramesDistinct(log);
   CheckPathsInsideDataRoot(log);
   CheckImageSizesPerCalibration(log);
+  CheckNuScenesImageSizes(log);
   for (const std::string& a : log.assumptions) SD_LOG(Warn, log.source.string() << ": " << a);
   return log;
 }

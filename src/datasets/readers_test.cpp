@@ -232,18 +232,21 @@ TEST(NuScenesTables, LyftFixtureAnnotationsConvertSize) {
 
 TEST(NuScenesTables, LocationOfNuScenesMaps) {
   TempDir tmp;
-  const fs::path src = RepoData("driving/lyft-tables/v1.01-train/v1.01-train");
-  const fs::path dst = tmp / "v1.0-test";
-  fs::create_directories(dst);
-  for (const auto& e : fs::directory_iterator(src)) fs::copy_file(e.path(), dst / e.path().filename());
-  json log_table = ReadJsonFile(dst / "log.json");
-  log_table[0]["location"] = "singapore-onenorth";
-  WriteJsonFile(dst / "log.json", log_table);
-  const Log log = OpenLog(tmp.path());
+  // The keyframe's own tables (a nuScenes v1.0 release: its cameras 1600x900) with the log put in Boston.
+  const fs::path root = tmp / "nuscenes";
+  fs::create_directories(root);
+  fs::copy(RepoData("driving/nuscenes-scene0061-kf0/v1.0-subset"), root / "v1.0-subset", fs::copy_options::recursive);
+  fs::create_directory_symlink(fs::absolute(RepoData("driving/nuscenes-scene0061-kf0/samples")), root / "samples");
+  // The subset ships without log.json (optional): one naming the scene's log.
+  const json scene = ReadJsonFile(root / "v1.0-subset" / "scene.json");
+  WriteJsonFile(root / "v1.0-subset" / "log.json",
+                json::array({{{"token", scene[0]["log_token"]}, {"logfile", "n015-2018-07-24-11-22-45+0800"},
+                              {"vehicle", "n015"}, {"date_captured", "2018-07-24"}, {"location", "boston-seaport"}}}));
+  const Log log = OpenLog(root);
   ASSERT_TRUE(log.location);
-  EXPECT_EQ(log.location->name, "singapore-onenorth");
-  EXPECT_NEAR(log.location->latitude_deg, 1.29, 0.02);
-  EXPECT_NEAR(log.location->longitude_deg, 103.78, 0.02);
+  EXPECT_EQ(log.location->name, "boston-seaport");
+  EXPECT_NEAR(log.location->latitude_deg, 42.34, 0.03);
+  EXPECT_NEAR(log.location->longitude_deg, -71.06, 0.03);
 }
 
 TEST(Mmdet3dV0, MiniValInfosBoxesAndVelocityHeading) {

@@ -56,6 +56,8 @@ Log ReadMmdet3dV1(const json& j, const fs::path& file, const OpenLogOptions& opt
     const JsonReader d = list[i];
     Frame f;
     f.token = d.Has("token") ? d["token"].String() : std::to_string(d.Has("sample_idx") ? d["sample_idx"].Integer() : int64_t(i));
+    // Python writes a NaN time as NaN, read as null: a broken value, not a missing one to default.
+    if (d.raw().contains("timestamp") && d.raw()["timestamp"].is_null()) d["timestamp"].Fail("NaN or null: not a time");
     if (d.Has("timestamp")) f.timestamp = d["timestamp"].Number();
     else assumed.Note("timestamp missing: 0 s assumed (no ego motion can be derived from time)", f.token);
     if (d.Has("ego2global")) {

@@ -105,6 +105,8 @@ TEST(ReaderChecks, FieldsThatCannotBeGuessedAreRefused) {
        {"annotation 2", "impossible box centre"}},
       {"camera_without_image", [](json& d) { d["data_list"][0]["images"]["CAM_BACK"].erase("img_path"); },
        {"images.CAM_BACK", "a camera without img_path"}},
+      {"timestamp_nan", [](json& d) { d["data_list"][0]["timestamp"] = nullptr; },
+       {".data_list[0].timestamp: NaN or null: not a time"}},
       {"timestamp_huge", [](json& d) { d["data_list"][0]["timestamp"] = 1e300; },
        {"frame ", "impossible timestamp 1e+300 s"}},
   });

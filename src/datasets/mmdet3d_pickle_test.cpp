@@ -553,8 +553,9 @@ TEST(WritePickle, KeepsProtocolFourAndGzip) {
   EXPECT_TRUE(IsGzip(ReadFileToString(written)));
   EXPECT_EQ(ProtocolOfFile(written), 4);
   json lists = json::object();
-  lists["instances"] = {V1Expected(edit.added[0], log.frames[0], 8)};
-  lists["cam_instances/CAM_FRONT"] = {{{"bbox", {500.0, 300.0, 560.0, 350.0}}}};
+  // json::array, not braces: `{one_json}` is a copy under clang and a one-element array under gcc.
+  lists["instances"] = json::array({V1Expected(edit.added[0], log.frames[0], 8)});
+  lists["cam_instances/CAM_FRONT"] = json::array({{{"bbox", {500.0, 300.0, 560.0, 350.0}}}});
   json records = json::array();
   records.push_back({{"input_index", 0}, {"insert_at", nullptr}, {"lists", lists}});
   ExpectPythonAgrees({{"input", in.string()}, {"output", written.string()}, {"list_key", "data_list"}, {"records", records}}, dir.path());

@@ -420,7 +420,8 @@ InfoEdit KittiV0Edit(const Log& log, const json& info, const std::vector<FrameEd
       for (size_t k = 0; k < names.Size(); ++k) num_objects += names[k].String() != "DontCare";
       if (an.Has("group_ids"))
         for (size_t k = 0; k < an["group_ids"].Size(); ++k) next_group = std::max(next_group, an["group_ids"][k].Integer() + 1);
-      for (const auto& [key, value] : an.raw().items()) {
+      for (const auto& item : an.raw().items()) {
+        const std::string& key = item.key();
         const auto it =
             std::find_if(std::begin(kAnnosColumns), std::end(kAnnosColumns), [&](const AnnosColumn& c) { return key == c.key; });
         if (it == std::end(kAnnosColumns))

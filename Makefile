@@ -23,4 +23,4 @@ bench: build
 	build/bin/bench_synth_keyframe --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
 
 clean:
-	rm -rf build build-debug build-asan out
+	rm -rf build build-debug build-asan build-fuzz out

@@ -3,7 +3,6 @@
 find_package(Eigen3 3.4 REQUIRED NO_MODULE)
 find_package(nlohmann_json 3.10 REQUIRED)
 find_package(TBB REQUIRED)
-find_package(embree 3 REQUIRED)
 find_package(TinyGLTF REQUIRED)
 find_package(tinyobjloader REQUIRED)
 find_package(nanoflann REQUIRED)
@@ -13,14 +12,18 @@ find_package(CLI11 REQUIRED)
 find_package(Threads REQUIRED)
 # gzip: PandaSet's .pkl.gz files, CLIP's published BPE vocabulary.
 find_package(ZLIB REQUIRED)
-# Asset mining: FAISS (Debian's static libfaiss, which links OpenMP and BLAS) searches the embedding index;
-# libcurl fetches URL-list images.
-find_package(OpenMP REQUIRED)
-find_package(faiss REQUIRED)
-find_package(CURL REQUIRED)
-# The asset bank: a SQLite catalogue; OpenSSL's EVP hashes the catalogued files (SHA-256).
-find_package(SQLite3 REQUIRED)
-find_package(OpenSSL REQUIRED)
+# The fuzz build (SYNTHDRIVE_FUZZ) compiles only core, io and datasets: none of what follows.
+if(NOT SYNTHDRIVE_FUZZ)
+  find_package(embree 3 REQUIRED)
+  # Asset mining: FAISS (Debian's static libfaiss, which links OpenMP and BLAS) searches the embedding index;
+  # libcurl fetches URL-list images.
+  find_package(OpenMP REQUIRED)
+  find_package(faiss REQUIRED)
+  find_package(CURL REQUIRED)
+  # The asset bank: a SQLite catalogue; OpenSSL's EVP hashes the catalogued files (SHA-256).
+  find_package(SQLite3 REQUIRED)
+  find_package(OpenSSL REQUIRED)
+endif()
 # LibTorch runs the learned stages (src/models). Debian's libtorch-dev is CPU-only; a CUDA LibTorch found
 # through CMAKE_PREFIX_PATH builds the same code for the GPU.
 if(SYNTHDRIVE_WITH_TORCH)

@@ -7,8 +7,13 @@ if(SYNTHDRIVE_WERROR)
 endif()
 
 add_library(synthdrive_sanitizers INTERFACE)
-if(SYNTHDRIVE_ASAN)
+# A UBSan report stops the program (no recovery), so any report fails the test or the fuzz run.
+if(SYNTHDRIVE_ASAN OR SYNTHDRIVE_FUZZ)
   target_compile_options(synthdrive_sanitizers INTERFACE
-    $<$<COMPILE_LANGUAGE:CXX>:-fsanitize=address,undefined -fno-omit-frame-pointer>)
-  target_link_options(synthdrive_sanitizers INTERFACE -fsanitize=address,undefined)
+    $<$<COMPILE_LANGUAGE:CXX>:-fsanitize=address,undefined -fno-sanitize-recover=undefined -fno-omit-frame-pointer>)
+  target_link_options(synthdrive_sanitizers INTERFACE -fsanitize=address,undefined -fno-sanitize-recover=undefined)
+endif()
+# Coverage feedback for libFuzzer in every module the targets link; the targets themselves link -fsanitize=fuzzer.
+if(SYNTHDRIVE_FUZZ)
+  target_compile_options(synthdrive_sanitizers INTERFACE $<$<COMPILE_LANGUAGE:CXX>:-fsanitize=fuzzer-no-link>)
 endif()

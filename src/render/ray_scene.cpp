@@ -45,6 +45,18 @@ void SkipFilter(const RTCFilterFunctionNArguments* args) {
   }
 }
 
+// Embree's contract (rtcIntersect1): a finite origin and direction, 0 <= tnear <= tfar. Outside it the traversal
+// is undefined (an fx = 0 camera once reached it with infinite directions and aborted in bvh_intersector1.cpp).
+// Such a ray is answered as a miss here instead: the readers refuse the inputs that made them, so what remains
+// is a degenerate ray of the geometry (a normalised zero vector), which hits nothing.
+bool RayWithinEmbreeContract(const Eigen::Vector3f& origin, const Eigen::Vector3f& dir, float t_near, float t_far) {
+  return origin.allFinite() && dir.allFinite() && dir.squaredNorm() > 0 && std::isfinite(t_near) && t_near >= 0 &&
+         !(t_far < t_near) && !std::isnan(t_far);
+}
+
+// Larger than any world coordinate the readers accept (1e7 m) and small enough for float traversal.
+constexpr float kMaxSceneCoordinate = 1e8f;
+
 RTCRayHit MakeRayHit(const Eigen::Vector3f& origin, const Eigen::Vector3f& dir, float t_near, float t_far) {
   RTCRayHit rh;
   rh.ray.org_x = origin.x();
@@ -153,6 +165,10 @@ int RayScene::AddMesh(std::shared_ptr<const TriangleMesh> mesh) {
     auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
                                                            3 * sizeof(float), m.NumVertices()));
     for (size_t i = 0; i < m.NumVertices(); ++i) {
+      // Meshes are checked finite where they are read and placed by bounded poses: a vertex outside this is a
+      // bug upstream, and Embree's BVH build is undefined on it.
+      SD_CHECK(m.positions[i].allFinite() && m.positions[i].cwiseAbs().maxCoeff() < kMaxSceneCoordinate,
+               << "vertex " << i << " at " << m.positions[i].transpose() << " cannot be ray traced");
       vb[3 * i + 0] = m.positions[i].x();
       vb[3 * i + 1] = m.positions[i].y();
       vb[3 * i + 2] = m.positions[i].z();
@@ -191,6 +207,7 @@ const TriangleMesh& RayScene::Mesh(int id) const {
 RayHit RayScene::Intersect(const Eigen::Vector3f& origin, const Eigen::Vector3f& dir, float t_near, float t_far,
                            int skip_mesh) const {
   SD_CHECK(impl_->committed, << "query before Commit");
+  if (!RayWithinEmbreeContract(origin, dir, t_near, t_far)) return RayHit{};
   SkipContext ctx;
   rtcInitIntersectContext(&ctx.context);
   ctx.skip_geom = RTC_INVALID_GEOMETRY_ID;
@@ -214,6 +231,7 @@ RayHit RayScene::Intersect(const Eigen::Vector3f& origin, const Eigen::Vector3f&
 bool RayScene::Occluded(const Eigen::Vector3f& origin, const Eigen::Vector3f& dir, float t_near, float t_far,
                         int skip_mesh) const {
   SD_CHECK(impl_->committed, << "query before Commit");
+  if (!RayWithinEmbreeContract(origin, dir, t_near, t_far)) return false;
   SkipContext ctx;
   rtcInitIntersectContext(&ctx.context);
   ctx.skip_geom = RTC_INVALID_GEOMETRY_ID;

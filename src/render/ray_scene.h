@@ -26,7 +26,7 @@ class RayScene {
   RayScene(RayScene&&) noexcept;
   RayScene& operator=(RayScene&&) noexcept;
 
-  // Adds a mesh (positions in the scene frame). The scene keeps a shared reference for shading lookups
+  // Adds a mesh (positions in the scene frame, finite and within 1e8 of the origin: SD_CHECK). The scene keeps a shared reference for shading lookups
   // (do not modify the mesh afterwards); Embree gets its own copy of positions and indices. Ids are
   // 0, 1, 2, ... in call order; a mesh without faces keeps its id and is never hit.
   int AddMesh(std::shared_ptr<const TriangleMesh> mesh);
@@ -36,7 +36,8 @@ class RayScene {
   int NumMeshes() const;
   const TriangleMesh& Mesh(int id) const;
 
-  // Nearest hit with t in [t_near, t_far]; `dir` must be unit length; `skip_mesh` >= 0 ignores that mesh (as
+  // Nearest hit with t in [t_near, t_far]; `dir` must be unit length (a ray with a non-finite or zero origin or
+  // direction, or t_near < 0 or > t_far, is a miss: it never reaches Embree); `skip_mesh` >= 0 ignores that mesh (as
   // for Occluded). Thread-safe after Commit().
   RayHit Intersect(const Eigen::Vector3f& origin, const Eigen::Vector3f& dir, float t_near = 0.0f,
                    float t_far = std::numeric_limits<float>::infinity(), int skip_mesh = -1) const;

@@ -4,6 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include <limits>
+
 #include "core/image.h"
 #include "render/test_meshes.h"
 
@@ -113,6 +115,28 @@ TEST(RayScene, OccludedSkipMesh) {
   EXPECT_TRUE(scene.Occluded(o, d, 0, 1.5f, far_id));
   EXPECT_EQ(scene.Intersect(o, d).mesh, near_id);
   EXPECT_EQ(scene.Intersect(o, d, 1.5f).mesh, far_id);
+}
+
+// Rays outside Embree's contract (non-finite or zero origin or direction, t_near < 0 or past t_far) are misses;
+// they used to reach the traversal, where an infinite direction aborted Embree.
+TEST(RayScene, RaysOutsideEmbreesContractAreMisses) {
+  RayScene scene;
+  scene.AddMesh(Quad({0, 0, 1}, {1, 0, 0}, {0, 1, 0}, 1, 1));
+  scene.Commit();
+  const float inf = std::numeric_limits<float>::infinity(), nan = std::numeric_limits<float>::quiet_NaN();
+  const Eigen::Vector3f o = Eigen::Vector3f::Zero(), d(0, 0, 1);
+  ASSERT_TRUE(scene.Intersect(o, d).Hit());
+  for (const auto& [origin, dir] : std::vector<std::pair<Eigen::Vector3f, Eigen::Vector3f>>{
+           {Eigen::Vector3f(nan, 0, 0), d}, {o, Eigen::Vector3f(0, 0, inf)}, {o, Eigen::Vector3f(nan, nan, nan)},
+           {o, Eigen::Vector3f::Zero()}, {Eigen::Vector3f(-inf, 0, 0), d}}) {
+    EXPECT_FALSE(scene.Intersect(origin, dir).Hit()) << origin.transpose() << " -> " << dir.transpose();
+    EXPECT_FALSE(scene.Occluded(origin, dir, 0, 10));
+  }
+  EXPECT_FALSE(scene.Intersect(o, d, nan).Hit());
+  EXPECT_FALSE(scene.Intersect(o, d, -1).Hit());
+  EXPECT_FALSE(scene.Intersect(o, d, 2, 1).Hit());
+  EXPECT_FALSE(scene.Occluded(o, d, 0, nan));
+  EXPECT_EQ(scene.IntersectMany({o, Eigen::Vector3f(nan, 0, 0)}, {d, d})[1].mesh, -1);
 }
 
 TEST(RayScene, IntersectManyMatchesIntersect) {

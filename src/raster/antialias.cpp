@@ -77,6 +77,8 @@ void CheckAntialiasArgs(std::span<const float> color, int channels, const Raster
                         std::span<const float> clip_pos, std::span<const int32_t> tris, const EdgeTopology& topology) {
   internal::CheckRaster(rast);
   internal::CheckTriangles(clip_pos, tris);
+  internal::CheckVertexIndices(tris, internal::NumVertices(clip_pos));
+  internal::CheckRasterTriangles(rast, tris);
   SD_CHECK(channels > 0 && color.size() == static_cast<size_t>(channels) * rast.NumPixels(),
            << "color: " << color.size() << " floats for " << channels << " channels");
   SD_CHECK(topology.neighbour.size() == tris.size(), << "topology built for another mesh");

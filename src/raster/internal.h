@@ -29,6 +29,23 @@ inline void CheckTriangles(std::span<const float> clip_pos, std::span<const int3
   SD_CHECK(tris.size() % 3 == 0, << "tris holds 3 indices per triangle, got " << tris.size());
 }
 
+// Every vertex index of `tris` names one of `num_vertices` vertices (the per-pixel code indexes without checks).
+inline void CheckVertexIndices(std::span<const int32_t> tris, size_t num_vertices) {
+  for (size_t k = 0; k < tris.size(); ++k)
+    SD_CHECK(tris[k] >= 0 && static_cast<size_t>(tris[k]) < num_vertices,
+             << "triangle " << k / 3 << " names vertex " << tris[k] << " of " << num_vertices);
+}
+
+// Every pixel's triangle id is -1 or one of `tris`' triangles: a raster buffer of another mesh is refused here
+// instead of reading out of bounds.
+inline void CheckRasterTriangles(const RasterBuffer& rast, std::span<const int32_t> tris) {
+  const int64_t num_triangles = static_cast<int64_t>(tris.size() / 3);
+  for (size_t p = 0; p < rast.triangle.size(); ++p)
+    SD_CHECK(rast.triangle[p] >= -1 && rast.triangle[p] < num_triangles,
+             << "pixel " << p << " holds triangle " << rast.triangle[p] << " of " << num_triangles
+             << " (a raster buffer of another mesh?)");
+}
+
 inline void CheckRaster(const RasterBuffer& rast) {
   SD_CHECK(rast.width >= 0 && rast.height >= 0);
   SD_CHECK(rast.bary.size() == 2 * rast.NumPixels() && rast.depth.size() == rast.NumPixels() &&

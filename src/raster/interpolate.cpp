@@ -14,7 +14,9 @@ void CheckInterpolateArgs(std::span<const float> attr, int channels, std::span<c
   SD_CHECK(channels > 0, << "channels " << channels);
   SD_CHECK(attr.size() % channels == 0, << "attr: " << attr.size() << " floats for " << channels << " channels");
   SD_CHECK(tris.size() % 3 == 0);
+  internal::CheckVertexIndices(tris, attr.size() / channels);
   internal::CheckRaster(rast);
+  internal::CheckRasterTriangles(rast, tris);
 }
 
 // Rows per task: interpolation is cheap per pixel, so tasks need a few rows to be worth scheduling.

@@ -52,6 +52,20 @@ TEST(Interpolate, ReproducesConstantAndVertexValues) {
 
 // Interpolate is linear in attr and bilinear in (attr, bary), so central differences are exact up to float
 // rounding; step 1e-2, tolerance 1e-3 relative.
+// The per-pixel code indexes without checks: indices past the attributes, or a raster buffer of a bigger mesh,
+// stop at the op's entry with the culprit named instead of reading out of bounds.
+TEST(InterpolateDeathTest, IndicesOutsideTheirBuffersAreContractViolations) {
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  const Scene s = SphereScene(16, 3);
+  const int V = s.mesh.NumVertices();
+  std::vector<float> attr(static_cast<size_t>(V)), out(s.rast.NumPixels());
+  const std::vector<float> too_few(static_cast<size_t>(V - 1));
+  EXPECT_DEATH(Interpolate(too_few, 1, s.mesh.tris, s.rast, out), "names vertex");
+  const std::vector<int32_t> first_triangle(s.mesh.tris.begin(), s.mesh.tris.begin() + 3);
+  EXPECT_DEATH(Interpolate(attr, 1, first_triangle, s.rast, out), "a raster buffer of another mesh");
+  Interpolate(attr, 1, s.mesh.tris, s.rast, out);  // the matching buffers pass
+}
+
 TEST(Interpolate, BackwardMatchesFiniteDifferences) {
   Scene s = SphereScene(24, 2);
   const int C = 3, V = s.mesh.NumVertices();

@@ -18,6 +18,9 @@
 //    near plane; the refinement cameras always do).
 //  - Triangles: 3 int32 vertex indices each; both windings are drawn (no culling).
 //  - Barycentrics are perspective-correct, (b0, b1) of the triangle's vertices 0 and 1; b2 = 1 - b0 - b1.
+//  - Contracts (SD_CHECK, abort with the culprit named): buffer sizes, every index of `tris` within the vertices
+//    of clip_pos / attr, every triangle id of a RasterBuffer within `tris` (a buffer of another mesh).
+//    Non-finite clip positions are not drawn.
 #include <cstdint>
 #include <span>
 #include <string>

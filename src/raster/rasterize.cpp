@@ -107,7 +107,7 @@ void Rasterize(std::span<const float> clip_pos, std::span<const int32_t> tris, i
   internal::CheckTriangles(clip_pos, tris);
   SD_CHECK(width >= 0 && height >= 0 && out != nullptr);
   const size_t num_vertices = internal::NumVertices(clip_pos);
-  for (int32_t v : tris) SD_CHECK(v >= 0 && static_cast<size_t>(v) < num_vertices, << "vertex index " << v);
+  internal::CheckVertexIndices(tris, num_vertices);
 
   out->width = width;
   out->height = height;
@@ -154,7 +154,9 @@ void RasterizeBackward(std::span<const float> clip_pos, std::span<const int32_t>
                        std::span<const float> grad_bary, std::span<const float> grad_depth,
                        std::span<float> grad_clip) {
   internal::CheckTriangles(clip_pos, tris);
+  internal::CheckVertexIndices(tris, internal::NumVertices(clip_pos));
   internal::CheckRaster(rast);
+  internal::CheckRasterTriangles(rast, tris);
   const size_t num_pixels = rast.NumPixels();
   SD_CHECK(grad_bary.size() == 2 * num_pixels, << "grad_bary: " << grad_bary.size());
   SD_CHECK(grad_depth.empty() || grad_depth.size() == num_pixels, << "grad_depth: " << grad_depth.size());

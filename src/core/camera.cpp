@@ -1,8 +1,15 @@
 #include "core/camera.h"
 
+#include <cmath>
+
+#include "core/error.h"
+
 namespace sd {
 
 PinholeCamera PinholeCamera::FromK(const Eigen::Matrix3d& K, int width, int height) {
+  // The readers refuse skewed calibrations with the file named (datasets' SkewProblem); one reaching here is a bug.
+  SD_CHECK(std::abs(K(0, 1)) <= 1e-3 * std::abs(K(0, 0)) && std::abs(K(1, 0)) <= 1e-6,
+           << "a skewed camera matrix (K[0][1] = " << K(0, 1) << ") has no PinholeCamera");
   PinholeCamera c;
   c.width = width;
   c.height = height;

@@ -20,6 +20,7 @@ struct PinholeCamera {
   double fx = 0, fy = 0, cx = 0, cy = 0;
   Distortion distortion;
 
+  // K must have no skew (SD_CHECK: the readers refuse skewed calibrations with the file named).
   static PinholeCamera FromK(const Eigen::Matrix3d& K, int width, int height);
   Eigen::Matrix3d K() const;
 

@@ -136,8 +136,16 @@ Eigen::Matrix3d CameraMatrix(const JsonReader& r, int width, int height) {
     r.Fail(Msg() << "impossible focal lengths fx = " << K(0, 0) << ", fy = " << K(1, 1) << " px (must be > 0 and < 1e6)");
   if ((K.row(2) - Eigen::RowVector3d(0, 0, 1)).cwiseAbs().maxCoeff() > 1e-6)
     r.Fail(Msg() << "not a camera matrix: the bottom row is [" << K.row(2) << "], not [0 0 1]");
+  if (const std::string skew = SkewProblem(K); !skew.empty()) r.Fail(skew);
   if (!PrincipalPointNearCentre(K(0, 2), K(1, 2), width, height)) r.Fail(PrincipalPointProblem(K(0, 2), K(1, 2), width, height));
   return K;
+}
+
+std::string SkewProblem(const Eigen::Matrix3d& K) {
+  if (std::abs(K(0, 1)) > 1e-3 * std::abs(K(0, 0)) || std::abs(K(1, 0)) > 1e-6)
+    return Msg() << "a skewed camera matrix (K[0][1] = " << K(0, 1) << ", K[1][0] = " << K(1, 0)
+                 << "): the pinhole model here has no skew, and dropping it would move the projections";
+  return "";
 }
 
 std::string PrincipalPointProblem(double cx, double cy, int width, int height) {

@@ -72,6 +72,9 @@ inline bool PrincipalPointNearCentre(double cx, double cy, int width, int height
 }
 // "the principal point (cx, cy) is not near the centre of the WxH image ..." for the errors of the rule above.
 std::string PrincipalPointProblem(double cx, double cy, int width, int height);
+// What is wrong with a camera matrix's off-diagonal terms, or "" when nothing is: PinholeCamera has no skew, so
+// a skew above 1e-3 fx (real calibrations hold exactly 0) or a non-zero K[1][0] would be dropped silently.
+std::string SkewProblem(const Eigen::Matrix3d& K);
 // Optional fields a reader defaulted, tallied per kind over a log's frames so each kind becomes one line of
 // Log::assumptions ("<what> (in 3 of 81 frames, first: <token>)") instead of one per frame.
 class AssumptionTally {

@@ -58,6 +58,7 @@ void CheckKittiCalib(const KittiCalib& c, const fs::path& path) {
     throw InputError(path, Msg() << "P2: impossible focal lengths fx = " << K(0, 0) << ", fy = " << K(1, 1) << " px (must be > 0 and < 1e6)");
   if ((K.row(2) - Eigen::RowVector3d(0, 0, 1)).cwiseAbs().maxCoeff() > 1e-6)
     throw InputError(path, Msg() << "P2: not a camera matrix: its bottom row starts [" << K.row(2) << "], not [0 0 1]");
+  if (const std::string skew = SkewProblem(K); !skew.empty()) throw InputError(path, "P2: " + skew);
   auto check_rotation = [&](const char* key, const Eigen::Matrix3d& R) {
     const double off = (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
     if (off > 1e-3) throw InputError(path, Msg() << key << ": not a rotation (R^T R differs from I by " << off << ")");

@@ -76,6 +76,7 @@ KittiRecordCalib V1Calib(const JsonReader& d) {
   const JsonReader images = d["images"];
   const JsonReader cam = images[kCam2];
   c.P2 = Mat34(cam["cam2img"]);
+  if (const std::string skew = SkewProblem(c.P2.leftCols<3>()); !skew.empty()) cam["cam2img"].Fail(skew);
   if (images.Has("R0_rect") && d.Has("lidar_points") && d["lidar_points"].Has("Tr_velo_to_cam")) {
     c.T_rect0_velo = RectFromVelo(Mat34(images["R0_rect"]), Mat34(d["lidar_points"]["Tr_velo_to_cam"]));
   } else if (cam.Has("lidar2cam")) {
@@ -86,8 +87,8 @@ KittiRecordCalib V1Calib(const JsonReader& d) {
     d.Fail("no calibration: expected images.R0_rect and lidar_points.Tr_velo_to_cam, or images.CAM2.lidar2cam");
   }
   if (cam.Has("width") && cam.Has("height")) {
-    c.width = static_cast<int>(cam["width"].Integer());
-    c.height = static_cast<int>(cam["height"].Integer());
+    c.width = static_cast<int>(cam["width"].IntegerIn(1, kMaxImageSidePx));
+    c.height = static_cast<int>(cam["height"].IntegerIn(1, kMaxImageSidePx));
   }
   return c;
 }
@@ -96,9 +97,15 @@ KittiRecordCalib V0Calib(const JsonReader& d) {
   KittiRecordCalib c;
   const JsonReader calib = d["calib"];
   c.P2 = Mat34(calib["P2"]);
+  if (const std::string skew = SkewProblem(c.P2.leftCols<3>()); !skew.empty()) calib["P2"].Fail(skew);
   c.T_rect0_velo = RectFromVelo(Mat34(calib["R0_rect"]), Mat34(calib["Tr_velo_to_cam"]));
   if (d["image"].Has("image_shape")) {
-    const std::vector<double> hw = Vec(d["image"]["image_shape"], 2);  // rows, columns
+    const JsonReader shape = d["image"]["image_shape"];
+    const std::vector<double> hw = Vec(shape, 2);  // rows, columns
+    // Checked before the casts (a NaN or 1e300 size would be undefined behaviour, not a wrong number).
+    for (double side : hw)
+      if (!(side >= 1 && side <= kMaxImageSidePx && side == std::trunc(side)))
+        shape.Fail(Msg() << "an image side of " << side << " px (a whole number from 1 to " << kMaxImageSidePx << ")");
     c.height = static_cast<int>(hw[0]);
     c.width = static_cast<int>(hw[1]);
   }

@@ -1,5 +1,6 @@
 // synthdrive: one binary, one subcommand per pipeline stage (DESIGN.md).
 #include <cstdio>
+#include <filesystem>
 #include <exception>
 #include <map>
 
@@ -67,6 +68,11 @@ int main(int argc, char** argv) {
       if (sub->parsed()) return run();
   } catch (const sd::InputError& e) {
     std::fprintf(stderr, "error: %s\n", e.what());
+    return 2;
+  } catch (const std::filesystem::filesystem_error& e) {
+    // The file system refused a path the user gave or a file named one (a symlink loop, a permission): said as
+    // an input error, the path first, without the library's "filesystem error: status:" prefix.
+    std::fprintf(stderr, "error: %s: %s\n", e.path1().string().c_str(), e.code().message().c_str());
     return 2;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "error: %s\n", e.what());

@@ -129,7 +129,7 @@ def write(path, data):
 
 
 def replace_with(path, kind):
-    """Replaces a file by a FIFO, a directory, an empty file or a symlink to a device."""
+    """Replaces a file by a FIFO, a directory, an empty file, a symlink loop or a symlink to a device."""
     if os.path.isdir(path) and not os.path.islink(path):
         shutil.rmtree(path)
     elif os.path.lexists(path):
@@ -141,6 +141,9 @@ def replace_with(path, kind):
         write(os.path.join(path, "inside.txt"), "a directory, not a file\n")
     elif kind == "empty":
         write(path, b"")
+    elif kind == "symlink loop":  # path -> path.loop -> path
+        os.symlink(os.path.basename(path) + ".loop", path)
+        os.symlink(os.path.basename(path), path + ".loop")
     elif kind.startswith("/dev/"):
         os.symlink(kind, path)
     else:
@@ -999,14 +1002,14 @@ def add_cases(b):
 
     # -- FIFOs, devices, directories, empty files ------------------------------------------------------------------
     S = "not a regular file"
-    for kind in ("fifo", "/dev/zero", "/dev/urandom", "dir", "empty"):
+    for kind in ("fifo", "/dev/zero", "/dev/urandom", "dir", "empty", "symlink loop"):
         nus_case(b, S, "sweep is %s" % kind, REFUSE, lambda p, rng, kind=kind: replace_with(p["sweep"], kind), [sweep])
-    for kind in ("fifo", "/dev/zero", "dir", "empty"):
+    for kind in ("fifo", "/dev/zero", "dir", "empty", "symlink loop"):
         nus_case(b, S, "CAM_FRONT image is %s" % kind, REFUSE,
                  lambda p, rng, kind=kind: replace_with(p["front"], kind), [front])
     nus_case(b, S, "sweep is a fifo, existing OUT", REFUSE, lambda p, rng: replace_with(p["sweep"], "fifo"), [sweep],
              preexisting=True)
-    for kind in ("fifo", "empty"):
+    for kind in ("fifo", "empty", "symlink loop"):
         nus_case(b, S, "info json is %s" % kind, REFUSE, lambda p, rng, kind=kind: replace_with(p["info"], kind))
     for kind in ("fifo", "dir", "empty", "/dev/zero"):
         b.add(S, "scenario is %s" % kind, REFUSE, lambda c, d, r, kind=kind: scen(c, d, lambda s: replace_with(s, kind)))

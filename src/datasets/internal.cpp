@@ -118,10 +118,8 @@ Rigid3d RigidPose(const JsonReader& r, double max_translation_m) {
   if (!m.allFinite()) r.Fail("a matrix entry is not finite");
   if ((m.row(3) - Eigen::RowVector4d(0, 0, 0, 1)).cwiseAbs().maxCoeff() > 1e-6)
     r.Fail(Msg() << "not a rigid transform: the bottom row is [" << m.row(3) << "], not [0 0 0 1]");
-  const Eigen::Matrix3d R = m.topLeftCorner<3, 3>();
-  const double off = (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
-  if (off > 1e-3) r.Fail(Msg() << "not a rigid transform: the rotation is not orthonormal (R^T R differs from I by " << off << ")");
-  if (R.determinant() < 0) r.Fail("not a rigid transform: the rotation is a reflection (determinant -1)");
+  if (const std::string rotation = RotationProblem(m.topLeftCorner<3, 3>()); !rotation.empty())
+    r.Fail("not a rigid transform: " + rotation);
   const double t = m.topRightCorner<3, 1>().norm();
   if (t > max_translation_m)
     r.Fail(Msg() << "the translation is " << t << " m from the origin, beyond the " << max_translation_m << " m a "
@@ -129,15 +127,27 @@ Rigid3d RigidPose(const JsonReader& r, double max_translation_m) {
   return Rigid3d::FromMatrix(m);
 }
 
+std::string RotationProblem(const Eigen::Matrix3d& R) {
+  const double off = (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+  if (off > 1e-3) return Msg() << "the rotation is not orthonormal (R^T R differs from I by " << off << ")";
+  if (R.determinant() < 0) return "the rotation is a reflection (determinant -1)";
+  return "";
+}
+
+std::string CameraMatrixProblem(const Eigen::Matrix3d& K, int width, int height) {
+  if (!K.allFinite()) return "a camera matrix entry is not finite";
+  if (!(K(0, 0) > 0 && K(1, 1) > 0 && K(0, 0) < 1e6 && K(1, 1) < 1e6))
+    return Msg() << "impossible focal lengths fx = " << K(0, 0) << ", fy = " << K(1, 1) << " px (must be > 0 and < 1e6)";
+  if ((K.row(2) - Eigen::RowVector3d(0, 0, 1)).cwiseAbs().maxCoeff() > 1e-6)
+    return Msg() << "not a camera matrix: the bottom row is [" << K.row(2) << "], not [0 0 1]";
+  if (std::string skew = SkewProblem(K); !skew.empty()) return skew;
+  if (!PrincipalPointNearCentre(K(0, 2), K(1, 2), width, height)) return PrincipalPointProblem(K(0, 2), K(1, 2), width, height);
+  return "";
+}
+
 Eigen::Matrix3d CameraMatrix(const JsonReader& r, int width, int height) {
   const Eigen::Matrix3d K = Mat3(r);
-  if (!K.allFinite()) r.Fail("a camera matrix entry is not finite");
-  if (!(K(0, 0) > 0 && K(1, 1) > 0 && K(0, 0) < 1e6 && K(1, 1) < 1e6))
-    r.Fail(Msg() << "impossible focal lengths fx = " << K(0, 0) << ", fy = " << K(1, 1) << " px (must be > 0 and < 1e6)");
-  if ((K.row(2) - Eigen::RowVector3d(0, 0, 1)).cwiseAbs().maxCoeff() > 1e-6)
-    r.Fail(Msg() << "not a camera matrix: the bottom row is [" << K.row(2) << "], not [0 0 1]");
-  if (const std::string skew = SkewProblem(K); !skew.empty()) r.Fail(skew);
-  if (!PrincipalPointNearCentre(K(0, 2), K(1, 2), width, height)) r.Fail(PrincipalPointProblem(K(0, 2), K(1, 2), width, height));
+  if (const std::string problem = CameraMatrixProblem(K, width, height); !problem.empty()) r.Fail(problem);
   return K;
 }
 

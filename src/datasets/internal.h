@@ -58,9 +58,14 @@ inline constexpr double kMaxSensorOffsetM = 100;     // a sensor's mounting rela
 inline constexpr double kMaxWorldCoordinateM = 1e7;  // a map frame's coordinates (UTM northings stay below)
 inline constexpr int kMaxImageSidePx = 1 << 15;      // a camera image's side: 32768 px, 6x the largest driving cameras'
 // A camera matrix (the top-left 3x3 of cam2img / P2) for an image of `width` x `height` (0: unknown): finite, focal
-// lengths positive and below 1e6 px, the bottom row [0 0 1], the principal point near the image's centre. A located
-// InputError otherwise.
+// lengths positive and below 1e6 px, the bottom row [0 0 1], no skew, the principal point near the image's centre.
+// A located InputError otherwise.
 Eigen::Matrix3d CameraMatrix(const JsonReader& r, int width, int height);
+// The rule of CameraMatrix on a matrix already read (KITTI's calib text): the problem, or "" when there is none.
+std::string CameraMatrixProblem(const Eigen::Matrix3d& K, int width, int height);
+// "" when R is a rotation (orthonormal to 1e-3, determinant +1), else what it is not: RigidPose's rule, shared with
+// the readers of rotations that are not JSON (KITTI's R0_rect and Tr_velo_to_cam).
+std::string RotationProblem(const Eigen::Matrix3d& R);
 // A driving camera's principal point lies near its image's centre: within 0.45-0.55 of the width and height in
 // every camera of nuScenes, Lyft, KITTI, Argoverse 2 and PandaSet. Beyond a quarter of the image from the centre
 // (outside its middle half), the image is not the one the calibration was made for: resized (a half-size nuScenes

@@ -47,25 +47,17 @@ std::vector<double> ParseNumbers(const std::string& text) {
   return v;
 }
 
-// What the reader trusts of a calib file, as RigidPose and CameraMatrix check an info file's matrices: finite
-// entries, P2's camera matrix with positive focal lengths below 1e6 px and the bottom row [0 0 1], R0_rect and
-// Tr_velo_to_cam's rotation orthonormal (to 1e-3) with determinant +1, the Velodyne within 100 m of the camera.
+// What the reader trusts of a calib file, by the rules an info file's matrices follow (CameraMatrix, RigidPose):
+// finite entries, P2 a camera matrix (its principal point is checked against the image at OpenLog), R0_rect and
+// Tr_velo_to_cam's rotations, the Velodyne within 100 m of the camera.
 void CheckKittiCalib(const KittiCalib& c, const fs::path& path) {
   if (!c.P2.allFinite() || !c.R0_rect.allFinite() || !c.Tr_velo_to_cam.allFinite())
     throw InputError(path, "a calib entry is not a finite number");
-  const Eigen::Matrix3d K = c.K2();
-  if (!(K(0, 0) > 0 && K(1, 1) > 0 && K(0, 0) < 1e6 && K(1, 1) < 1e6))
-    throw InputError(path, Msg() << "P2: impossible focal lengths fx = " << K(0, 0) << ", fy = " << K(1, 1) << " px (must be > 0 and < 1e6)");
-  if ((K.row(2) - Eigen::RowVector3d(0, 0, 1)).cwiseAbs().maxCoeff() > 1e-6)
-    throw InputError(path, Msg() << "P2: not a camera matrix: its bottom row starts [" << K.row(2) << "], not [0 0 1]");
-  if (const std::string skew = SkewProblem(K); !skew.empty()) throw InputError(path, "P2: " + skew);
-  auto check_rotation = [&](const char* key, const Eigen::Matrix3d& R) {
-    const double off = (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
-    if (off > 1e-3) throw InputError(path, Msg() << key << ": not a rotation (R^T R differs from I by " << off << ")");
-    if (R.determinant() < 0) throw InputError(path, Msg() << key << ": the rotation is a reflection (determinant -1)");
-  };
-  check_rotation("R0_rect", c.R0_rect);
-  check_rotation("Tr_velo_to_cam", c.Tr_velo_to_cam.leftCols<3>());
+  if (const std::string problem = CameraMatrixProblem(c.K2(), 0, 0); !problem.empty())
+    throw InputError(path, "P2: " + problem);
+  for (const auto& [key, R] : {std::pair<const char*, Eigen::Matrix3d>{"R0_rect", c.R0_rect},
+                               {"Tr_velo_to_cam", c.Tr_velo_to_cam.leftCols<3>()}})
+    if (const std::string problem = RotationProblem(R); !problem.empty()) throw InputError(path, Msg() << key << ": " << problem);
   if (c.Tr_velo_to_cam.col(3).norm() > kMaxSensorOffsetM)
     throw InputError(path, Msg() << "Tr_velo_to_cam: the translation is " << c.Tr_velo_to_cam.col(3).norm()
                                  << " m, beyond the " << kMaxSensorOffsetM << " m a sensor's mounting can be");

@@ -142,7 +142,7 @@ TEST(ReaderChecks, KittiCalibImagesAndLabelsAreChecked) {
       {"p2_bottom_row", [&](const fs::path& t) { set_line(t / "calib/000001.txt", "P2:", "707 0 600 0 0 707 180 0 0 0 0 0"); },
        "P2: not a camera matrix"},
       {"r0_scaled", [&](const fs::path& t) { set_line(t / "calib/000001.txt", "R0_rect:", "2 0 0 0 2 0 0 0 2"); },
-       "R0_rect: not a rotation"},
+       "R0_rect: the rotation is not orthonormal (R^T R differs from I by 3)"},
       {"tr_reflection", [&](const fs::path& t) { set_line(t / "calib/000001.txt", "Tr_velo_to_cam:", "1 0 0 0 0 1 0 0 0 0 -1 0"); },
        "Tr_velo_to_cam: the rotation is a reflection"},
       {"tr_far", [&](const fs::path& t) { set_line(t / "calib/000001.txt", "Tr_velo_to_cam:", "1 0 0 0 0 1 0 0 0 0 1 1e17"); },

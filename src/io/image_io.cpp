@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdint>
 #include <limits>
+#include <optional>
 
 #include <stb/stb_image.h>
 #include <stb/stb_image_write.h>
@@ -58,6 +60,35 @@ void RefuseOversizedJpegHuffmanTables(std::string_view bytes, const std::string&
   }
 }
 
+// stb_image 2.27 copies each IDAT chunk into a buffer it allocates at the first non-empty one, so an empty
+// IDAT before any data passes a null destination to memcpy (undefined, found by fuzz/image_fuzzer). An empty
+// IDAT carries no image data and is legal PNG; dropping it decodes the same image. Returns the PNG without its
+// empty IDAT chunks, or nothing when it has none (the common case, no copy).
+std::optional<std::string> WithoutEmptyPngDataChunks(std::string_view bytes) {
+  static constexpr std::string_view kSignature("\x89PNG\r\n\x1a\n", 8);
+  if (bytes.substr(0, kSignature.size()) != kSignature) return std::nullopt;
+  const auto be32 = [&](size_t i) {
+    uint32_t v = 0;
+    for (size_t k = 0; k < 4; ++k) v = v << 8 | static_cast<unsigned char>(bytes[i + k]);
+    return v;
+  };
+  std::optional<std::string> kept;
+  size_t at = kSignature.size(), copied_to = 0;
+  while (at + 12 <= bytes.size()) {
+    const size_t length = be32(at);
+    const std::string_view type = bytes.substr(at + 4, 4);
+    if (length == 0 && type == "IDAT") {
+      if (!kept) kept.emplace();
+      kept->append(bytes.substr(copied_to, at - copied_to));
+      copied_to = at + 12;
+    }
+    if (type == "IEND" || length > bytes.size() - at - 12) break;  // the end, or a truncated chunk stb refuses
+    at += 12 + length;
+  }
+  if (kept) kept->append(bytes.substr(copied_to));
+  return kept;
+}
+
 void AppendToString(void* context, void* data, int size) {
   static_cast<std::string*>(context)->append(static_cast<const char*>(data), static_cast<size_t>(size));
 }
@@ -70,6 +101,8 @@ ImageU8 DecodeImage(std::string_view bytes, const std::string& what, int channel
   if (bytes.size() > static_cast<size_t>(std::numeric_limits<int>::max()))
     throw InputError(what, Msg() << "cannot decode image: " << bytes.size() << " bytes is too large");
   RefuseOversizedJpegHuffmanTables(bytes, what);
+  const std::optional<std::string> cleaned = WithoutEmptyPngDataChunks(bytes);
+  if (cleaned) bytes = *cleaned;
   int w = 0, h = 0, n = 0;
   unsigned char* pixels = stbi_load_from_memory(reinterpret_cast<const stbi_uc*>(bytes.data()),
                                                 static_cast<int>(bytes.size()), &w, &h, &n, channels);

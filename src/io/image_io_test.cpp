@@ -145,6 +145,28 @@ TEST(ImageIo, JpegHuffmanTablesDeclaringMoreThan256CodesAreRefused) {
   }
 }
 
+// stb_image 2.27 passes a null buffer to memcpy for an empty IDAT before the image data (found by
+// fuzz/image_fuzzer, undefined behaviour). An empty IDAT is legal and carries nothing: the PNG decodes to the same
+// pixels with empty IDATs before, between and after the real one.
+TEST(ImageIo, EmptyPngDataChunksDecodeToTheSameImage) {
+  const ImageU8 img = Pattern(23, 9, 3);
+  const std::string png = EncodeImage(img, "png");
+  const size_t idat = png.find("IDAT");
+  ASSERT_NE(idat, std::string::npos);
+  const size_t data_chunk = idat - 4;  // the chunk starts with its length
+  const std::string empty_idat("\0\0\0\0IDAT\xAE\x42\x60\x82", 12);
+  const size_t after = png.find("IEND") - 4;
+  const std::string with_empties =
+      png.substr(0, data_chunk) + empty_idat + png.substr(data_chunk, after - data_chunk) + empty_idat + png.substr(after);
+  for (int channels : {0, 3, 4}) {
+    const ImageU8 back = DecodeImage(with_empties, "empty-idat.png", channels);
+    const ImageU8 reference = DecodeImage(png, "plain.png", channels);
+    EXPECT_EQ(back.width(), 23);
+    EXPECT_EQ(back.vector(), reference.vector()) << channels;
+  }
+  EXPECT_EQ(DecodeImage(with_empties, "empty-idat.png").vector(), img.vector());
+}
+
 // The quality a JPEG was written at, read back from its quantisation table: our own encoder's (stb, IJG scaling)
 // and the repo's nuScenes keyframe (what synth matches inserted pixels to).
 TEST(ImageIo, EstimatesTheJpegQualityFromItsQuantisationTable) {

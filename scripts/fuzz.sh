@@ -5,7 +5,9 @@
 # the input saved under build-fuzz/crashes/<target>/ (keep it in fuzz/regressions/<target>/ once fixed).
 # With --unit-tests it first builds the unit tests of the same modules (core, io, datasets) in that build and
 # runs them under ASan + UBSan; any report fails (CI's sanitizer stage, scripts/ci_sanitizers.sh).
-# FUZZ_SEED=N fixes libFuzzer's mutation seed (CI does; otherwise each run explores anew).
+# FUZZ_SEED=N fixes libFuzzer's mutation seed; FUZZ_RUNS=N runs exactly N inputs per target from a corpus seeded
+# afresh (build-fuzz/corpus-fixed/) instead of fuzzing for a time: with both, a run explores the same inputs on
+# any machine, however fast (CI does; otherwise each run explores anew and the corpus grows across runs).
 #   scripts/fuzz.sh [--unit-tests] [SECONDS_PER_TARGET] [TARGET...]
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -72,6 +74,18 @@ printf '%-16s %10s %8s %8s %7s %s\n' target executions exec/s cov ft result
 for t in "${targets[@]}"; do
   bin="$BUILD/fuzz/${t}_fuzzer"
   corpus="$BUILD/corpus/$t"
+  budget=(-max_total_time="$SECONDS_PER_TARGET")
+  if [ -n "${FUZZ_RUNS:-}" ]; then
+    # A time budget makes the inputs explored depend on the machine's speed; a count does not. The time cap
+    # only guards against a hang-like slowdown (each input also has -timeout).
+    corpus="$BUILD/corpus-fixed/$t"
+    rm -rf "$corpus"
+    budget=(-runs="$FUZZ_RUNS" -max_total_time=900)
+  fi
+  # Address-space randomisation changes which paths some targets take (pointer-keyed order), so a fixed run
+  # turns it off where the kernel lets us.
+  launcher=()
+  [ -n "${FUZZ_RUNS:-}" ] && setarch "$(uname -m)" -R true 2>/dev/null && launcher=(setarch "$(uname -m)" -R)
   crashes="$BUILD/crashes/$t"
   log="$BUILD/logs/$t.log"
   mkdir -p "$corpus" "$crashes" "$(dirname "$log")"
@@ -80,7 +94,7 @@ for t in "${targets[@]}"; do
   regressions=(fuzz/regressions/"$t"/*)
   if [ -e "${regressions[0]}" ] && ! "$bin" "${regressions[@]}" >"$log.replay" 2>&1; then
     result="regression fails (see $log.replay)"
-  elif ! SYNTHDRIVE_FUZZ_SEEDS_OUT="$corpus" "$bin" "$corpus" -max_total_time="$SECONDS_PER_TARGET" -timeout=10 \
+  elif ! SYNTHDRIVE_FUZZ_SEEDS_OUT="$corpus" "${launcher[@]}" "$bin" "$corpus" "${budget[@]}" -timeout=10 \
       ${FUZZ_SEED:+-seed="$FUZZ_SEED"} \
       -rss_limit_mb=2048 -print_final_stats=1 -artifact_prefix="$crashes/" >"$log" 2>&1; then
     result="CRASH: $(ls -t "$crashes" | head -1 | sed "s|^|$crashes/|") (see $log)"

@@ -20,6 +20,9 @@ double Rad(double deg) { return deg * kPi / 180.0; }
 double Deg(double rad) { return rad * 180.0 / kPi; }
 // A revolve wider than this many times its box's length or width (at the box's height) is refused.
 constexpr double kMaxRevolveWidthToBox = 3.0;
+// An oval section seen within asin(sqrt(0.05)) = 13 degrees of its length shows only its rings' widths, not how
+// long each is: below this, every ring takes the box's ratio instead of being flattened only where wide.
+constexpr double kMinSin2ForFlattenedRings = 0.05;
 
 // The silhouette's extent, pixel rows and columns [x0, x1) x [y0, y1).
 struct PixelBounds {
@@ -569,17 +572,32 @@ PhotoShape ShapeFromPhoto(const PhotoObservation& photo, const ShapePriorOptions
       }
     }
     if (!out.base_plate && options.size_measured && std::abs(size.x() - size.y()) > 0.05 * size.head<2>().maxCoeff()) {
-      // An oval section (a flask-shaped bottle, a flattened drum): a measured box longer than it is wide makes each
-      // ring an ellipse of semi-axes a (along the box's length) and q a (q = width / length). Seen with that length
-      // at psi to the line of sight, the ellipse is sqrt(sin^2 psi + q^2 cos^2 psi) a wide, which the photo's
-      // radius is; the widest ring's a is half the box's length, so its width across the line of sight gives psi
-      // (left/right ambiguous: an oval looks the same turned either way).
+      // An oval section (a flask-shaped bottle, a flattened drum): a measured box longer than it is wide. The
+      // widest ring is an ellipse of semi-axes L/2 (along the box's length) and W/2; seen with that length at psi
+      // to the line of sight it is sqrt(L^2 sin^2 psi + W^2 cos^2 psi) / 2 wide, which the photo's widest radius
+      // is, so it gives psi (left/right ambiguous: an oval looks the same turned either way).
       double widest = 0;
       for (const auto& ring : kept) widest = std::max(widest, ring.second);
       const double q = size.y() / size.x(), u = 2 * widest / size.x();
-      const double sin2 = std::clamp((u * u - q * q) / (1 - q * q), 0.0, 1.0);
-      const double stretch = 1 / std::sqrt(sin2 + q * q * (1 - sin2));
-      for (Eigen::Vector3f& p : out.coarse.positions) p.x() *= float(stretch), p.y() *= float(stretch * q);
+      const double sin2 = std::clamp((u * u - q * q) / (1 - q * q), 0.0, 1.0), cos2 = 1 - sin2;
+      const double half_width = size.y() / 2;
+      if (sin2 >= kMinSin2ForFlattenedRings) {
+        // The other rings are flattened only as far as the box's width makes them: a ring of semi-axes (a, b)
+        // with b = min(a, W/2). A flattened bottle is round at its neck and cap, and flat only where its body is
+        // wider than it is deep (HOPE's salad dressing: 4.3 cm deep from base to shoulder, a round 3.6 cm neck);
+        // a can whose box a pull tab lengthens keeps a round body. A ring no wider than W/2 in the photo is
+        // round; a wider one has b = W/2 and the a whose ellipse is the photo's width at psi.
+        for (Eigen::Vector3f& p : out.coarse.positions) {
+          const double rho = std::hypot(double(p.x()), double(p.y()));
+          if (rho <= half_width || rho == 0) continue;
+          const double a = std::sqrt(std::max(0.0, rho * rho - half_width * half_width * cos2) / sin2);
+          p.x() *= float(a / rho), p.y() *= float(half_width / rho);
+        }
+      } else {
+        // Seen nearly along its length, the photo shows each ring's width only: every ring takes the box's ratio.
+        const double stretch = 1 / std::sqrt(sin2 + q * q * cos2);
+        for (Eigen::Vector3f& p : out.coarse.positions) p.x() *= float(stretch), p.y() *= float(stretch * q);
+      }
       align_heading(std::asin(std::sqrt(sin2)));
       out.yaw_method = Msg() << "silhouette width against the measured box's length and width (an oval section; "
                              << "left/right ambiguous)";

@@ -1,6 +1,7 @@
 // bench_shape_prior: one photo → one asset with no learned model (assetgen/shape_prior.h), against ground truth.
 //
-// For each benchmark object (bench_objects.h, plus the milk truck and a second car): the ground truth is stood
+// For each benchmark object (bench_objects.h, plus every vehicle of ../shared/data/assets whose up axis is known):
+// the ground truth is stood
 // upright (+z; UprightAxis corrects the y-up HOPE scans), turned so its longer horizontal side is +x (a vehicle's
 // length: the mirror prior's symmetry plane is then y = 0), resting on z = 0 and centred, in its own units. One
 // "photo" is rendered as a driving camera sees such an object: 640x480, 50° vertical field of view, elevation 10°,
@@ -48,6 +49,7 @@
 #include <map>
 #include <sstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -83,7 +85,15 @@ std::string CategoryOf(const std::string& name) {
       {"hope_butter", "crate"},                   {"hope_cream_cheese", "crate"},
       {"hope_macaroni_and_cheese", "crate"},      {"hope_chocolate_pudding", "crate"},
       {"metadrive_road_barrier", "barrier"},      {"torcs_p406", "car"},
-      {"cesium_milk_truck", "truck"},             {"torcs_155_dtm", "car"}};
+      {"cesium_milk_truck", "truck"},             {"torcs_155_dtm", "car"},
+      {"metadrive_beetle", "car"},                {"quaternius_normal_car1", "car"},
+      {"quaternius_normal_car2", "car"},          {"quaternius_suv", "car"},
+      {"quaternius_taxi", "car"},                 {"quaternius_police_car", "emergency_vehicle"},
+      {"torcs_baja_bug", "car"},                  {"torcs_buggy", "car"},
+      {"flightgear_110bus", "bus"},               {"quaternius_bus", "bus"},
+      {"quaternius_school_bus", "bus"},           {"flightgear_humvee_pickup", "truck"},
+      {"kenney_truck_green", "truck"},            {"flightgear_oshkosh_ti1500_firetruck", "emergency_vehicle"},
+      {"flightgear_forklift", "construction_vehicle"}};
   const auto it = kCategory.find(name);
   return it == kCategory.end() ? "debris" : it->second;
 }
@@ -376,6 +386,26 @@ int main(int argc, char** argv) {
   std::vector<bench::BenchObject> objects = bench::Objects();
   objects.push_back({"cesium_milk_truck", "road", "truck/cesium_milk_truck/obj/cesium_milk_truck.obj", "+y"});
   objects.push_back({"torcs_155_dtm", "road", "car/torcs_155_dtm/obj/torcs_155_dtm.obj", "+y"});
+  // Every other vehicle of ../shared/data/assets with a converted OBJ whose up axis is known (the README's notes
+  // or its bounds): the mirror prior is for them. Left out: the ambulance (its bounds say no axis is up) and
+  // the Kenney trucks' two recolours of the green one.
+  for (const auto& [name, folder, up] : std::vector<std::tuple<std::string, std::string, std::string>>{
+           {"metadrive_beetle", "car", "+y"},
+           {"quaternius_normal_car1", "car", "+z"},
+           {"quaternius_normal_car2", "car", "+z"},
+           {"quaternius_suv", "car", "+z"},
+           {"quaternius_taxi", "car", "+z"},
+           {"quaternius_police_car", "emergency_vehicle", "+z"},
+           {"torcs_baja_bug", "car", "+y"},
+           {"torcs_buggy", "car", "+y"},
+           {"flightgear_110bus", "bus", "+y"},
+           {"quaternius_bus", "bus", "+z"},
+           {"quaternius_school_bus", "bus", "+z"},
+           {"flightgear_humvee_pickup", "truck", "+y"},
+           {"kenney_truck_green", "truck", "+y"},
+           {"flightgear_oshkosh_ti1500_firetruck", "emergency_vehicle", "+y"},
+           {"flightgear_forklift", "construction_vehicle", "+y"}})
+    objects.push_back({name, "road", folder + "/" + name + "/obj/" + name + ".obj", up});
 
   const geometry::GeometryMetricsOptions metric_options;
   std::printf("geometry protocol: %s\ntexture protocol: %s\n", geometry::DescribeProtocol(metric_options).c_str(),

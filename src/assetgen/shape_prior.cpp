@@ -293,6 +293,12 @@ ShapePrior DefaultShapePrior(const std::string& category) {
   return ShapePrior::kHull;
 }
 
+bool HasClosedBody(const std::string& category) {
+  static const char* kBodies[] = {"car", "truck", "trailer", "bus", "emergency_vehicle"};
+  for (const char* c : kBodies) if (category == c) return true;
+  return false;
+}
+
 SilhouetteAxis FitSymmetryAxis(const ImageF& mask) {
   // Row midpoints, fitted by least squares weighted by the row's width, once more without the rows farthest
   // from the first fit (handles, a sign's post, ragged mask rows).
@@ -658,6 +664,16 @@ PhotoShape ShapeFromPhoto(const PhotoObservation& photo, const ShapePriorOptions
   const Eigen::Vector3f half = (0.5 * size).cast<float>() - Eigen::Vector3f::Constant(inset);
   hull.bounds.min = Eigen::Vector3f(-half.x(), -half.y(), inset);
   hull.bounds.max = Eigen::Vector3f(half.x(), half.y(), float(size.z()) - inset);
+  if (out.prior == ShapePrior::kMirror && HasClosedBody(options.category)) {
+    // A vehicle's body is, to a first approximation, its side profile across its whole width. The photo and its
+    // mirror carve each side but leave a ridge down the middle wherever both lines of sight pass over the near
+    // side into the body (above the hood seen from a front quarter, behind a cab): any line of voxels across
+    // the width that is not (nearly) full is emptied. On the 18 vehicles of bench_shape_prior the median
+    // Chamfer against the single-view hull went from -10 % (no rule) to -20 / -25 / -31 % with 70 / 85 / 95 %,
+    // no vehicle worse than the hull (RESULTS.md); 95 % leaves the sides' voxel rounding.
+    hull.solid_across_axis = 1;
+    hull.min_column_fill = 0.95f;
+  }
   out.coarse = geometry::VisualHull(silhouettes, hull);
   if (out.coarse.faces.empty()) throw InputError({}, Msg() << ToString(out.prior) << " cannot fit: the carved hull is empty");
   return out;

@@ -36,6 +36,9 @@ const char* ToString(ShapePrior prior);
 std::optional<ShapePrior> ParseShapePrior(const std::string& name);
 // The prior a category's objects have (traffic cones revolve, vehicles mirror, signs extrude, the rest hull).
 ShapePrior DefaultShapePrior(const std::string& category);
+// Vehicles whose body is solid across its width (cars, trucks, buses, trailers; not bicycles or barriers): the
+// mirror prior empties what its views leave as a thin ridge across the width.
+bool HasClosedBody(const std::string& category);
 
 struct PhotoObservation {
   ImageU8 image;                         // sRGB, 3 or 4 channels

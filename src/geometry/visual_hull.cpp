@@ -90,6 +90,10 @@ void Validate(const std::vector<SilhouetteView>& views, const VisualHullOptions&
     throw InputError("", Msg() << "VisualHull: resolution must be in [2, 2048], got " << options.resolution);
   if (!(options.mask_threshold > 0 && options.mask_threshold < 1))
     throw InputError("", Msg() << "VisualHull: mask_threshold must be in (0, 1), got " << options.mask_threshold);
+  if (options.solid_across_axis < -1 || options.solid_across_axis > 2)
+    throw InputError("", Msg() << "VisualHull: solid_across_axis must be -1, 0, 1 or 2, got " << options.solid_across_axis);
+  if (!(options.min_column_fill >= 0 && options.min_column_fill <= 1))
+    throw InputError("", Msg() << "VisualHull: min_column_fill must be in [0, 1], got " << options.min_column_fill);
   if (!options.bounds.IsEmpty() && !(options.bounds.Size().minCoeff() > 0))
     throw InputError("", "VisualHull: bounds have zero extent along some axis");
 }
@@ -193,6 +197,21 @@ void SmoothField(int passes, ScalarGrid* grid) {
     }
 }
 
+// Empties every line of nodes along `axis` that is less than `min_fill` inside (solid_across_axis).
+void EmptyThinColumns(int axis, float min_fill, float threshold, ScalarGrid* grid) {
+  const int a = (axis + 1) % 3, b = (axis + 2) % 3;
+  const int inner = grid->dims[axis] - 2;  // the border layers are outside by construction
+  for (int q = 1; q + 1 < grid->dims[b]; ++q)
+    for (int p = 1; p + 1 < grid->dims[a]; ++p) {
+      Eigen::Vector3i n;
+      n[a] = p, n[b] = q;
+      int inside = 0;
+      for (n[axis] = 1; n[axis] <= inner; ++n[axis]) inside += grid->at(n.x(), n.y(), n.z()) >= threshold;
+      if (inside >= min_fill * inner) continue;
+      for (n[axis] = 1; n[axis] <= inner; ++n[axis]) grid->at(n.x(), n.y(), n.z()) = 0.0f;
+    }
+}
+
 }  // namespace
 
 TriangleMesh VisualHull(const std::vector<SilhouetteView>& views, const VisualHullOptions& options) {
@@ -248,6 +267,8 @@ TriangleMesh VisualHull(const std::vector<SilhouetteView>& views, const VisualHu
       }
     }
   });
+  if (options.solid_across_axis >= 0)
+    EmptyThinColumns(options.solid_across_axis, options.min_column_fill, options.mask_threshold, &grid);
   CarveFreeSpace(options.free_segments, &grid);
   if (!options.free_segments.empty()) SmoothField(options.carved_smoothing_passes, &grid);
 

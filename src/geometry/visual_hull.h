@@ -35,6 +35,13 @@ struct VisualHullOptions {
   // half a voxel of a segment are outside whatever the silhouettes say (they carve concavities no silhouette
   // shows, and the parts of a box the object does not fill).
   std::vector<std::pair<Eigen::Vector3f, Eigen::Vector3f>> free_segments;
+  // An object solid across one axis of the bounds (a vehicle's body across its width, 1 = y): a line of nodes
+  // along that axis that the silhouettes leave less than min_column_fill inside is emptied whole. Views from
+  // one side of such an object carve the side they see but leave a ridge in the middle of the width, where the
+  // line of sight passes over the near side into the object's silhouette (above a car's hood, seen from a front
+  // quarter, the hood nearer the camera than the cabin); the ridge is what the object is not. -1: off.
+  int solid_across_axis = -1;
+  float min_column_fill = 0.7f;
   // Passes of a [1 2 1] / 4 filter along each axis over the field once beams have carved it (two: a Gaussian of
   // about one voxel). A beam sets the nodes it passes to 0 outright, so an uncarved surface would keep voxel-sized
   // pits and steps; refinement turns those into folds, and the UV atlas into thousands of charts (a PandaSet car:
@@ -44,7 +51,7 @@ struct VisualHullOptions {
 
 // Throws InputError when no view is given or a mask's size disagrees with its camera (also: a mask with other
 // than 1 channel, non-positive focal lengths, resolution outside [2, 2048], mask_threshold outside (0, 1),
-// bounds flat along an axis).
+// bounds flat along an axis, solid_across_axis outside [-1, 2], min_column_fill outside [0, 1]).
 // The field at a node is the mask's coverage of the node's footprint (one voxel, projected), so the surface
 // follows the silhouettes to ~0.1 voxel rather than sitting on voxel steps. A node that no view sees is
 // outside; the grid has one forced-outside node layer beyond the bounds, so the mesh is closed and clipped at

@@ -49,9 +49,9 @@ std::vector<Orbit> Rig() {
 
 // Binary masks: a pixel is object when the ray through its centre hits the shape.
 using HitTest = std::function<bool(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction)>;
-std::vector<SilhouetteView> RenderMasks(const HitTest& hit) {
+std::vector<SilhouetteView> RenderMasks(const HitTest& hit, const std::vector<Orbit>& orbits = Rig()) {
   std::vector<SilhouetteView> views;
-  for (const Orbit& o : Rig()) {
+  for (const Orbit& o : orbits) {
     SilhouetteView v;
     v.camera = o.camera;
     v.T_cam_world = o.T_cam_world;
@@ -72,18 +72,22 @@ bool HitsSphere(const Eigen::Vector3d& o, const Eigen::Vector3d& d, double r) {
   return t > 0 && (o + t * d).squaredNorm() < r * r;
 }
 
-bool HitsCube(const Eigen::Vector3d& o, const Eigen::Vector3d& d, double half) {
+bool HitsBox(const Eigen::Vector3d& o, const Eigen::Vector3d& d, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) {
   double t0 = 0, t1 = 1e30;
   for (int a = 0; a < 3; ++a) {
     if (std::abs(d[a]) < 1e-15) {
-      if (std::abs(o[a]) > half) return false;
+      if (o[a] < lo[a] || o[a] > hi[a]) return false;
       continue;
     }
-    double ta = (-half - o[a]) / d[a], tb = (half - o[a]) / d[a];
+    double ta = (lo[a] - o[a]) / d[a], tb = (hi[a] - o[a]) / d[a];
     if (ta > tb) std::swap(ta, tb);
     t0 = std::max(t0, ta), t1 = std::min(t1, tb);
   }
   return t0 < t1;
+}
+
+bool HitsCube(const Eigen::Vector3d& o, const Eigen::Vector3d& d, double half) {
+  return HitsBox(o, d, Eigen::Vector3d::Constant(-half), Eigen::Vector3d::Constant(half));
 }
 
 // Reference volume of the exact visual hull, by counting the centres of an n^3 lattice over [-half, half]^3:
@@ -294,6 +298,37 @@ TEST(VisualHull, BeamsCarveASmoothSurfaceNotVoxelPits) {
   EXPECT_THROW(VisualHull(views, options), InputError);
 }
 
+// A car-like block, seen as a road camera sees a car from a front quarter and as its mirror image: a body 2 long,
+// 0.9 wide, 0.5 tall, and a cabin 0.4 tall over its rear 1.1. Above the hood the two views leave a ridge down
+// the middle, where their lines of sight pass over the near side into the cabin's silhouette; across its width
+// the car is solid, and solid_across_axis removes the ridge without touching the car.
+TEST(VisualHull, SolidAcrossAnAxisRemovesTheRidgeTwoSideViewsLeave) {
+  const Eigen::Vector3d body_lo(-1, -0.45, -0.5), body_hi(1, 0.45, 0), cabin_lo(-1, -0.45, 0), cabin_hi(0.1, 0.45, 0.4);
+  const auto car = [&](auto& o, auto& d) { return HitsBox(o, d, body_lo, body_hi) || HitsBox(o, d, cabin_lo, cabin_hi); };
+  const std::vector<SilhouetteView> views = RenderMasks(car, {OrbitCamera(30, 10), OrbitCamera(-30, 10)});
+  VisualHullOptions options;
+  options.resolution = 80;
+  options.bounds.min = Eigen::Vector3f(-1, -0.45f, -0.5f);
+  options.bounds.max = Eigen::Vector3f(1, 0.45f, 0.4f);
+  const TriangleMesh plain = VisualHull(views, options);
+  options.solid_across_axis = 1;
+  const TriangleMesh solid = VisualHull(views, options);
+  const auto above_hood = [](const TriangleMesh& m) {
+    int n = 0;
+    for (const Eigen::Vector3f& p : m.positions) n += p.x() > 0.35f && p.z() > 0.1f;
+    return n;
+  };
+  const double truth = 2 * 0.9 * 0.5 + 1.1 * 0.9 * 0.4;
+  std::printf("volume: truth %.3f, hull %.3f, solid across y %.3f; vertices above the hood %d, %d\n", truth,
+              SignedVolume(plain), SignedVolume(solid), above_hood(plain), above_hood(solid));
+  EXPECT_GT(above_hood(plain), 20);
+  EXPECT_EQ(above_hood(solid), 0);
+  // The car itself is kept: its columns are full.
+  EXPECT_GT(SignedVolume(solid), 0.97 * truth);
+  EXPECT_LT(SignedVolume(solid), SignedVolume(plain));
+  ExpectClosedGenusZero(solid);
+}
+
 TEST(VisualHull, RejectsBadInput) {
   std::vector<SilhouetteView> views = RenderMasks([](auto& o, auto& d) { return HitsSphere(o, d, 1.0); });
   EXPECT_THROW(VisualHull({}, {}), InputError);
@@ -317,6 +352,12 @@ TEST(VisualHull, RejectsBadInput) {
   EXPECT_THROW(VisualHull(views, options), InputError);
   options = {};
   options.mask_threshold = 1.0f;
+  EXPECT_THROW(VisualHull(views, options), InputError);
+  options = {};
+  options.solid_across_axis = 3;
+  EXPECT_THROW(VisualHull(views, options), InputError);
+  options = {};
+  options.min_column_fill = 1.5f;
   EXPECT_THROW(VisualHull(views, options), InputError);
   options = {};
   options.bounds.min = Eigen::Vector3f(-1, -1, 0);

@@ -161,7 +161,7 @@ double BlockNoiseSigma(const ImageU8& image, int bx, int by, int c) {
   return std::sqrt(sum / (36.0 * n));
 }
 
-std::vector<double> EdgeRiseWidths(const ImageU8& image, const std::array<int, 4>* region, const ImageF* mask) {
+std::vector<EdgeRise> FindEdgeRises(const ImageU8& image, const std::array<int, 4>* region, const ImageF* mask) {
   const int w = image.width(), h = image.height();
   std::vector<double> luma(static_cast<size_t>(w) * h);
   for (int y = 0; y < h; ++y)
@@ -169,7 +169,7 @@ std::vector<double> EdgeRiseWidths(const ImageU8& image, const std::array<int, 4
   const int x0 = region ? std::max(2, (*region)[0]) : 2, y0 = region ? std::max(2, (*region)[1]) : 2;
   const int x1 = region ? std::min(w - 2, (*region)[2]) : w - 2, y1 = region ? std::min(h - 2, (*region)[3]) : h - 2;
   constexpr int kHalf = 6;  // profile samples either side of the edge
-  std::vector<double> widths;
+  std::vector<EdgeRise> edges;
   // Every other pixel: neighbouring edge pixels give the same profile.
   for (int y = y0; y < y1; y += 2)
     for (int x = x0; x < x1; x += 2) {
@@ -188,8 +188,14 @@ std::vector<double> EdgeRiseWidths(const ImageU8& image, const std::array<int, 4
       if (g_here < g_fwd || g_here < g_back) continue;
       std::vector<double> profile;
       for (int s = -kHalf; s <= kHalf; ++s) profile.push_back(Bilinear(luma, w, h, x + s * ux, y + s * uy));
-      if (const auto rise = RiseOfProfile(profile)) widths.push_back(*rise);
+      if (const auto rise = RiseOfProfile(profile)) edges.push_back({*rise, ux, uy});
     }
+  return edges;
+}
+
+std::vector<double> EdgeRiseWidths(const ImageU8& image, const std::array<int, 4>* region, const ImageF* mask) {
+  std::vector<double> widths;
+  for (const EdgeRise& e : FindEdgeRises(image, region, mask)) widths.push_back(e.rise_px);
   std::sort(widths.begin(), widths.end());
   return widths;
 }
@@ -201,9 +207,24 @@ CameraLook EstimateCameraLook(const ImageU8& image, std::optional<int> jpeg_qual
   look.edges = static_cast<int>(widths.size());
   if (widths.size() >= 50) look.edge_width_px = widths[static_cast<size_t>(0.2 * static_cast<double>(widths.size()))];
   if (objects) {
-    const std::vector<double> on_objects = EdgeRiseWidths(image, nullptr, objects);
+    const std::vector<EdgeRise> found = FindEdgeRises(image, nullptr, objects);
+    std::vector<double> on_objects, across_x, across_y;
+    const double cos30 = std::cos(30.0 * 3.14159265358979323846 / 180.0);
+    for (const EdgeRise& e : found) {
+      on_objects.push_back(e.rise_px);
+      if (std::abs(e.nx) >= cos30) across_x.push_back(e.rise_px);
+      if (std::abs(e.ny) >= cos30) across_y.push_back(e.rise_px);
+    }
+    const auto median = [](std::vector<double> v) {
+      std::nth_element(v.begin(), v.begin() + static_cast<long>(v.size() / 2), v.end());
+      return v[v.size() / 2];
+    };
     look.object_edges = static_cast<int>(on_objects.size());
-    if (on_objects.size() >= 30) look.object_edge_rise_px = on_objects[on_objects.size() / 2];
+    if (on_objects.size() >= 30) look.object_edge_rise_px = median(on_objects);
+    look.object_edges_across_x = static_cast<int>(across_x.size());
+    look.object_edges_across_y = static_cast<int>(across_y.size());
+    if (across_x.size() >= 15) look.object_edge_rise_across_x_px = median(across_x);
+    if (across_y.size() >= 15) look.object_edge_rise_across_y_px = median(across_y);
   }
   look.jpeg_quality = jpeg_quality.value_or(0);
   return look;
@@ -219,6 +240,10 @@ nlohmann::json CameraLook::ToJson() const {
   j["edges"] = edges;
   j["object_edge_rise_px"] = object_edge_rise_px;
   j["object_edges"] = object_edges;
+  j["object_edge_rise_across_x_px"] = object_edge_rise_across_x_px;
+  j["object_edges_across_x"] = object_edges_across_x;
+  j["object_edge_rise_across_y_px"] = object_edge_rise_across_y_px;
+  j["object_edges_across_y"] = object_edges_across_y;
   j["jpeg_quality"] = jpeg_quality;
   return j;
 }

@@ -41,6 +41,11 @@ struct CameraLook {
   // 30: what an object in this image looks like, softened by its distance, motion and the optics. 0: unknown.
   double object_edge_rise_px = 0;
   int object_edges = 0;
+  // The same edges split by direction: the median rise across x (edges within 30 degrees of vertical) and across
+  // y (within 30 degrees of horizontal), 0 where fewer than 15. Motion blur softens one direction only: a side
+  // camera's image moves along x as the ego drives on.
+  double object_edge_rise_across_x_px = 0, object_edge_rise_across_y_px = 0;
+  int object_edges_across_x = 0, object_edges_across_y = 0;
   // The rise inserted objects are blurred to: the real objects' where known, else the image's sharpest edges.
   double TargetEdgeRise() const { return object_edge_rise_px > 0 ? object_edge_rise_px : edge_width_px; }
   // The file's JPEG quality (io/image_io.h EstimateJpegQuality); 0 when it is not a JPEG.
@@ -54,8 +59,17 @@ struct CameraLook {
 // objects are (> 0.5), for object_edge_rise_px; null: not known.
 CameraLook EstimateCameraLook(const ImageU8& image, std::optional<int> jpeg_quality, const ImageF* objects = nullptr);
 
-// The 10-90 % edge rise of `image` (one channel, luma of sRGB) at its strong step edges: all widths found, sorted.
-// Restricted to `region` (x0, y0, x1, y1) when given, and to pixels where `mask` (same size) is > 0.5 when given.
+// One strong step edge of an image: its 10-90 % rise (pixels, along the gradient) and the gradient's unit
+// direction (nx, ny), image axes.
+struct EdgeRise {
+  double rise_px = 0;
+  double nx = 0, ny = 0;
+};
+// The strong step edges of `image` (luma of sRGB), in scan order. Restricted to `region` (x0, y0, x1, y1) when
+// given, and to pixels where `mask` (same size) is > 0.5 when given.
+std::vector<EdgeRise> FindEdgeRises(const ImageU8& image, const std::array<int, 4>* region = nullptr,
+                                    const ImageF* mask = nullptr);
+// Their rises alone, sorted.
 std::vector<double> EdgeRiseWidths(const ImageU8& image, const std::array<int, 4>* region = nullptr,
                                    const ImageF* mask = nullptr);
 

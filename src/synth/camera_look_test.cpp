@@ -73,6 +73,28 @@ TEST(CameraLook, MeasuresTheEdgeRiseOfBlurredSteps) {
   }
 }
 
+// Motion blur softens one direction: a checkerboard blurred by sigma 2.0 along x and 0.8 along y measures its
+// objects' edges across x and across y apart (the vertical edges' rise is the x blur's).
+TEST(CameraLook, SplitsTheObjectsEdgeRiseByDirection) {
+  const double sigma_x = 2.0, sigma_y = 0.8;
+  const auto square_wave = [](double t, double sigma) {  // +-1 every 40 px, blurred
+    const double d = std::fmod(t + 0.5, 40.0) - 20;
+    return std::erf(d / (std::sqrt(2.0) * sigma)) * (std::fmod(std::floor((t + 0.5) / 40.0), 2.0) == 0 ? 1 : -1);
+  };
+  ImageU8 board(400, 320, 3);
+  for (int y = 0; y < 320; ++y)
+    for (int x = 0; x < 400; ++x)
+      for (int c = 0; c < 3; ++c) board.at(x, y, c) = Clamp8(130 + 70 * square_wave(x, sigma_x) * square_wave(y, sigma_y));
+  const ImageF everywhere(400, 320, 1, 1.0f);
+  const CameraLook look = EstimateCameraLook(board, std::nullopt, &everywhere);
+  std::printf("rise across x %.2f px (%d edges), across y %.2f px (%d)\n", look.object_edge_rise_across_x_px,
+              look.object_edges_across_x, look.object_edge_rise_across_y_px, look.object_edges_across_y);
+  EXPECT_NEAR(look.object_edge_rise_across_x_px, 2.563 * sigma_x, 0.15 * 2.563 * sigma_x);
+  EXPECT_NEAR(look.object_edge_rise_across_y_px, 2.563 * sigma_y, 0.3 + 0.15 * 2.563 * sigma_y);
+  EXPECT_GT(look.object_edges_across_x, 100);
+  EXPECT_GT(look.object_edges_across_y, 100);
+}
+
 TEST(CameraLook, ExtraBlurAddsInQuadratureAndABlurredStepRisesAsAsked) {
   EXPECT_DOUBLE_EQ(ExtraBlurSigma(3.0, 2.0), 0.0);  // already softer
   EXPECT_NEAR(ExtraBlurSigma(0.0, 2.563), 1.0, 1e-3);

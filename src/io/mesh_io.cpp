@@ -16,7 +16,6 @@
 
 #include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
-#include <stb/stb_image.h>
 #include <tiny_gltf.h>
 #include <tiny_obj_loader.h>
 
@@ -491,15 +490,11 @@ class GltfReader {
         throw InputError(path_, Msg() << "image " << source << " has no data");
       }
     } else if (gi.width == -1) {  // encoded bytes kept by KeepEncodedImage
-      int w = 0, h = 0, c = 0;
-      unsigned char* px = stbi_load_from_memory(gi.image.data(), static_cast<int>(gi.image.size()), &w, &h, &c, 0);
-      if (!px)
-        throw InputError(external ? file : path_, Msg() << "cannot decode image " << source << " ('" << name
-                                                        << "'): " << stbi_failure_reason());
-      ImageU8 out(w, h, c);
-      std::copy(px, px + static_cast<size_t>(w) * h * c, out.data());
-      stbi_image_free(px);
-      img = std::make_shared<const ImageU8>(std::move(out));
+      // Through DecodeImage, which checks what Debian's stb_image 2.27 would overflow on (a fuzzed glTF reached
+      // stb's Huffman-table overrun through an embedded JPEG when this called stb itself).
+      const std::string_view bytes(reinterpret_cast<const char*>(gi.image.data()), gi.image.size());
+      img = std::make_shared<const ImageU8>(
+          DecodeImage(bytes, Msg() << (external ? file : path_).string() << ": image " << source << " ('" << name << "')"));
     } else {
       SD_CHECK(gi.bits == 8 && gi.component > 0, << "unexpected decoded image layout");
       ImageU8 out(gi.width, gi.height, gi.component);

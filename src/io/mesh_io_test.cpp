@@ -276,6 +276,32 @@ TEST(MeshIo, ErrorsNameTheFile) {
   }
 }
 
+// A glTF's textures are decoded by DecodeImage, which refuses what Debian's stb_image 2.27 would overflow on: the
+// cone's JPEG with its first Huffman table declaring 4080 codes (a fuzzed glTF reached stb's overrun when the
+// reader called stb itself). The error names the glTF and the image.
+TEST(MeshIo, AGltfTextureStbWouldOverflowOnIsRefused) {
+  TempDir tmp;
+  const fs::path cone = RepoData("assets/metadrive_traffic_cone");
+  fs::copy_file(cone / "scene.gltf", tmp / "cone.gltf");
+  fs::copy_file(cone / "scene.bin", tmp / "scene.bin");
+  fs::create_directories(tmp / "textures");
+  for (const auto& entry : fs::directory_iterator(cone / "textures")) fs::copy_file(entry.path(), tmp / "textures" / entry.path().filename());
+  ASSERT_NO_THROW(LoadGltf(tmp / "cone.gltf"));
+  std::string jpeg = ReadFileToString(tmp / "textures/cone_baseColor.jpeg");
+  const size_t dht = jpeg.find("\xFF\xC4");
+  ASSERT_NE(dht, std::string::npos);
+  for (size_t i = 1; i <= 16; ++i) jpeg[dht + 4 + i] = static_cast<char>(0xFF);
+  WriteFileAtomic(tmp / "textures/cone_baseColor.jpeg", jpeg);
+  try {
+    LoadGltf(tmp / "cone.gltf");
+    FAIL() << "loaded";
+  } catch (const InputError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("cone_baseColor.jpeg"), std::string::npos) << what;
+    EXPECT_NE(what.find("a Huffman table declares 4080 codes"), std::string::npos) << what;
+  }
+}
+
 // The mesh readers open files themselves: a FIFO (or device) would block them, deep JSON would overflow
 // tinygltf's recursive parser. Both refused with the file named.
 TEST(MeshIo, OnlyRegularFilesAndBoundedGltfJsonAreRead) {

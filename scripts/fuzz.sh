@@ -6,8 +6,8 @@
 # With --unit-tests it first builds the unit tests of the same modules (core, io, datasets) in that build and
 # runs them under ASan + UBSan; any report fails (CI's sanitizer stage, scripts/ci_sanitizers.sh).
 # FUZZ_SEED=N fixes libFuzzer's mutation seed; FUZZ_RUNS=N runs exactly N inputs per target from a corpus seeded
-# afresh (build-fuzz/corpus-fixed/) instead of fuzzing for a time: with both, a run explores the same inputs on
-# any machine, however fast (CI does; otherwise each run explores anew and the corpus grows across runs).
+# afresh (build-fuzz/corpus-fixed/) instead of fuzzing for a time: the same amount of work on any machine, and
+# with the seed mostly the same inputs (CI does; otherwise each run explores anew and the corpus grows).
 #   scripts/fuzz.sh [--unit-tests] [SECONDS_PER_TARGET] [TARGET...]
 set -euo pipefail
 cd "$(dirname "$0")/.."

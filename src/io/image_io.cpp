@@ -30,8 +30,10 @@ void RefuseOversizedJpegHuffmanTables(std::string_view bytes, const std::string&
   if (bytes.size() < 4 || static_cast<unsigned char>(bytes[0]) != 0xFF || static_cast<unsigned char>(bytes[1]) != 0xD8)
     return;
   const auto byte_at = [&](size_t i) { return i < bytes.size() ? static_cast<unsigned char>(bytes[i]) : 0u; };
+  // Read past its end, the data is zeros, as stb reads it (stbi__get8 returns 0 there): a table cut short by
+  // the end of the file still has 16 counts, some of them real.
   size_t at = 2;
-  while (at + 4 <= bytes.size()) {
+  while (at + 2 <= bytes.size()) {
     if (byte_at(at) != 0xFF) {  // entropy-coded data after a scan: on to the next marker
       ++at;
       continue;
@@ -46,7 +48,7 @@ void RefuseOversizedJpegHuffmanTables(std::string_view bytes, const std::string&
     if (marker == 0xC4) {
       long left = static_cast<long>(length) - 2;
       size_t table = at + 4;
-      while (left > 0 && table + 17 <= bytes.size()) {
+      while (left > 0 && table < bytes.size()) {
         size_t codes = 0;
         for (size_t i = 1; i <= 16; ++i) codes += byte_at(table + i);
         if (codes > 256)
@@ -100,6 +102,12 @@ ImageU8 DecodeImage(std::string_view bytes, const std::string& what, int channel
   // stb_image takes an int length; anything larger is not an image we can hold anyway.
   if (bytes.size() > static_cast<size_t>(std::numeric_limits<int>::max()))
     throw InputError(what, Msg() << "cannot decode image: " << bytes.size() << " bytes is too large");
+  // PNG and JPEG only: every image the program reads is one (logs, textures, mined crops), and stb_image 2.27's
+  // other decoders (GIF, PSD, PIC, TGA, HDR, BMP, PNM) carry overflows fixed only in later releases. A byte
+  // stream that only claims another format is not handed to them.
+  static constexpr std::string_view kPng("\x89PNG\r\n\x1a\n", 8), kJpeg("\xFF\xD8\xFF", 3);
+  if (bytes.substr(0, kPng.size()) != kPng && bytes.substr(0, kJpeg.size()) != kJpeg)
+    throw InputError(what, "cannot decode image: not a PNG or JPEG file");
   RefuseOversizedJpegHuffmanTables(bytes, what);
   const std::optional<std::string> cleaned = WithoutEmptyPngDataChunks(bytes);
   if (cleaned) bytes = *cleaned;

@@ -9,8 +9,9 @@
 
 namespace sd {
 
-// Reads PNG/JPEG (and anything stb_image decodes). `channels` 0 keeps the file's channel count, else forces
-// 1, 3 or 4. InputError names the file when it is missing or not a decodable image.
+// Reads a PNG or JPEG (by its signature, whatever the file's name; other formats are refused). `channels` 0 keeps
+// the file's channel count, else forces 1, 3 or 4. InputError names the file when it is missing or not a
+// decodable image.
 ImageU8 ReadImage(const std::filesystem::path& path, int channels = 0);
 // Decodes an encoded image held in memory (e.g. a downloaded body). `what` names its origin (a URL, an archive
 // member) for the InputError thrown when the bytes are not a decodable image; `channels` as for ReadImage.

@@ -145,6 +145,46 @@ TEST(ImageIo, JpegHuffmanTablesDeclaringMoreThan256CodesAreRefused) {
   }
 }
 
+// The same overrun from a Huffman table that the file's end cuts short (found by CI's fuzz run): stb reads the
+// missing counts as zeros, so the counts that are there still sum past 256. A JPEG whose DHT segment claims more
+// than it holds, ending in a table header and nine counts of 255.
+TEST(ImageIo, AHuffmanTableCutShortByTheFilesEndIsRefusedToo) {
+  const std::string jpeg = EncodeImage(Pattern(32, 16, 3), "jpg", 90);
+  const size_t dht = jpeg.find("\xFF\xC4");
+  ASSERT_NE(dht, std::string::npos);
+  const size_t first_table_end = dht + 4 + 17 + [&] {
+    size_t codes = 0;
+    for (size_t i = 1; i <= 16; ++i) codes += static_cast<unsigned char>(jpeg[dht + 4 + i]);
+    return codes;
+  }();
+  std::string cut = jpeg.substr(0, first_table_end) + "\x10" + std::string(9, '\xFF');
+  cut[dht + 2] = 0x01, cut[dht + 3] = 0x00;  // the segment claims 256 bytes
+  try {
+    DecodeImage(cut, "cut.jpg");
+    FAIL() << "decoded";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("cut.jpg: cannot decode image: corrupt JPEG: a Huffman table declares 2295 codes"),
+              std::string::npos) << e.what();
+  }
+}
+
+// Only PNG and JPEG reach stb: a BMP, a TGA-like stream or a GIF header is refused by its signature (stb 2.27's
+// other decoders carry overflows fixed later), whatever the file is called; a PNG named .jpg still decodes.
+TEST(ImageIo, OnlyPngAndJpegAreDecoded) {
+  const std::string bmp = std::string("BM") + std::string(60, '\0');
+  const std::string gif = "GIF89a" + std::string(20, '\x01');
+  for (const std::string& bytes : {bmp, gif, std::string("\0\0\x02\0\0\0\0\0", 8) + std::string(40, '\x10')}) {
+    try {
+      DecodeImage(bytes, "x.png");
+      FAIL() << bytes.substr(0, 6);
+    } catch (const InputError& e) {
+      EXPECT_EQ(std::string(e.what()), "x.png: cannot decode image: not a PNG or JPEG file");
+    }
+  }
+  const ImageU8 img = Pattern(6, 5, 3);
+  EXPECT_EQ(DecodeImage(EncodeImage(img, "png"), "named.jpg").vector(), img.vector());
+}
+
 // stb_image 2.27 passes a null buffer to memcpy for an empty IDAT before the image data (found by
 // fuzz/image_fuzzer, undefined behaviour). An empty IDAT is legal and carries nothing: the PNG decodes to the same
 // pixels with empty IDATs before, between and after the real one.

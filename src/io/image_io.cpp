@@ -91,6 +91,64 @@ std::optional<std::string> WithoutEmptyPngDataChunks(std::string_view bytes) {
   return kept;
 }
 
+// Binary PGM / PPM (P5 / P6, maxval <= 255), read here rather than by stb_image 2.27, whose PNM decoder crashes on
+// a truncated file (CVE-2021-42716). Masks are often written this way. Returns the file's own channels (1 or 3).
+ImageU8 DecodeBinaryPnm(std::string_view bytes, const std::string& what) {
+  size_t at = 2;
+  const auto fail = [&](const std::string& why) { return InputError(what, "cannot decode image: PNM: " + why); };
+  const auto next_number = [&](const char* name) {
+    for (;;) {  // whitespace and # comments between header fields
+      while (at < bytes.size() && std::isspace(static_cast<unsigned char>(bytes[at]))) ++at;
+      if (at < bytes.size() && bytes[at] == '#') {
+        while (at < bytes.size() && bytes[at] != '\n') ++at;
+        continue;
+      }
+      break;
+    }
+    long v = 0;
+    size_t digits = 0;
+    for (; at < bytes.size() && std::isdigit(static_cast<unsigned char>(bytes[at])) && digits < 9; ++at, ++digits)
+      v = v * 10 + (bytes[at] - '0');
+    if (digits == 0 || (at < bytes.size() && std::isdigit(static_cast<unsigned char>(bytes[at]))))
+      throw fail(Msg() << "bad " << name << " in the header");
+    return v;
+  };
+  const int channels = bytes[1] == '5' ? 1 : 3;
+  const long w = next_number("width"), h = next_number("height"), maxval = next_number("maxval");
+  if (w <= 0 || h <= 0 || w > (1 << 15) || h > (1 << 15)) throw fail(Msg() << "size " << w << "x" << h << " out of range");
+  if (maxval <= 0 || maxval > 255) throw fail(Msg() << "maxval " << maxval << " (only 8-bit files are read)");
+  if (at >= bytes.size() || !std::isspace(static_cast<unsigned char>(bytes[at]))) throw fail("no whitespace after the header");
+  ++at;
+  const size_t need = static_cast<size_t>(w) * static_cast<size_t>(h) * channels;
+  if (bytes.size() - at < need)
+    throw fail(Msg() << "truncated: " << bytes.size() - at << " bytes of pixel data for " << need);
+  ImageU8 img(static_cast<int>(w), static_cast<int>(h), channels);
+  for (size_t i = 0; i < need; ++i) {
+    const unsigned v = static_cast<unsigned char>(bytes[at + i]);
+    img.data()[i] = static_cast<uint8_t>(maxval == 255 ? v : std::min<unsigned>(255, (v * 255 + maxval / 2) / maxval));
+  }
+  return img;
+}
+
+// `image` with `channels` channels (0: as it is), converted as stb_image converts (grey replicated, luma by its
+// integer weights, opaque alpha added).
+ImageU8 WithChannels(const ImageU8& image, int channels) {
+  if (channels == 0 || channels == image.channels()) return image;
+  ImageU8 out(image.width(), image.height(), channels);
+  for (int y = 0; y < image.height(); ++y)
+    for (int x = 0; x < image.width(); ++x) {
+      const bool grey = image.channels() < 3;
+      const unsigned r = image.at(x, y, 0), g = grey ? r : image.at(x, y, 1), b = grey ? r : image.at(x, y, 2);
+      const uint8_t luma = static_cast<uint8_t>((r * 77 + g * 150 + b * 29) >> 8);
+      const uint8_t rgb[3] = {static_cast<uint8_t>(r), static_cast<uint8_t>(g), static_cast<uint8_t>(b)};
+      for (int c = 0; c < channels; ++c) {
+        if ((channels == 2 && c == 1) || (channels == 4 && c == 3)) out.at(x, y, c) = 255;
+        else out.at(x, y, c) = channels < 3 ? (grey ? rgb[0] : luma) : rgb[c];
+      }
+    }
+  return out;
+}
+
 void AppendToString(void* context, void* data, int size) {
   static_cast<std::string*>(context)->append(static_cast<const char*>(data), static_cast<size_t>(size));
 }
@@ -102,12 +160,14 @@ ImageU8 DecodeImage(std::string_view bytes, const std::string& what, int channel
   // stb_image takes an int length; anything larger is not an image we can hold anyway.
   if (bytes.size() > static_cast<size_t>(std::numeric_limits<int>::max()))
     throw InputError(what, Msg() << "cannot decode image: " << bytes.size() << " bytes is too large");
-  // PNG and JPEG only: every image the program reads is one (logs, textures, mined crops), and stb_image 2.27's
-  // other decoders (GIF, PSD, PIC, TGA, HDR, BMP, PNM) carry overflows fixed only in later releases. A byte
-  // stream that only claims another format is not handed to them.
+  // PNG and JPEG by stb, binary PGM/PPM (masks) by our own reader, nothing else: the logs, textures and mined
+  // crops are PNG or JPEG, and stb_image 2.27's other decoders (GIF, PSD, PIC, TGA, HDR, BMP, its PNM) carry
+  // overflows fixed only in later releases. A byte stream that only claims another format is not handed to them.
   static constexpr std::string_view kPng("\x89PNG\r\n\x1a\n", 8), kJpeg("\xFF\xD8\xFF", 3);
+  if (bytes.size() >= 2 && bytes[0] == 'P' && (bytes[1] == '5' || bytes[1] == '6'))
+    return WithChannels(DecodeBinaryPnm(bytes, what), channels);
   if (bytes.substr(0, kPng.size()) != kPng && bytes.substr(0, kJpeg.size()) != kJpeg)
-    throw InputError(what, "cannot decode image: not a PNG or JPEG file");
+    throw InputError(what, "cannot decode image: not a PNG, JPEG or binary PGM/PPM file");
   RefuseOversizedJpegHuffmanTables(bytes, what);
   const std::optional<std::string> cleaned = WithoutEmptyPngDataChunks(bytes);
   if (cleaned) bytes = *cleaned;

@@ -9,7 +9,8 @@
 
 namespace sd {
 
-// Reads a PNG or JPEG (by its signature, whatever the file's name; other formats are refused). `channels` 0 keeps
+// Reads a PNG, a JPEG or a binary 8-bit PGM/PPM (by its signature, whatever the file's name; other formats are
+// refused). `channels` 0 keeps
 // the file's channel count, else forces 1, 3 or 4. InputError names the file when it is missing or not a
 // decodable image.
 ImageU8 ReadImage(const std::filesystem::path& path, int channels = 0);

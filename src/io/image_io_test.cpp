@@ -168,7 +168,7 @@ TEST(ImageIo, AHuffmanTableCutShortByTheFilesEndIsRefusedToo) {
   }
 }
 
-// Only PNG and JPEG reach stb: a BMP, a TGA-like stream or a GIF header is refused by its signature (stb 2.27's
+// Only PNG and JPEG reach stb (binary PGM/PPM our own reader): a BMP, a TGA-like stream or a GIF header is refused by its signature (stb 2.27's
 // other decoders carry overflows fixed later), whatever the file is called; a PNG named .jpg still decodes.
 TEST(ImageIo, OnlyPngAndJpegAreDecoded) {
   const std::string bmp = std::string("BM") + std::string(60, '\0');
@@ -178,11 +178,34 @@ TEST(ImageIo, OnlyPngAndJpegAreDecoded) {
       DecodeImage(bytes, "x.png");
       FAIL() << bytes.substr(0, 6);
     } catch (const InputError& e) {
-      EXPECT_EQ(std::string(e.what()), "x.png: cannot decode image: not a PNG or JPEG file");
+      EXPECT_EQ(std::string(e.what()), "x.png: cannot decode image: not a PNG, JPEG or binary PGM/PPM file");
     }
   }
   const ImageU8 img = Pattern(6, 5, 3);
   EXPECT_EQ(DecodeImage(EncodeImage(img, "png"), "named.jpg").vector(), img.vector());
+  // Binary PGM / PPM (masks are often written so) are read by our own reader: exact pixels, a comment in the
+  // header, channels converted as for the others; a truncated one is refused with its size.
+  std::string ppm = "P6\n# a comment\n6 5\n255\n";
+  for (uint8_t v : img.vector()) ppm.push_back(static_cast<char>(v));
+  EXPECT_EQ(DecodeImage(ppm, "m.ppm").vector(), img.vector());
+  const ImageU8 rgba = DecodeImage(ppm, "m.ppm", 4);
+  ASSERT_EQ(rgba.channels(), 4);
+  EXPECT_EQ(rgba.at(5, 4, 2), img.at(5, 4, 2));
+  EXPECT_EQ(rgba.at(5, 4, 3), 255);
+  std::string pgm = "P5 3 2 255\n";
+  pgm += std::string("\x00\x80\xFF\x10\x20\x30", 6);
+  const ImageU8 grey = DecodeImage(pgm, "m.pgm");
+  ASSERT_EQ(grey.channels(), 1);
+  EXPECT_EQ(grey.at(1, 0), 0x80);
+  EXPECT_EQ(DecodeImage(pgm, "m.pgm", 3).at(2, 1, 1), 0x30);
+  try {
+    DecodeImage(pgm.substr(0, pgm.size() - 2), "cut.pgm");
+    FAIL() << "decoded";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), "cut.pgm: cannot decode image: PNM: truncated: 4 bytes of pixel data for 6");
+  }
+  EXPECT_THROW(DecodeImage("P5 3 2 65535\n" + std::string(12, '\0'), "deep.pgm"), InputError);
+  EXPECT_THROW(DecodeImage("P5 99999999999 2 255\n", "huge.pgm"), InputError);
 }
 
 // stb_image 2.27 passes a null buffer to memcpy for an empty IDAT before the image data (found by

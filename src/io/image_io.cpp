@@ -16,6 +16,9 @@
 namespace sd {
 namespace {
 
+// The first bytes of every PNG file.
+constexpr std::string_view kPngSignature("\x89PNG\r\n\x1a\n", 8);
+
 std::string LowerExtension(const std::filesystem::path& p) {
   std::string ext = p.extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
@@ -67,15 +70,14 @@ void RefuseOversizedJpegHuffmanTables(std::string_view bytes, const std::string&
 // IDAT carries no image data and is legal PNG; dropping it decodes the same image. Returns the PNG without its
 // empty IDAT chunks, or nothing when it has none (the common case, no copy).
 std::optional<std::string> WithoutEmptyPngDataChunks(std::string_view bytes) {
-  static constexpr std::string_view kSignature("\x89PNG\r\n\x1a\n", 8);
-  if (bytes.substr(0, kSignature.size()) != kSignature) return std::nullopt;
+  if (bytes.substr(0, kPngSignature.size()) != kPngSignature) return std::nullopt;
   const auto be32 = [&](size_t i) {
     uint32_t v = 0;
     for (size_t k = 0; k < 4; ++k) v = v << 8 | static_cast<unsigned char>(bytes[i + k]);
     return v;
   };
   std::optional<std::string> kept;
-  size_t at = kSignature.size(), copied_to = 0;
+  size_t at = kPngSignature.size(), copied_to = 0;
   while (at + 12 <= bytes.size()) {
     const size_t length = be32(at);
     const std::string_view type = bytes.substr(at + 4, 4);
@@ -163,10 +165,10 @@ ImageU8 DecodeImage(std::string_view bytes, const std::string& what, int channel
   // PNG and JPEG by stb, binary PGM/PPM (masks) by our own reader, nothing else: the logs, textures and mined
   // crops are PNG or JPEG, and stb_image 2.27's other decoders (GIF, PSD, PIC, TGA, HDR, BMP, its PNM) carry
   // overflows fixed only in later releases. A byte stream that only claims another format is not handed to them.
-  static constexpr std::string_view kPng("\x89PNG\r\n\x1a\n", 8), kJpeg("\xFF\xD8\xFF", 3);
+  static constexpr std::string_view kJpeg("\xFF\xD8\xFF", 3);
   if (bytes.size() >= 2 && bytes[0] == 'P' && (bytes[1] == '5' || bytes[1] == '6'))
     return WithChannels(DecodeBinaryPnm(bytes, what), channels);
-  if (bytes.substr(0, kPng.size()) != kPng && bytes.substr(0, kJpeg.size()) != kJpeg)
+  if (bytes.substr(0, kPngSignature.size()) != kPngSignature && bytes.substr(0, kJpeg.size()) != kJpeg)
     throw InputError(what, "cannot decode image: not a PNG, JPEG or binary PGM/PPM file");
   RefuseOversizedJpegHuffmanTables(bytes, what);
   const std::optional<std::string> cleaned = WithoutEmptyPngDataChunks(bytes);

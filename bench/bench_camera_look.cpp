@@ -36,6 +36,7 @@ struct Run {
   std::vector<sd::ObjectLook> objects;
   std::vector<double> shadow_grain;  // per shadowed road block: its residual sigma after / before
   std::vector<sd::ShadowContrast> shadows;  // cast shadows' road darkening, real and inserted objects
+  std::vector<sd::ContactDarkening> contacts;  // the road at their foot against the road around them
   double seconds = 0;
 };
 
@@ -64,7 +65,7 @@ void ShadowGrain(const sd::CameraOutcome& co, const sd::CameraSensor& cam, const
 Run Measure(const std::string& name, const sd::Log& log, const std::vector<size_t>& frames, const std::vector<sd::Asset>& assets,
             const sd::Scenario& scenario, const sd::SynthPlan* plan, const sd::CameraLookOptions& look_options,
             const std::string& mode) {
-  Run run{name, mode, {}, {}, {}, 0};
+  Run run{name, mode, {}, {}, {}, {}, 0};
   sd::SynthOptions options;
   options.camera_look = look_options;
   for (size_t fi : frames) {
@@ -90,6 +91,8 @@ Run Measure(const std::string& name, const sd::Log& log, const std::vector<size_
     for (const sd::ObjectOutcome& ob : out.objects) inserted.emplace_back(ob.label.category, ob.placement.box);
     for (sd::ShadowContrast& s : sd::MeasureShadowContrasts(frame, inserted, linear, out.sun_direction_ego))
       run.shadows.push_back(std::move(s));
+    for (sd::ContactDarkening& c : sd::MeasureContactDarkening(frame, inserted, linear, out.sun_direction_ego))
+      run.contacts.push_back(std::move(c));
     for (const sd::CameraOutcome& co : out.cameras) {
       const sd::CameraSensor* cam = frame.FindCamera(co.channel);
       // The image's own look, from the photograph before insertion.
@@ -145,6 +148,14 @@ nlohmann::json Row(const Run& r) {
   const sd::ShadowComparison sh = sd::CompareShadows(r.shadows);
   std::printf("|   cast shadows (lit/shadow road, 1 = none): real %.2f (%d objects), inserted %.2f (%d)\n", sh.real_contrast,
               sh.real, sh.inserted_contrast, sh.inserted);
+  nlohmann::json contact = nlohmann::json::array();
+  for (const sd::ContactComparison& cc : sd::CompareContacts(r.contacts)) {
+    std::printf("|   contact darkening %s(road 0.6-1 m / 3-20 cm, 1 = none): real %.2f (%d objects), inserted %.2f (%d)\n",
+                cc.category.empty() ? "" : (cc.category + " ").c_str(), cc.real_darkening, cc.real, cc.inserted_darkening,
+                cc.inserted);
+    contact.push_back({{"category", cc.category}, {"real", cc.real_darkening}, {"real_objects", cc.real},
+                       {"inserted", cc.inserted_darkening}, {"inserted_objects", cc.inserted}});
+  }
   nlohmann::json shadows = nlohmann::json::array();
   for (const sd::ShadowContrast& s : r.shadows)
     shadows.push_back({{"frame", s.frame}, {"camera", s.channel}, {"category", s.category}, {"inserted", s.inserted},
@@ -153,6 +164,7 @@ nlohmann::json Row(const Run& r) {
           {"mode", r.mode},
           {"shadow_contrast", {{"real", sh.real_contrast}, {"real_objects", sh.real}, {"inserted", sh.inserted_contrast},
                                {"inserted_objects", sh.inserted}, {"objects", shadows}}},
+          {"contact_darkening", contact},
           {"real_objects", c.real},
           {"inserted_objects", c.inserted},
           {"noise", {{"real", c.real_noise}, {"inserted", c.inserted_noise}}},

@@ -98,6 +98,11 @@ Runner AddEvalCommand(CLI::App& app) {
                     "over %d\n", sh.real_contrast, sh.real, sh.inserted_contrast, sh.inserted);
       else
         std::printf("cast shadows: no object with enough visible road around it (or synth.json without the frames' sun)\n");
+      for (const ContactComparison& c : report.contact)
+        if (c.real > 0 || c.inserted > 0)
+          std::printf("contact darkening %s(road 0.6-1 m / 3-20 cm from the footprint, 1 = none): real median %.2f over %d "
+                      "objects, inserted %.2f over %d\n", c.category.empty() ? "" : (c.category + " ").c_str(),
+                      c.real_darkening, c.real, c.inserted_darkening, c.inserted);
       nlohmann::json j = report.ToJson();
       j["synth"] = dir.string();
       WriteJsonFile(out, j);

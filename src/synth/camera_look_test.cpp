@@ -342,6 +342,89 @@ TEST(Realism, ShadowContrastOfRealAndInsertedObjectsOnASyntheticRoad) {
   for (const ShadowContrast& s : MeasureShadowContrasts(f, inserted, {flat}, sun)) EXPECT_NEAR(s.contrast, 1.0, 1e-6);
 }
 
+// Contact darkening on the same kind of synthetic road: the ground within 25 cm of each real car's footprint at
+// half the open road's luminance, of each inserted cone's at two thirds. The measure reads 2 and 1.5; the cars'
+// cast shadows, drawn darker still, are left out of both bands when the sun is known; a plain road reads 1.
+TEST(Realism, ContactDarkeningOfRealAndInsertedObjectsOnASyntheticRoad) {
+  Frame f;
+  f.token = "synthetic";
+  const CameraSensor cam = testing::TopDownCamera(12);
+  f.cameras.push_back(cam);
+  auto box = [](double x, double y, double yaw, const Eigen::Vector3d& size) {
+    Box3 b;
+    b.T_frame_box = Rigid3d::FromYaw(yaw, Eigen::Vector3d(x, y, size.z() / 2));
+    b.size = size;
+    return b;
+  };
+  for (const Box3& b : {box(4, 3, 0.3, {4.2, 1.8, 1.5}), box(-4, 3.5, -0.7, {4.2, 1.8, 1.5})}) {
+    Annotation a;
+    a.category = "car";
+    a.box = b;
+    f.annotations.push_back(a);
+  }
+  const Eigen::Vector3d cone(0.4, 0.4, 0.7);
+  const std::vector<std::pair<std::string, Box3>> inserted = {{"traffic_cone", box(-2, -3, 0.2, cone)},
+                                                              {"traffic_cone", box(3, -2.5, 0.0, cone)}};
+  // The sun behind the cars: their shadows fall towards the camera, onto road it sees.
+  const double az = 100 * std::numbers::pi / 180, el = 40 * std::numbers::pi / 180;
+  const Eigen::Vector3d sun(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el));
+  // Distance from a ground point to a box's footprint.
+  auto footprint_distance = [](const Box3& b, const Eigen::Vector2d& p) {
+    const Eigen::Vector3d q = b.T_frame_box.Inverse() * Eigen::Vector3d(p.x(), p.y(), 0);
+    return std::hypot(std::max(std::abs(q.x()) - b.size.x() / 2, 0.0), std::max(std::abs(q.y()) - b.size.y() / 2, 0.0));
+  };
+  auto draw = [&](bool with_shadows) {
+    ImageF img(cam.intrinsics.width, cam.intrinsics.height, 3, 0.3f);
+    for (int y = 0; y < img.height(); ++y)
+      for (int x = 0; x < img.width(); ++x) {
+        const Eigen::Vector3d o = cam.T_ego_cam.translation, d = cam.T_ego_cam.rotation * cam.intrinsics.RayDirection({x + 0.5, y + 0.5});
+        const Eigen::Vector2d p = (o + d * (-o.z() / d.z())).head<2>();
+        float value = 0.3f;
+        for (const Annotation& a : f.annotations) {
+          if (footprint_distance(a.box, p) < 0.25) value = 0.15f;
+          if (with_shadows && geometry::InsideConvexPolygon(ShadowHull(a.box, sun), p)) value = 0.03f;
+        }
+        for (const auto& [category, b] : inserted)
+          if (footprint_distance(b, p) < 0.25) value = 0.2f;
+        for (int c = 0; c < 3; ++c) img.at(x, y, c) = value;
+      }
+    return img;
+  };
+  const std::vector<ContactDarkening> contacts = MeasureContactDarkening(f, inserted, {draw(true)}, sun);
+  int real = 0, ins = 0;
+  for (const ContactDarkening& c : contacts) {
+    EXPECT_EQ(c.frame, "synthetic");
+    EXPECT_EQ(c.channel, "CAM_FRONT");
+    if (c.inserted) {
+      ++ins;
+      EXPECT_EQ(c.category, "traffic_cone");
+      EXPECT_NEAR(c.darkening, 1.5, 0.05);
+    } else {
+      ++real;
+      EXPECT_EQ(c.category, "car");
+      EXPECT_NEAR(c.darkening, 2.0, 0.05);
+    }
+  }
+  EXPECT_EQ(real, 2);
+  EXPECT_EQ(ins, 2);
+  const std::vector<ContactComparison> by = CompareContacts(contacts);
+  ASSERT_EQ(by.size(), 2u);  // all objects, then the inserted category
+  EXPECT_EQ(by[1].category, "traffic_cone");
+  EXPECT_EQ(by[1].real, 0);
+  EXPECT_EQ(by[1].inserted, 2);
+  EXPECT_NEAR(by[1].inserted_darkening, 1.5, 0.05);
+  // The sun unknown, the cars' shadows fall into their bands and the measure no longer reads their rim.
+  for (const ContactDarkening& c : MeasureContactDarkening(f, inserted, {draw(true)}, std::nullopt)) {
+    if (c.category == "car") {
+      EXPECT_GT(std::abs(c.darkening - 2.0), 0.3);
+    }
+  }
+  const ImageF flat(cam.intrinsics.width, cam.intrinsics.height, 3, 0.3f);
+  const auto plain = MeasureContactDarkening(f, inserted, {flat}, sun);
+  EXPECT_EQ(plain.size(), 4u);
+  for (const ContactDarkening& c : plain) EXPECT_NEAR(c.darkening, 1.0, 1e-6);
+}
+
 // The colour cap's reference over the repo keyframe's real objects: barriers (a standard livery, 25 views) take
 // their median, so one vivid barrier does not lift the ceiling for all; cars (every paint) their most saturated;
 // the one real cone its own (fewer than three views).

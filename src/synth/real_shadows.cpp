@@ -54,7 +54,19 @@ double SegmentDistance(const Eigen::Vector2d& p, const Eigen::Vector2d& a, const
   return (p - (a + t * ab)).norm();
 }
 
-std::vector<GroundPatch> SampleGroundPatches(const Frame& frame, const std::vector<ImageF>& linear, const ShadowCheckOptions& opt) {
+// How far around each box the ground is sampled, and how close to the box a cell may lie.
+struct PatchSpec {
+  double min_height_m = 0, max_distance_m = 0, cell_m = 0.1;
+  double footprint_margin_m = 0.15;  // the box's own footprint grown by this is not ground
+  std::optional<double> reach_m;     // beyond the footprint's bounding circle; empty: as far as a shadow reaches
+  double own_sight_margin_m = 0.05;  // a sight line passing this close to the box itself is blocked by it
+};
+
+PatchSpec ShadowSpec(const ShadowCheckOptions& opt) {
+  return {opt.min_height_m, opt.max_distance_m, opt.cell_m, opt.footprint_margin_m, std::nullopt, 0.05};
+}
+
+std::vector<GroundPatch> SampleGroundPatches(const Frame& frame, const std::vector<ImageF>& linear, const PatchSpec& opt) {
   // One patch per annotation, in parallel; each cell tests only the boxes that can reach it (the answers are
   // those of testing every box: the others are farther than their bounding circle).
   std::vector<std::optional<GroundPatch>> slots(frame.annotations.size());
@@ -81,7 +93,8 @@ std::vector<GroundPatch> SampleGroundPatches(const Frame& frame, const std::vect
     g.z = box.center().z() - 0.5 * box.size.z();
     g.cell = opt.cell_m;
     // Shadows of sun elevations >= 20 deg reach at most h / tan(20 deg) from the footprint.
-    const double reach = 0.5 * box.size.head<2>().norm() + std::min(6.0, box.size.z() / std::tan(20 * kDeg)) + 0.2;
+    const double reach = 0.5 * box.size.head<2>().norm() +
+                         opt.reach_m.value_or(std::min(6.0, box.size.z() / std::tan(20 * kDeg)) + 0.2);
     g.n = static_cast<int>(std::ceil(2 * reach / g.cell));
     g.origin = box.center().head<2>() - Eigen::Vector2d::Constant(reach);
     g.lum.assign(static_cast<size_t>(g.n) * g.n, std::numeric_limits<float>::quiet_NaN());
@@ -111,7 +124,8 @@ std::vector<GroundPatch> SampleGroundPatches(const Frame& frame, const std::vect
         const auto uv = cam.intrinsics.Project(T_cam_ego * p, 0.5);
         if (!uv || !cam.intrinsics.InImage(*uv)) continue;
         for (size_t bi : between)
-          if (SegmentHitsBox(cam_o, p + Eigen::Vector3d(0, 0, 0.02), frame.annotations[bi].box, 0.05)) {
+          if (SegmentHitsBox(cam_o, p + Eigen::Vector3d(0, 0, 0.02), frame.annotations[bi].box,
+                             bi == ai ? opt.own_sight_margin_m : 0.05)) {
             blocked = true;
             break;
           }
@@ -196,13 +210,13 @@ std::vector<Eigen::Vector2d> ShadowHull(const Box3& box, const Eigen::Vector3d& 
 
 ShadowCheck CheckSunAgainstShadows(const Frame& frame, const std::vector<ImageF>& linear, const Eigen::Vector3d& sun,
                                    const ShadowCheckOptions& options) {
-  return Judge(SampleGroundPatches(frame, linear, options), sun, options, /*core=*/true);
+  return Judge(SampleGroundPatches(frame, linear, ShadowSpec(options)), sun, options, /*core=*/true);
 }
 
 std::optional<Eigen::Vector3d> EstimateSunFromShadows(const Frame& frame, const std::vector<ImageF>& linear,
                                                       const ShadowCheckOptions& options, ShadowCheck* best,
                                                       std::optional<double> elevation_deg) {
-  const auto patches = SampleGroundPatches(frame, linear, options);
+  const auto patches = SampleGroundPatches(frame, linear, ShadowSpec(options));
   std::vector<double> elevations;
   if (elevation_deg) elevations.push_back(*elevation_deg);
   else
@@ -225,6 +239,73 @@ std::optional<Eigen::Vector3d> EstimateSunFromShadows(const Frame& frame, const 
       out = dirs[i];
       if (best) *best = checks[i];
     }
+  }
+  return out;
+}
+
+std::vector<ContactCheckBox> CheckContactDarkening(const Frame& frame, const std::vector<ImageF>& linear,
+                                                   const std::optional<Eigen::Vector3d>& sun_dir_ego,
+                                                   const ContactCheckOptions& opt) {
+  PatchSpec spec;
+  spec.min_height_m = opt.min_height_m;
+  spec.max_distance_m = opt.max_distance_m;
+  spec.cell_m = opt.cell_m;
+  spec.footprint_margin_m = 0;  // the band starts at the footprint's edge
+  spec.reach_m = opt.far_to_m + opt.cell_m;
+  // The road just in front of the object, seen past its own box: only the box itself, not a margin around it,
+  // may hide it (the band would otherwise start where the contact darkening has already faded).
+  spec.own_sight_margin_m = 0.005;
+  const std::vector<GroundPatch> patches = SampleGroundPatches(frame, linear, spec);
+  struct Hull {
+    std::vector<Eigen::Vector2d> polygon;
+    Eigen::Vector2d lo, hi;
+  };
+  std::vector<Hull> shadows;
+  if (sun_dir_ego && sun_dir_ego->z() > 0.05)
+    for (const Annotation& a : frame.annotations) {
+      Hull h;
+      h.polygon = ShadowHull(a.box, *sun_dir_ego);
+      h.lo = h.hi = h.polygon.front();
+      for (const auto& p : h.polygon) h.lo = h.lo.cwiseMin(p), h.hi = h.hi.cwiseMax(p);
+      shadows.push_back(std::move(h));
+    }
+  std::vector<ContactCheckBox> out;
+  for (const GroundPatch& g : patches) {
+    const Rigid3d T_box_frame = g.box.T_frame_box.Inverse();
+    const Eigen::Vector2d half = 0.5 * g.box.size.head<2>();
+    const Eigen::Vector2d patch_lo = g.origin, patch_hi = g.origin + Eigen::Vector2d::Constant(g.n * g.cell);
+    std::vector<const Hull*> reaching;
+    for (const Hull& h : shadows)
+      if ((h.lo.array() <= patch_hi.array()).all() && (h.hi.array() >= patch_lo.array()).all()) reaching.push_back(&h);
+    std::vector<float> near, far;
+    for (int j = 0; j < g.n; ++j)
+      for (int i = 0; i < g.n; ++i) {
+        const float y = g.lum[static_cast<size_t>(j) * g.n + i];
+        if (std::isnan(y)) continue;
+        const Eigen::Vector2d p(g.origin.x() + (i + 0.5) * g.cell, g.origin.y() + (j + 0.5) * g.cell);
+        const Eigen::Vector3d q = T_box_frame * Eigen::Vector3d(p.x(), p.y(), g.z);
+        const double d = Eigen::Vector2d(std::max(std::abs(q.x()) - half.x(), 0.0), std::max(std::abs(q.y()) - half.y(), 0.0)).norm();
+        const bool in_near = d > opt.near_from_m && d <= opt.near_to_m, in_far = d > opt.far_from_m && d <= opt.far_to_m;
+        if (!in_near && !in_far) continue;
+        bool shaded = false;
+        for (const Hull* h : reaching)
+          if (geometry::InsideConvexPolygon(h->polygon, p)) {
+            shaded = true;
+            break;
+          }
+        if (!shaded) (in_near ? near : far).push_back(y);
+      }
+    if (static_cast<int>(near.size()) < opt.min_cells || static_cast<int>(far.size()) < opt.min_cells) continue;
+    auto median = [](std::vector<float>& v) {
+      std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+      return static_cast<double>(v[v.size() / 2]);
+    };
+    ContactCheckBox b;
+    b.annotation = g.annotation;
+    b.channel = g.channel;
+    b.near_luminance = median(near);
+    b.far_luminance = median(far);
+    if (b.near_luminance > 0 && b.far_luminance > 0) out.push_back(b);
   }
   return out;
 }

@@ -56,4 +56,28 @@ std::optional<Eigen::Vector3d> EstimateSunFromShadows(const Frame& frame, const 
                                                       const ShadowCheckOptions& options = {}, ShadowCheck* best = nullptr,
                                                       std::optional<double> elevation_deg = std::nullopt);
 
+// Contact darkening: the road right beside a box's footprint against the road a little farther out, both outside
+// every box's sun shadow. The object hides part of the sky (and of the bright surroundings) from the ground at its
+// foot; that darker rim is how a viewer reads an object as standing on the road rather than pasted over it. Each
+// box 0.3 m tall or more within 25 m is judged in the camera that sees it nearest its image centre; ground
+// hidden behind a box, inside another box's footprint or in any box's shadow (`sun_dir_ego`, when known) is
+// left out.
+struct ContactCheckOptions {
+  double min_height_m = 0.3;
+  double max_distance_m = 25;
+  double cell_m = 0.03;
+  double near_from_m = 0.03, near_to_m = 0.2;  // the band beside the footprint (from its edge)
+  double far_from_m = 0.6, far_to_m = 1.0;     // the reference road around it
+  int min_cells = 12;                          // visible cells needed in each band
+};
+struct ContactCheckBox {
+  size_t annotation = 0;
+  std::string channel;
+  double near_luminance = 0, far_luminance = 0;  // medians of linear Y
+  double Darkening() const { return near_luminance > 0 ? far_luminance / near_luminance : 0; }  // 1 = none
+};
+std::vector<ContactCheckBox> CheckContactDarkening(const Frame& frame, const std::vector<ImageF>& linear,
+                                                   const std::optional<Eigen::Vector3d>& sun_dir_ego,
+                                                   const ContactCheckOptions& options = {});
+
 }  // namespace sd

@@ -310,6 +310,19 @@ nlohmann::json RealismReport::ToJson() const {
   for (const ShadowContrast& sc : shadows)
     j["shadows"].push_back({{"frame", sc.frame}, {"camera", sc.channel}, {"category", sc.category},
                             {"inserted", sc.inserted}, {"contrast", sc.contrast}});
+  j["contact_protocol"] = "synth/realism.h MeasureContactDarkening: median linear luminance of the road 0.6-1 m from the "
+                          "footprint over that 3-20 cm from it, outside every box's shadow (1 = no contact darkening)";
+  j["contact"] = nlohmann::json::array();
+  for (const ContactComparison& c : contact)
+    j["contact"].push_back({{"category", c.category.empty() ? nlohmann::json(nullptr) : nlohmann::json(c.category)},
+                            {"real", c.real},
+                            {"inserted", c.inserted},
+                            {"real_median_darkening", c.real_darkening},
+                            {"inserted_median_darkening", c.inserted_darkening}});
+  j["contacts"] = nlohmann::json::array();
+  for (const ContactDarkening& c : contacts)
+    j["contacts"].push_back({{"frame", c.frame}, {"camera", c.channel}, {"category", c.category},
+                             {"inserted", c.inserted}, {"darkening", c.darkening}});
   j["objects"] = nlohmann::json::array();
   for (const RealismRow& r : rows)
     j["objects"].push_back({{"frame", r.frame},
@@ -372,6 +385,50 @@ ShadowComparison CompareShadows(const std::vector<ShadowContrast>& shadows) {
   return c;
 }
 
+std::vector<ContactDarkening> MeasureContactDarkening(const Frame& frame,
+                                                      const std::vector<std::pair<std::string, Box3>>& inserted,
+                                                      const std::vector<ImageF>& linear,
+                                                      const std::optional<Eigen::Vector3d>& sun_dir_ego) {
+  Frame scene = frame;  // the inserts as annotations: they hide road and cast shadows like the real boxes
+  const size_t real = frame.annotations.size();
+  for (const auto& [category, box] : inserted) {
+    Annotation a;
+    a.category = category;
+    a.box = box;
+    scene.annotations.push_back(a);
+  }
+  std::optional<Eigen::Vector3d> sun;
+  if (sun_dir_ego) sun = sun_dir_ego->normalized();
+  std::vector<ContactDarkening> out;
+  for (const ContactCheckBox& b : CheckContactDarkening(scene, linear, sun)) {
+    const bool is_inserted = b.annotation >= real;
+    const Annotation& a = scene.annotations[b.annotation];
+    out.push_back({frame.token, b.channel, is_inserted ? a.category : CanonicalCategory(a.category), is_inserted, b.Darkening()});
+  }
+  return out;
+}
+
+std::vector<ContactComparison> CompareContacts(const std::vector<ContactDarkening>& contacts) {
+  auto compare = [&](const std::string& category) {
+    std::vector<double> real, inserted;
+    for (const ContactDarkening& c : contacts)
+      if (category.empty() || c.category == category) (c.inserted ? inserted : real).push_back(c.darkening);
+    ContactComparison out;
+    out.category = category;
+    out.real = static_cast<int>(real.size());
+    out.inserted = static_cast<int>(inserted.size());
+    out.real_darkening = Median(real);
+    out.inserted_darkening = Median(inserted);
+    return out;
+  };
+  std::vector<ContactComparison> out = {compare("")};
+  std::set<std::string> categories;
+  for (const ContactDarkening& c : contacts)
+    if (c.inserted) categories.insert(c.category);
+  for (const std::string& category : categories) out.push_back(compare(category));
+  return out;
+}
+
 RealismReport EvaluateRealism(const std::filesystem::path& synth_out) {
   namespace fs = std::filesystem;
   const fs::path synth_json = synth_out / "synth.json";
@@ -411,18 +468,20 @@ RealismReport EvaluateRealism(const std::filesystem::path& synth_out) {
         const fs::path rel = cam.image_path.lexically_relative(log.data_root);
         if (rel.empty() || *rel.begin() == "..") throw InputError(cam.image_path, "lies outside the log's data root");
         final_images[k] = ReadImage(synth_out / rel, 3);
-      } else if (shadows) {
+      } else {
         final_images[k] = ReadImage(cam.image_path, 3);
       }
     }
+    std::vector<ImageF> linear;
+    for (const ImageU8& image : final_images) linear.push_back(ToLinear(image));
+    std::optional<Eigen::Vector3d> sun;
     if (shadows) {
-      Eigen::Vector3d sun;
-      for (int k = 0; k < 3; ++k) sun[k] = rf["sun_direction_ego"][k].Number();
-      if (!(sun.norm() > 0.5)) rf["sun_direction_ego"].Fail("is not a direction");
-      std::vector<ImageF> linear;
-      for (const ImageU8& image : final_images) linear.push_back(ToLinear(image));
-      for (ShadowContrast& sc : MeasureShadowContrasts(*frame, inserted, linear, sun)) report.shadows.push_back(std::move(sc));
+      sun.emplace();
+      for (int k = 0; k < 3; ++k) (*sun)[k] = rf["sun_direction_ego"][k].Number();
+      if (!(sun->norm() > 0.5)) rf["sun_direction_ego"].Fail("is not a direction");
+      for (ShadowContrast& sc : MeasureShadowContrasts(*frame, inserted, linear, *sun)) report.shadows.push_back(std::move(sc));
     }
+    for (ContactDarkening& c : MeasureContactDarkening(*frame, inserted, linear, sun)) report.contacts.push_back(std::move(c));
     for (const auto& [channel, light] : rf["camera_light"].raw().items()) {
       const CameraSensor* cam = frame->FindCamera(channel);
       if (!cam) rf["camera_light"].Fail("the original log's frame has no camera " + channel);
@@ -453,6 +512,7 @@ RealismReport EvaluateRealism(const std::filesystem::path& synth_out) {
   }
   report.classifier = ClassifyRealVsInserted(all);
   report.shadow = CompareShadows(report.shadows);
+  report.contact = CompareContacts(report.contacts);
   return report;
 }
 

@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <functional>
 #include <map>
+#include <optional>
 #include <set>
 #include <string>
 #include <vector>
@@ -108,6 +109,27 @@ struct ShadowComparison {
 };
 ShadowComparison CompareShadows(const std::vector<ShadowContrast>& shadows);
 
+// Contact darkening at an object's foot, inserts against the real objects of the same frame (real_shadows.h
+// CheckContactDarkening on the final images, outside every box's shadow for `sun_dir_ego` when known): the
+// median linear luminance of the road 0.6-1 m from its footprint over that of the road 3-20 cm from it. 1 is
+// none: an object that does not darken the ground it stands on looks pasted onto it.
+struct ContactDarkening {
+  std::string frame, channel, category;
+  bool inserted = false;
+  double darkening = 0;
+};
+std::vector<ContactDarkening> MeasureContactDarkening(const Frame& frame,
+                                                      const std::vector<std::pair<std::string, Box3>>& inserted,
+                                                      const std::vector<ImageF>& linear,
+                                                      const std::optional<Eigen::Vector3d>& sun_dir_ego);
+struct ContactComparison {
+  std::string category;  // "" = all objects
+  int real = 0, inserted = 0;
+  double real_darkening = 0, inserted_darkening = 0;  // medians; 0 with none
+};
+// All objects first, then each category that has inserted objects.
+std::vector<ContactComparison> CompareContacts(const std::vector<ContactDarkening>& contacts);
+
 // `synthdrive eval realism`: every frame and camera of a synth output, its inserted objects (synth.json) and the
 // real annotated objects of the original log (synth.json "log") measured in the output images, the noise model
 // from the original image. InputError naming the file for a folder without synth.json, an original log that is
@@ -126,6 +148,8 @@ struct RealismReport {
   TwoSampleTest classifier;               // over all objects
   std::vector<ShadowContrast> shadows;    // frames that record their sun (synth.json sun_direction_ego)
   ShadowComparison shadow;
+  std::vector<ContactDarkening> contacts;
+  std::vector<ContactComparison> contact;  // CompareContacts(contacts)
   nlohmann::json ToJson() const;
 };
 RealismReport EvaluateRealism(const std::filesystem::path& synth_out);

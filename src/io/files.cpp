@@ -26,10 +26,20 @@ std::string ReadFileToString(const fs::path& path) {
     throw InputError(path, "is not a regular file (a FIFO, device or socket): not read as data");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(path, std::string("cannot open: ") + std::strerror(errno));
-  std::ostringstream ss;
-  ss << in.rdbuf();
+  // One read into a string of the file's size: a stringstream's doubling and final copy cost a second for
+  // the 140 MB of a million-vector search index's codes.
+  const uintmax_t size = fs::file_size(path, ec);
+  std::string bytes(ec ? 0 : static_cast<size_t>(size), '\0');
+  in.read(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  bytes.resize(static_cast<size_t>(in.gcount()));
   if (in.bad()) throw InputError(path, "read error");
-  return ss.str();
+  if (!in.eof()) {  // the file grew since it was measured: the rest too
+    std::ostringstream rest;
+    rest << in.rdbuf();
+    if (in.bad()) throw InputError(path, "read error");
+    bytes += rest.str();
+  }
+  return bytes;
 }
 
 fs::path TemporarySibling(const fs::path& path) {

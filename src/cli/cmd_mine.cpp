@@ -51,6 +51,7 @@ void AddIndexCommand(CLI::App& app, std::function<int()>& run) {
     int chunk_size = 0, max_crop_px = 512, min_box_px = 12, max_image_px = 1024, fetch_concurrency = 8;
     double max_truncation = 0.75, timeout_s = 60, stall_s = 15, max_download_mb = 32;
     int retries = 2;
+    size_t ann_min_rows = mining::kAnnMinRows;
   };
   auto a = std::make_shared<Args>();
   app.add_option("--log", a->logs, "Driving log: nuScenes/Lyft root, mmdet3d info .json or KITTI root (repeatable)");
@@ -82,6 +83,9 @@ void AddIndexCommand(CLI::App& app, std::function<int()>& run) {
       ->check(CLI::Range(0, 10));
   app.add_option("--fetch-concurrency", a->fetch_concurrency, "Parallel downloads")->default_val(8)
       ->check(CLI::Range(1, 64));
+  app.add_option("--ann-min-rows", a->ann_min_rows,
+                 "Build the approximate (IVF-PQ) index once the index holds this many vectors; 0: never (docs/mining.md)")
+      ->default_val(mining::kAnnMinRows)->check(CLI::NonNegativeNumber);
   run = [a]() {
     mining::IndexBuildOptions o;
     for (const auto& p : a->logs) o.sources.push_back({mining::SourceKind::kLog, p});
@@ -106,12 +110,20 @@ void AddIndexCommand(CLI::App& app, std::function<int()>& run) {
     o.fetch.max_bytes = static_cast<size_t>(a->max_download_mb * 1024 * 1024);
     o.fetch.retries = a->retries;
     o.fetch_concurrency = a->fetch_concurrency;
+    o.build_ann = a->ann_min_rows > 0;
+    o.ann_min_rows = a->ann_min_rows;
     const std::optional<models::ClipEncoder> clip = LoadClip(a->clip, a->device);
     o.clip = clip ? &*clip : nullptr;
     const mining::IndexBuildReport r = mining::BuildIndex(a->out, o);
     SD_LOG(Info, "mine index: " << r.items << " object images in " << r.chunks_built << " new chunks ("
                                 << r.chunks_skipped << " already done, " << r.failures << " failures) in "
                                 << r.seconds << " s; " << a->out);
+    for (const std::string& kind : r.ann_built)
+      SD_LOG(Info, "mine index: approximate " << kind << " index (re)built (" << r.ann_seconds << " s for all)");
+    if (o.shard.count > 1 && o.build_ann)
+      SD_LOG(Info, "mine index: shard " << o.shard.ToString() << " done; once every shard is, a plain `mine index` with "
+                                           "the same sources builds the approximate index (when it holds "
+                                        << o.ann_min_rows << "+ vectors)");
     // The batch convention (README, "Exit status"): 1 when any item of this run failed, the others kept.
     if (!r.failed_chunks.empty()) {
       for (const std::string& f : r.failed_chunks) SD_LOG(Error, "mine index: chunk " << f);
@@ -179,7 +191,8 @@ void AddQueryCommand(CLI::App& app, std::function<int()>& run) {
     if (fs::exists(a->out) && !a->overwrite) throw InputError(a->out, "exists (pass --overwrite to replace it)");
     const mining::MiningIndex index = mining::MiningIndex::Open(a->index);
     SD_LOG(Info, "index " << a->index << ": " << index.size() << " object images in " << index.shard_count()
-                          << " shards" << (index.has_clip() ? ", CLIP " + index.clip_model() : ", no CLIP vectors"));
+                          << " shards" << (index.has_clip() ? ", CLIP " + index.clip_model() : ", no CLIP vectors")
+                          << (index.ann(mining::VectorKind::kClip) ? ", approximate CLIP search" : ""));
     // Only load CLIP when the index can use it: loading is the slow part of a small query.
     const std::optional<models::ClipEncoder> clip =
         index.has_clip() && o.mode != mining::QueryMode::kLabel ? LoadClip(a->clip, a->device) : std::nullopt;

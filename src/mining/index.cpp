@@ -27,6 +27,7 @@
 #include "io/image_io.h"
 #include "io/json.h"
 #include "mining/descriptor.h"
+#include "mining/item_table.h"
 #include "models/clip.h"
 #include "models/resample.h"
 
@@ -456,9 +457,7 @@ ChunkOutput BuildChunk(const SourceState& s, const Chunk& chunk, const IndexBuil
 
 void WriteChunk(const SourceState& s, const Chunk& chunk, const IndexHeader& header, const ChunkOutput& out,
                 const fs::path& dir) {
-  std::string lines;
-  for (const MinedItem& item : out.items) lines += ToJson(item).dump() + "\n";
-  WriteFileAtomic(dir / "items.jsonl", lines);
+  WriteItemTable(dir, out.items);
   WriteVectors(dir / VectorFileName(VectorKind::kDescriptor), header.descriptor_dim, out.descriptors);
   if (header.clip_dim > 0) WriteVectors(dir / VectorFileName(VectorKind::kClip), header.clip_dim, out.clip);
   WriteJsonFile(dir / "chunk.json", {{"source", s.source.path.string()},
@@ -531,6 +530,21 @@ IndexBuildReport BuildIndex(const fs::path& index_dir, const IndexBuildOptions& 
   report.chunks_built = run.done;
   report.chunks_skipped = run.skipped;
   for (const BatchFailure& f : run.failures) report.failed_chunks.push_back(chunks[f.item].name + ": " + f.error);
+  if (options.build_ann && options.shard.count == 1 && report.failed_chunks.empty()) {
+    const auto t_ann = std::chrono::steady_clock::now();
+    const MiningIndex index = MiningIndex::Open(index_dir);
+    for (VectorKind kind : {VectorKind::kDescriptor, VectorKind::kClip}) {
+      if (kind == VectorKind::kClip && !index.has_clip()) continue;
+      const std::vector<AnnShard> shards = index.ShardVectors(kind);
+      if (!AnnNeedsBuild(index_dir, ToString(kind), index.dim(kind), shards, options.ann_min_rows)) continue;
+      SD_LOG(Info, "mine index: building the approximate " << ToString(kind) << " index over " << index.size() << " vectors");
+      const AnnBuildReport ann = BuildAnn(index_dir, ToString(kind), index.dim(kind), shards);
+      SD_LOG(Info, "mine index: " << ToString(kind) << " IVF-PQ (" << ann.params.nlist << " lists, " << ann.params.m
+                                  << "-byte codes) trained in " << ann.train_seconds << " s, filled in " << ann.add_seconds << " s");
+      report.ann_built.push_back(ToString(kind));
+    }
+    report.ann_seconds = Seconds(t_ann);
+  }
   report.seconds = Seconds(t0);
   return report;
 }
@@ -540,6 +554,7 @@ IndexBuildReport BuildIndex(const fs::path& index_dir, const IndexBuildOptions& 
 struct MiningIndex::Shard {
   fs::path dir;
   size_t first_row = 0, rows = 0;
+  ItemTable items;
   std::unique_ptr<MappedVectors> descriptor, clip;
 };
 
@@ -549,15 +564,54 @@ MiningIndex& MiningIndex::operator=(MiningIndex&&) noexcept = default;
 MiningIndex::~MiningIndex() = default;
 
 size_t MiningIndex::shard_count() const { return shards_.size(); }
-fs::path MiningIndex::ItemDir(size_t row) const { return shards_[item_shard_[row]]->dir; }
+const MiningIndex::Shard& MiningIndex::ShardOf(size_t row, size_t* local) const {
+  if (row >= rows_) throw std::out_of_range("MiningIndex: row " + std::to_string(row) + " of " + std::to_string(rows_));
+  // The last shard starting at or before `row`: never an empty one, whose successor starts at the same row.
+  const auto it = std::upper_bound(shards_.begin(), shards_.end(), row,
+                                   [](size_t r, const std::unique_ptr<Shard>& s) { return r < s->first_row; });
+  const Shard& s = **std::prev(it);
+  *local = row - s.first_row;
+  return s;
+}
+
+MinedItem MiningIndex::item(size_t row) const {
+  size_t local = 0;
+  const Shard& s = ShardOf(row, &local);
+  return s.items.item(local);
+}
+
+ItemSummary MiningIndex::summary(size_t row) const {
+  size_t local = 0;
+  const Shard& s = ShardOf(row, &local);
+  return s.items.summary(local);
+}
+
+fs::path MiningIndex::ItemDir(size_t row) const {
+  size_t local = 0;
+  return ShardOf(row, &local).dir;
+}
+
+const AnnIndex* MiningIndex::ann(VectorKind kind) const {
+  return kind == VectorKind::kClip ? ann_clip_.get() : ann_descriptor_.get();
+}
+
+std::vector<AnnShard> MiningIndex::ShardVectors(VectorKind kind) const {
+  std::vector<AnnShard> out;
+  for (const auto& s : shards_) {
+    const MappedVectors* v = kind == VectorKind::kClip ? s->clip.get() : s->descriptor.get();
+    out.push_back({s->dir.filename().string(), s->rows, v ? v->data() : nullptr});
+  }
+  return out;
+}
 
 int MiningIndex::dim(VectorKind kind) const { return kind == VectorKind::kClip ? clip_dim_ : descriptor_dim_; }
 
 const float* MiningIndex::vector(VectorKind kind, size_t row) const {
-  const Shard& s = *shards_[item_shard_[row]];
+  size_t local = 0;
+  const Shard& s = ShardOf(row, &local);
   const MappedVectors* v = kind == VectorKind::kClip ? s.clip.get() : s.descriptor.get();
   SD_CHECK(v != nullptr, << "no " << ToString(kind) << " vectors in this index");
-  return v->data() + (row - s.first_row) * dim(kind);
+  return v->data() + local * dim(kind);
 }
 
 MiningIndex MiningIndex::Open(const fs::path& index_dir) {
@@ -582,16 +636,15 @@ MiningIndex MiningIndex::Open(const fs::path& index_dir) {
         dirs.push_back(e.path());
     }
   std::sort(dirs.begin(), dirs.end());
-  // Shards parse in parallel (the records are most of the opening time), then join in name order.
-  std::vector<std::vector<MinedItem>> shard_items(dirs.size());
+  // Shards open in parallel (a shard written before items.bin existed parses its JSON lines), then join in name
+  // order.
   std::vector<std::unique_ptr<Shard>> shards(dirs.size());
   // One shard's records and vector maps (a lambda: Shard is private to MiningIndex).
-  auto load_shard = [&header](const fs::path& dir, std::vector<MinedItem>& items, std::unique_ptr<Shard>& out) {
+  auto load_shard = [&header](const fs::path& dir, std::unique_ptr<Shard>& out) {
     auto shard = std::make_unique<Shard>();
     shard->dir = dir;
-    ForEachJsonLine(dir / "items.jsonl",
-                    [&](const json& j, const std::string& where) { items.push_back(ItemFromJson(j, where)); });
-    shard->rows = items.size();
+    shard->items = ItemTable::Open(dir);
+    shard->rows = shard->items.size();
     shard->descriptor = std::make_unique<MappedVectors>(dir / VectorFileName(VectorKind::kDescriptor), header.descriptor_dim);
     if (header.clip_dim > 0)
       shard->clip = std::make_unique<MappedVectors>(dir / VectorFileName(VectorKind::kClip), header.clip_dim);
@@ -604,7 +657,7 @@ MiningIndex MiningIndex::Open(const fs::path& index_dir) {
   std::vector<std::exception_ptr> errors(dirs.size());
   ParallelFor(0, dirs.size(), [&](size_t s) {
     try {
-      load_shard(dirs[s], shard_items[s], shards[s]);
+      load_shard(dirs[s], shards[s]);
     } catch (...) {
       errors[s] = std::current_exception();  // ParallelFor bodies must not throw: rethrown below, first shard first
     }
@@ -612,26 +665,44 @@ MiningIndex MiningIndex::Open(const fs::path& index_dir) {
   for (const std::exception_ptr& e : errors)
     if (e) std::rethrow_exception(e);
   for (size_t s = 0; s < dirs.size(); ++s) {
-    shards[s]->first_row = index.items_.size();
-    for (MinedItem& item : shard_items[s]) {
-      index.items_.push_back(std::move(item));
-      index.item_shard_.push_back(s);
-    }
+    shards[s]->first_row = index.rows_;
+    index.rows_ += shards[s]->rows;
     index.shards_.push_back(std::move(shards[s]));
   }
+  index.ann_descriptor_ = AnnIndex::Load(index_dir, ToString(VectorKind::kDescriptor), index.descriptor_dim_,
+                                         index.ShardVectors(VectorKind::kDescriptor));
+  if (index.has_clip())
+    index.ann_clip_ = AnnIndex::Load(index_dir, ToString(VectorKind::kClip), index.clip_dim_, index.ShardVectors(VectorKind::kClip));
   return index;
 }
 
-std::vector<std::vector<SearchHit>> MiningIndex::Search(VectorKind kind, const float* queries, size_t nq,
-                                                        size_t k) const {
+std::vector<std::vector<SearchHit>> MiningIndex::Search(VectorKind kind, const float* queries, size_t nq, size_t k,
+                                                        SearchMode mode) const {
   if (kind == VectorKind::kClip && !has_clip())
     throw InputError(dir_, "has no CLIP embeddings (built without a CLIP model)");
   const size_t d = static_cast<size_t>(dim(kind));
   std::vector<std::vector<SearchHit>> hits(nq);
   if (k == 0) return hits;
-  // One exact top-k per shard, shards in parallel (a single query is memory-bound in one thread), then merged.
+  const AnnIndex* approx = mode == SearchMode::kAuto ? ann(kind) : nullptr;
+  // Candidates from the approximate index, re-scored exactly from the mapped vectors: many times k, because the
+  // codes' estimate is coarser than the differences between an object's near neighbours (re-scoring 256 rows
+  // reads half a megabyte of mapped vectors at 512 floats, a fraction of a millisecond).
+  if (approx) {
+    const size_t kk = std::max<size_t>(16 * k, 256);
+    const auto candidates = approx->Candidates(queries, nq, kk);
+    for (size_t q = 0; q < nq; ++q)
+      for (const auto& [shard, local] : candidates[q]) {
+        const Shard& s = *shards_[shard];
+        const MappedVectors* v = kind == VectorKind::kClip ? s.clip.get() : s.descriptor.get();
+        const float score = faiss::fvec_inner_product(queries + q * d, v->data() + local * d, d);
+        hits[q].push_back({s.first_row + local, score});
+      }
+  }
+  // One exact top-k per shard the approximate index does not cover (all of them without one), shards in
+  // parallel (a single query is memory-bound in one thread), then merged.
   std::vector<std::vector<std::vector<SearchHit>>> per_shard(shards_.size());
   ParallelFor(0, shards_.size(), [&](size_t s) {
+    if (approx && approx->covers()[s]) return;
     const Shard& shard = *shards_[s];
     const MappedVectors* v = kind == VectorKind::kClip ? shard.clip.get() : shard.descriptor.get();
     if (!v || v->count() == 0) return;

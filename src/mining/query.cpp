@@ -81,13 +81,19 @@ std::string CategoryForPrompt(const std::string& prompt) {
   return best;
 }
 
-double ImageQuality(const MinedItem& item) {
-  const double size = std::clamp(ObjectSizePx(item) / 128.0, 0.0, 1.0);
+double ImageQuality(const ItemSummary& item) {
+  const double size = std::clamp(item.object_size_px / 128.0, 0.0, 1.0);
   const double sharp = item.sharpness < 0 ? 0.5 : std::clamp(item.sharpness / 200.0, 0.0, 1.0);
-  const double trunc = item.truncation < 0 ? 0.0 : std::clamp(item.truncation, 0.0, 1.0);
-  const double occl = item.occlusion < 0 ? 0.0 : std::clamp(item.occlusion, 0.0, 1.0);
+  const double trunc = item.truncation < 0 ? 0.0 : std::clamp<double>(item.truncation, 0.0, 1.0);
+  const double occl = item.occlusion < 0 ? 0.0 : std::clamp<double>(item.occlusion, 0.0, 1.0);
   // Size and sharpness matter through a square root: a 64-pixel cone is usable, a fully occluded one is not.
   return std::sqrt(size) * std::sqrt(sharp) * (1 - trunc) * (1 - occl);
+}
+
+double ImageQuality(const MinedItem& item) {
+  // Through the table's float figures, so that ranking from the table and from a record agree exactly.
+  return ImageQuality(ItemSummary{item.category, static_cast<float>(ObjectSizePx(item)), static_cast<float>(item.truncation),
+                                  static_cast<float>(item.occlusion), static_cast<float>(item.sharpness)});
 }
 
 namespace {
@@ -193,12 +199,17 @@ std::vector<PromptResult> RunQuery(const MiningIndex& index, const QueryOptions&
                                                         : "the index has no CLIP embeddings for free-text search"));
       r.mode = QueryMode::kLabel;
       r.category = category;
+      // Ranked from the shards' tables: a label query over a million items parses only the records it keeps.
+      std::vector<std::pair<Candidate, double>> ranked_by_quality;
+      for (size_t row = 0; row < index.size(); ++row) {
+        const ItemSummary s = index.summary(row);
+        if (s.category == category) ranked_by_quality.push_back({{row, 1.0}, ImageQuality(s)});
+      }
+      std::stable_sort(ranked_by_quality.begin(), ranked_by_quality.end(),
+                       [](const auto& a, const auto& b) { return a.second > b.second; });
       std::vector<Candidate> ranked;
-      for (size_t row = 0; row < index.size(); ++row)
-        if (index.item(row).category == category) ranked.push_back({row, 1.0});
-      std::stable_sort(ranked.begin(), ranked.end(), [&](const Candidate& a, const Candidate& b) {
-        return ImageQuality(index.item(a.row)) > ImageQuality(index.item(b.row));
-      });
+      ranked.reserve(ranked_by_quality.size());
+      for (const auto& [c, quality] : ranked_by_quality) ranked.push_back(c);
       Select(index, ranked, 0.0, o, r);
     }
     SD_LOG(Info, "\"" << prompt << "\": " << ToString(r.mode) << " mode"

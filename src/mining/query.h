@@ -68,6 +68,7 @@ std::string CategoryForPrompt(const std::string& prompt);
 
 // 0..1: larger, sharper, less truncated and less occluded crops first.
 double ImageQuality(const MinedItem& item);
+double ImageQuality(const ItemSummary& item);
 
 std::vector<PromptResult> RunQuery(const MiningIndex& index, const QueryOptions& options);
 

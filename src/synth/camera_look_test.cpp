@@ -278,27 +278,36 @@ TEST(Realism, TheRealVsInsertedClassifierIsAtChanceOnlyWhenTheyMeasureAlike) {
   EXPECT_EQ(ClassifyRealVsInserted(one).folds, 0);
 }
 
-// A camera 12 m above flat ground looking straight down at two real cars and two inserted cones, the ground
-// drawn with each box's shadow (a box's shadow with its footprint is exactly real_shadows.h's ShadowHull): the
-// real cars' shadows at a quarter of the lit road, the inserts' at half. The measure reads 4 and 2; the cone
-// standing where a car's shadow covers the road it would be compared with is left out.
-TEST(Realism, ShadowContrastOfRealAndInsertedObjectsOnASyntheticRoad) {
+// A box standing on the ground (z = 0) of the synthetic road frames below.
+Box3 GroundBox(double x, double y, double yaw, const Eigen::Vector3d& size) {
+  Box3 b;
+  b.T_frame_box = Rigid3d::FromYaw(yaw, Eigen::Vector3d(x, y, size.z() / 2));
+  b.size = size;
+  return b;
+}
+
+// A frame seen by a camera 12 m above flat ground looking straight down, with two real cars of `car_size`.
+Frame TopDownRoadWithTwoCars(const Eigen::Vector3d& car_size) {
   Frame f;
   f.token = "synthetic";
-  const CameraSensor cam = testing::TopDownCamera(12);
-  f.cameras.push_back(cam);
-  auto box = [](double x, double y, double yaw, const Eigen::Vector3d& size) {
-    Box3 b;
-    b.T_frame_box = Rigid3d::FromYaw(yaw, Eigen::Vector3d(x, y, size.z() / 2));
-    b.size = size;
-    return b;
-  };
-  for (const Box3& b : {box(4, 3, 0.3, {1.8, 1.2, 1.6}), box(-4, 3.5, -0.7, {1.8, 1.2, 1.6})}) {
+  f.cameras.push_back(testing::TopDownCamera(12));
+  for (const Box3& b : {GroundBox(4, 3, 0.3, car_size), GroundBox(-4, 3.5, -0.7, car_size)}) {
     Annotation a;
     a.category = "car";
     a.box = b;
     f.annotations.push_back(a);
   }
+  return f;
+}
+
+// A camera 12 m above flat ground looking straight down at two real cars and two inserted cones, the ground
+// drawn with each box's shadow (a box's shadow with its footprint is exactly real_shadows.h's ShadowHull): the
+// real cars' shadows at a quarter of the lit road, the inserts' at half. The measure reads 4 and 2; the cone
+// standing where a car's shadow covers the road it would be compared with is left out.
+TEST(Realism, ShadowContrastOfRealAndInsertedObjectsOnASyntheticRoad) {
+  const Frame f = TopDownRoadWithTwoCars({1.8, 1.2, 1.6});
+  const CameraSensor& cam = f.cameras[0];
+  const auto box = GroundBox;
   const Eigen::Vector3d cone(0.5, 0.5, 0.7);
   const std::vector<std::pair<std::string, Box3>> inserted = {{"traffic_cone", box(-3, -3, 0.2, cone)},
                                                               {"traffic_cone", box(3.3, 1.0, 0.0, cone)}};
@@ -346,22 +355,9 @@ TEST(Realism, ShadowContrastOfRealAndInsertedObjectsOnASyntheticRoad) {
 // half the open road's luminance, of each inserted cone's at two thirds. The measure reads 2 and 1.5; the cars'
 // cast shadows, drawn darker still, are left out of both bands when the sun is known; a plain road reads 1.
 TEST(Realism, ContactDarkeningOfRealAndInsertedObjectsOnASyntheticRoad) {
-  Frame f;
-  f.token = "synthetic";
-  const CameraSensor cam = testing::TopDownCamera(12);
-  f.cameras.push_back(cam);
-  auto box = [](double x, double y, double yaw, const Eigen::Vector3d& size) {
-    Box3 b;
-    b.T_frame_box = Rigid3d::FromYaw(yaw, Eigen::Vector3d(x, y, size.z() / 2));
-    b.size = size;
-    return b;
-  };
-  for (const Box3& b : {box(4, 3, 0.3, {4.2, 1.8, 1.5}), box(-4, 3.5, -0.7, {4.2, 1.8, 1.5})}) {
-    Annotation a;
-    a.category = "car";
-    a.box = b;
-    f.annotations.push_back(a);
-  }
+  const Frame f = TopDownRoadWithTwoCars({4.2, 1.8, 1.5});
+  const CameraSensor& cam = f.cameras[0];
+  const auto box = GroundBox;
   const Eigen::Vector3d cone(0.4, 0.4, 0.7);
   const std::vector<std::pair<std::string, Box3>> inserted = {{"traffic_cone", box(-2, -3, 0.2, cone)},
                                                               {"traffic_cone", box(3, -2.5, 0.0, cone)}};

@@ -338,18 +338,28 @@ nlohmann::json RealismReport::ToJson() const {
   return j;
 }
 
-std::vector<ShadowContrast> MeasureShadowContrasts(const Frame& frame,
-                                                   const std::vector<std::pair<std::string, Box3>>& inserted,
-                                                   const std::vector<ImageF>& linear, const Eigen::Vector3d& sun_dir_ego) {
-  // The frame with the inserts as annotations: every box, real or not, hides the road behind it from the camera.
+namespace {
+
+// The frame with the inserts as annotations after its real ones: every box, real or not, hides the road behind
+// it from the camera and casts its shadow.
+Frame WithInsertsAsAnnotations(const Frame& frame, const std::vector<std::pair<std::string, Box3>>& inserted) {
   Frame scene = frame;
-  const size_t real = frame.annotations.size();
   for (const auto& [category, box] : inserted) {
     Annotation a;
     a.category = category;
     a.box = box;
     scene.annotations.push_back(a);
   }
+  return scene;
+}
+
+}  // namespace
+
+std::vector<ShadowContrast> MeasureShadowContrasts(const Frame& frame,
+                                                   const std::vector<std::pair<std::string, Box3>>& inserted,
+                                                   const std::vector<ImageF>& linear, const Eigen::Vector3d& sun_dir_ego) {
+  const Frame scene = WithInsertsAsAnnotations(frame, inserted);
+  const size_t real = frame.annotations.size();
   ShadowCheckOptions options;
   options.min_height_m = 0.5;  // cones, posts and barriers as well as vehicles
   options.cell_m = 0.05;       // a cone's shadow is a few decimetres wide
@@ -389,14 +399,8 @@ std::vector<ContactDarkening> MeasureContactDarkening(const Frame& frame,
                                                       const std::vector<std::pair<std::string, Box3>>& inserted,
                                                       const std::vector<ImageF>& linear,
                                                       const std::optional<Eigen::Vector3d>& sun_dir_ego) {
-  Frame scene = frame;  // the inserts as annotations: they hide road and cast shadows like the real boxes
+  const Frame scene = WithInsertsAsAnnotations(frame, inserted);
   const size_t real = frame.annotations.size();
-  for (const auto& [category, box] : inserted) {
-    Annotation a;
-    a.category = category;
-    a.box = box;
-    scene.annotations.push_back(a);
-  }
   std::optional<Eigen::Vector3d> sun;
   if (sun_dir_ego) sun = sun_dir_ego->normalized();
   std::vector<ContactDarkening> out;

@@ -556,6 +556,7 @@ struct MiningIndex::Shard {
   size_t first_row = 0, rows = 0;
   ItemTable items;
   std::unique_ptr<MappedVectors> descriptor, clip;
+  const MappedVectors* Vectors(VectorKind kind) const { return kind == VectorKind::kClip ? clip.get() : descriptor.get(); }
 };
 
 MiningIndex::MiningIndex() = default;
@@ -598,7 +599,7 @@ const AnnIndex* MiningIndex::ann(VectorKind kind) const {
 std::vector<AnnShard> MiningIndex::ShardVectors(VectorKind kind) const {
   std::vector<AnnShard> out;
   for (const auto& s : shards_) {
-    const MappedVectors* v = kind == VectorKind::kClip ? s->clip.get() : s->descriptor.get();
+    const MappedVectors* v = s->Vectors(kind);
     out.push_back({s->dir.filename().string(), s->rows, v ? v->data() : nullptr});
   }
   return out;
@@ -609,7 +610,7 @@ int MiningIndex::dim(VectorKind kind) const { return kind == VectorKind::kClip ?
 const float* MiningIndex::vector(VectorKind kind, size_t row) const {
   size_t local = 0;
   const Shard& s = ShardOf(row, &local);
-  const MappedVectors* v = kind == VectorKind::kClip ? s.clip.get() : s.descriptor.get();
+  const MappedVectors* v = s.Vectors(kind);
   SD_CHECK(v != nullptr, << "no " << ToString(kind) << " vectors in this index");
   return v->data() + local * dim(kind);
 }
@@ -693,7 +694,7 @@ std::vector<std::vector<SearchHit>> MiningIndex::Search(VectorKind kind, const f
     for (size_t q = 0; q < nq; ++q)
       for (const auto& [shard, local] : candidates[q]) {
         const Shard& s = *shards_[shard];
-        const MappedVectors* v = kind == VectorKind::kClip ? s.clip.get() : s.descriptor.get();
+        const MappedVectors* v = s.Vectors(kind);
         const float score = faiss::fvec_inner_product(queries + q * d, v->data() + local * d, d);
         hits[q].push_back({s.first_row + local, score});
       }
@@ -704,7 +705,7 @@ std::vector<std::vector<SearchHit>> MiningIndex::Search(VectorKind kind, const f
   ParallelFor(0, shards_.size(), [&](size_t s) {
     if (approx && approx->covers()[s]) return;
     const Shard& shard = *shards_[s];
-    const MappedVectors* v = kind == VectorKind::kClip ? shard.clip.get() : shard.descriptor.get();
+    const MappedVectors* v = shard.Vectors(kind);
     if (!v || v->count() == 0) return;
     const size_t kk = std::min(k, v->count());
     std::vector<float> scores(nq * kk, 0.f);

@@ -39,6 +39,24 @@ T Get(const std::string& bytes, size_t at) {
 
 }  // namespace
 
+// The table's row for `item`, whose JSON line is [offset, offset + length) and line `line` of items.jsonl: one
+// definition for the table written with the lines and the one rebuilt from them.
+ItemTable::Record ItemTable::MakeRecord(const MinedItem& item, uint64_t offset, uint32_t length, uint32_t line,
+                                        std::map<std::string, uint32_t>* category_ids, std::vector<std::string>* categories) {
+  auto [it, added] = category_ids->emplace(item.category, static_cast<uint32_t>(categories->size()));
+  if (added) categories->push_back(item.category);
+  Record rec;
+  rec.offset = offset;
+  rec.length = length;
+  rec.line = line;
+  rec.category = it->second;
+  rec.object_size_px = static_cast<float>(ObjectSizePx(item));
+  rec.truncation = static_cast<float>(item.truncation);
+  rec.occlusion = static_cast<float>(item.occlusion);
+  rec.sharpness = static_cast<float>(item.sharpness);
+  return rec;
+}
+
 // A read-only map of items.jsonl: the records are parsed from it on demand.
 class ItemTable::MappedText {
  public:
@@ -75,24 +93,24 @@ class ItemTable::MappedText {
 };
 
 void WriteItemTable(const fs::path& shard_dir, const std::vector<MinedItem>& items) {
+  using Record = ItemTable::Record;
   std::string lines;
   std::string records;
   std::map<std::string, uint32_t> category_ids;
   std::vector<std::string> categories;
   for (size_t i = 0; i < items.size(); ++i) {
-    const MinedItem& item = items[i];
-    const std::string line = ToJson(item).dump();
+    const std::string line = ToJson(items[i]).dump();
     SD_CHECK(line.size() < UINT32_MAX, << "a record of " << line.size() << " bytes");
-    auto [it, added] = category_ids.emplace(item.category, static_cast<uint32_t>(categories.size()));
-    if (added) categories.push_back(item.category);
-    Put<uint64_t>(&records, lines.size());
-    Put<uint32_t>(&records, static_cast<uint32_t>(line.size()));
-    Put<uint32_t>(&records, static_cast<uint32_t>(i + 1));
-    Put<uint32_t>(&records, it->second);
-    Put<float>(&records, static_cast<float>(ObjectSizePx(item)));
-    Put<float>(&records, static_cast<float>(item.truncation));
-    Put<float>(&records, static_cast<float>(item.occlusion));
-    Put<float>(&records, static_cast<float>(item.sharpness));
+    const Record rec = ItemTable::MakeRecord(items[i], lines.size(), static_cast<uint32_t>(line.size()), static_cast<uint32_t>(i + 1),
+                                  &category_ids, &categories);
+    Put<uint64_t>(&records, rec.offset);
+    Put<uint32_t>(&records, rec.length);
+    Put<uint32_t>(&records, rec.line);
+    Put<uint32_t>(&records, rec.category);
+    Put<float>(&records, rec.object_size_px);
+    Put<float>(&records, rec.truncation);
+    Put<float>(&records, rec.occlusion);
+    Put<float>(&records, rec.sharpness);
     Put<uint32_t>(&records, 0);
     lines += line;
     lines += '\n';
@@ -177,17 +195,7 @@ ItemTable ItemTable::Open(const fs::path& shard_dir) {
     if (s.find_first_not_of(" \t\r") != std::string_view::npos) {
       const std::string where = t.jsonl_.string() + ":" + std::to_string(line);
       const MinedItem item = ItemFromJson(ParseJsonText(s, where), where);
-      auto [it, added] = category_ids.emplace(item.category, static_cast<uint32_t>(t.categories_.size()));
-      if (added) t.categories_.push_back(item.category);
-      Record rec;
-      rec.offset = begin;
-      rec.length = static_cast<uint32_t>(s.size());
-      rec.line = line;
-      rec.category = it->second;
-      rec.object_size_px = static_cast<float>(ObjectSizePx(item));
-      rec.truncation = static_cast<float>(item.truncation);
-      rec.occlusion = static_cast<float>(item.occlusion);
-      rec.sharpness = static_cast<float>(item.sharpness);
+      const Record rec = MakeRecord(item, begin, static_cast<uint32_t>(s.size()), line, &category_ids, &t.categories_);
       t.records_.push_back(rec);
     }
     begin = end + 1;

@@ -13,6 +13,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <memory>
+#include <map>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -57,6 +58,9 @@ class ItemTable {
     float object_size_px = 0, truncation = -1, occlusion = -1, sharpness = -1;
   };
   class MappedText;
+  friend void WriteItemTable(const std::filesystem::path& shard_dir, const std::vector<MinedItem>& items);
+  static Record MakeRecord(const MinedItem& item, uint64_t offset, uint32_t length, uint32_t line,
+                           std::map<std::string, uint32_t>* category_ids, std::vector<std::string>* categories);
   std::filesystem::path jsonl_;
   std::unique_ptr<MappedText> text_;
   std::vector<std::string> categories_;

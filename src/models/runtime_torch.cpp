@@ -128,7 +128,10 @@ std::vector<Tensor> Model::Run(const std::vector<Tensor>& inputs) const {
     SD_CHECK(static_cast<int64_t>(t.values.size()) == t.numel(), << t.values.size() << " vs " << t.numel());
     // from_blob does not copy; .to() below makes the copy the module may keep, so `inputs` stay the caller's.
     torch::Tensor x = torch::from_blob(const_cast<float*>(t.values.data()), t.shape, torch::kFloat32);
-    x = x.to(impl_->device, impl_->half ? torch::kHalf : torch::kFloat32, /*non_blocking=*/false, /*copy=*/true);
+    // Token ids stay float32 in half mode: float16 holds integers exactly only up to 2048, and a CLIP id
+    // (up to 49407) would reach the embedding lookup rounded to another token.
+    const bool to_half = impl_->half && c.inputs[i].encoding != "token_ids";
+    x = x.to(impl_->device, to_half ? torch::kHalf : torch::kFloat32, /*non_blocking=*/false, /*copy=*/true);
     args.emplace_back(std::move(x));
   }
 

@@ -15,8 +15,13 @@ Writes, into OUT_DIR:
   bpe_simple_vocab_16e6.txt   the BPE merges, uncompressed (the C++ tokenizer reads plain text)
 
 Usage:
-  export_clip.py OUT_DIR [--arch ViT-B-32] [--pretrained openai] [--backend open_clip|openai]
+  export_clip.py OUT_DIR [--arch ViT-B-32] [--pretrained openai] [--backend open_clip|openai|transformers]
   e.g. --arch ViT-L-14 --pretrained openai   (OpenAI's ViT-L/14, D = 768, S = 224)
+  --backend transformers --pretrained HF_FOLDER --vocab bpe_simple_vocab_16e6.txt.gz
+      a Hugging Face CLIPModel checkpoint folder (e.g. a download of openai/clip-vit-base-patch32); its BPE
+      merges are OpenAI's, given by --vocab. --pretrained random builds the architecture of the default
+      CLIPConfig (ViT-B/32) with random weights (--seed): no checkpoint, for proving the runtime on the real
+      architecture (tools/gpu/clip_check.py).
 Licences: OpenAI CLIP weights MIT; open_clip code MIT; LAION-trained open_clip weights MIT.
 """
 import argparse
@@ -58,7 +63,82 @@ class TextEncoder(torch.nn.Module):
         return self.model.encode_text(tokens.to(torch.int64)).float()
 
 
-def load(backend, arch, pretrained):
+class HFClip(torch.nn.Module):
+    """A transformers CLIPModel behind the open_clip / OpenAI interface the encoders above use."""
+
+    class Visual(torch.nn.Module):
+        def __init__(self, model):
+            super().__init__()
+            self.vision_model, self.projection = model.vision_model, model.visual_projection
+
+        def forward(self, pixels):
+            return self.projection(self.vision_model(pixel_values=pixels).pooler_output)
+
+    def __init__(self, model):
+        super().__init__()
+        self.model = model
+        self.visual = HFClip.Visual(model)
+        self.context_length = int(model.config.text_config.max_position_embeddings)
+        self.vocab_size = int(model.config.text_config.vocab_size)
+
+    def encode_image(self, pixels):
+        return self.visual(pixels)
+
+    def encode_text(self, ids):
+        # The text tower pools at the end-of-text token; OpenAI's padding (zeros after it) is what the C++
+        # tokenizer writes, and the causal mask keeps padding from reaching the tokens before it.
+        return self.model.text_projection(self.model.text_model(input_ids=ids).pooler_output)
+
+
+def openai_tokenize(bpe_path, context):
+    """OpenAI's clip.tokenize (sot, BPE ids, eot, zeros; truncated with eot last), from the BPE merges alone:
+    the vocabulary is the 256 byte symbols, the same with '</w>', every merge, then the two specials."""
+    from transformers import CLIPTokenizer
+    import tempfile
+    opener = gzip.open if bpe_path.endswith(".gz") else open
+    with opener(bpe_path, "rt", encoding="utf-8") as f:
+        merges = f.read().split("\n")[1:49152 - 256 - 2 + 1]
+    byte_symbols = list(range(ord("!"), ord("~") + 1)) + list(range(ord("¡"), ord("¬") + 1)) + \
+        list(range(ord("®"), ord("ÿ") + 1))
+    extra = [b for b in range(256) if b not in byte_symbols]
+    symbols = [chr(b) for b in byte_symbols] + [chr(256 + i) for i in range(len(extra))]
+    vocab = symbols + [v + "</w>" for v in symbols] + ["".join(m.split()) for m in merges]
+    vocab += ["<|startoftext|>", "<|endoftext|>"]
+    folder = tempfile.mkdtemp(prefix="clip_vocab_")
+    with open(os.path.join(folder, "vocab.json"), "w", encoding="utf-8") as f:
+        json.dump({v: i for i, v in enumerate(vocab)}, f)
+    with open(os.path.join(folder, "merges.txt"), "w", encoding="utf-8") as f:
+        f.write("#version: 0.2\n" + "\n".join(merges) + "\n")
+    hf = CLIPTokenizer(os.path.join(folder, "vocab.json"), os.path.join(folder, "merges.txt"))
+    sot, eot = vocab.index("<|startoftext|>"), vocab.index("<|endoftext|>")
+
+    def tokenize(texts):
+        out = torch.zeros(len(texts), context, dtype=torch.int64)
+        for row, text in enumerate(texts):
+            ids = [sot] + hf(text, add_special_tokens=False)["input_ids"] + [eot]
+            ids = ids[:context]
+            ids[-1] = eot
+            out[row, :len(ids)] = torch.tensor(ids)
+        return out
+    return tokenize
+
+
+def load(backend, arch, pretrained, vocab=None, seed=0):
+    if backend == "transformers":
+        import transformers
+        if not vocab:
+            sys.exit("export_clip: --backend transformers needs --vocab (OpenAI's bpe_simple_vocab_16e6.txt.gz)")
+        if pretrained == "random":
+            torch.manual_seed(seed)
+            hf = transformers.CLIPModel(transformers.CLIPConfig())
+            source = f"transformers {transformers.__version__} CLIPModel(CLIPConfig()) random init, seed {seed}"
+        else:
+            hf = transformers.CLIPModel.from_pretrained(pretrained)
+            source = f"transformers {transformers.__version__} CLIPModel {pretrained}"
+        model = HFClip(hf.float().eval())
+        size = int(hf.config.vision_config.image_size)
+        tokenize = openai_tokenize(vocab, model.context_length)
+        return model.eval(), OPENAI_MEAN, OPENAI_STD, size, vocab, tokenize, source, None
     if backend == "open_clip":
         import open_clip
         model, _, preprocess = open_clip.create_model_and_transforms(arch, pretrained=pretrained, device="cpu")
@@ -87,11 +167,14 @@ def main():
     ap.add_argument("out_dir")
     ap.add_argument("--arch", default="ViT-B-32")
     ap.add_argument("--pretrained", default="openai")
-    ap.add_argument("--backend", choices=["open_clip", "openai"], default="open_clip")
+    ap.add_argument("--backend", choices=["open_clip", "openai", "transformers"], default="open_clip")
+    ap.add_argument("--vocab", help="BPE merges file (transformers backend)")
+    ap.add_argument("--seed", type=int, default=0, help="random initialisation seed (--pretrained random)")
     args = ap.parse_args()
     os.makedirs(args.out_dir, exist_ok=True)
 
-    model, mean, std, size, bpe, tokenize, source, preprocess = load(args.backend, args.arch, args.pretrained)
+    model, mean, std, size, bpe, tokenize, source, preprocess = load(args.backend, args.arch, args.pretrained,
+                                                                      args.vocab, args.seed)
     context = int(model.context_length)
     vocab = int(model.vocab_size)
     with torch.no_grad():

@@ -3,12 +3,14 @@
 #  1. the raster tests on the GPU (SYNTHDRIVE_DEVICE=cuda: every gradient test) and the CPU/GPU agreement test;
 #  2. the model runtime built here against PyTorch's CUDA LibTorch, its tests on the GPU, and bench_models;
 #  3. bench_refine and bench_generate (oracle views) on the GPU and on this machine's CPUs, with the peak GPU
-#     memory sampled by nvidia-smi.
+#     memory sampled by nvidia-smi;
+#  4. CLIP ViT-B/32 on its real architecture (random weights) through the runtime and tokenizer against the
+#     Python model, and its throughput (tools/gpu/clip_check.py; needs the vocabulary pack.sh copies).
 # Usage: tools/gpu/run_gpu.sh <packed-dir from pack.sh> <results-dir> [objects]
-# PHASES (default "tests refine generate") picks the parts, so a run can be split to fit a time limit;
+# PHASES (default "tests refine generate clip") picks the parts, so a run can be split to fit a time limit;
 # REPEATS (default 3) is bench_refine's repeats per object.
 set -uo pipefail
-phases=" ${PHASES:-tests refine generate} "
+phases=" ${PHASES:-tests refine generate clip} "
 repeats=${REPEATS:-3}
 pack=$(realpath "${1:?usage: run_gpu.sh <packed-dir> <results-dir> [objects]}")
 results=${2:?usage: run_gpu.sh <packed-dir> <results-dir> [objects]}
@@ -26,6 +28,17 @@ nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader | 
 nvidia-smi --query-gpu=timestamp,memory.used --format=csv,noheader,nounits -lms 100 >> "$results/gpu_memory.csv" &
 sampler=$!
 mark() { echo "$(date '+%Y/%m/%d %H:%M:%S.%3N'), MARK $*" >> "$results/gpu_memory.csv"; }
+
+# The model runtime, its tests and benchmarks, built against the machine's CUDA LibTorch (once per run).
+build_models() {
+  [[ -x /tmp/build-gpu/bin/bench_clip ]] && return 0
+  step "model runtime against CUDA LibTorch"
+  local prefix
+  prefix=$(python3 -c 'import torch; print(torch.utils.cmake_prefix_path)')
+  (cmake -S "$repo/tools/gpu" -B /tmp/build-gpu -DSYNTHDRIVE_GPU_DEPS="$pack/deps" -DCMAKE_PREFIX_PATH="$prefix" \
+     -DCMAKE_BUILD_TYPE=Release > "$results/models_build.txt" 2>&1 &&
+   cmake --build /tmp/build-gpu -j "$(nproc)" >> "$results/models_build.txt" 2>&1) || { status=1; tail -n 30 "$results/models_build.txt"; }
+}
 
 if [[ $phases == *" tests "* ]]; then
 step "raster tests on cuda"
@@ -49,11 +62,7 @@ for t in "$pack"/bin/raster_*; do
 done
 
 if [[ -x "$(command -v python3)" ]] && python3 -c 'import torch' 2>/dev/null; then
-  step "model runtime against CUDA LibTorch"
-  prefix=$(python3 -c 'import torch; print(torch.utils.cmake_prefix_path)')
-  (cmake -S "$repo/tools/gpu" -B /tmp/build-gpu -DSYNTHDRIVE_GPU_DEPS="$pack/deps" -DCMAKE_PREFIX_PATH="$prefix" \
-     -DCMAKE_BUILD_TYPE=Release > "$results/models_build.txt" 2>&1 &&
-   cmake --build /tmp/build-gpu -j "$(nproc)" >> "$results/models_build.txt" 2>&1) || { status=1; tail -n 30 "$results/models_build.txt"; }
+  build_models
   models=/tmp/test_models
   for g in make_test_models make_stage_test_models make_diffusion_test_models make_segmentation_test_models; do
     python3 "$repo/tools/testing/$g.py" "$models/$g" >> "$results/models_fixtures.txt" 2>&1 || echo "fixture $g failed" | tee -a "$results/summary.txt"
@@ -91,6 +100,21 @@ done
     > "$results/bench_generate_$device.txt" 2>&1 || status=1
   tail -n 12 "$results/bench_generate_$device.txt"
 done
+if [[ $phases == *" clip "* ]]; then
+  if [[ -f $pack/clip/bpe_simple_vocab_16e6.txt.gz ]]; then
+    build_models
+    step "CLIP ViT-B/32 through the runtime against the Python model"
+    mark clip
+    photos=("$repo"/data/images/roadanomaly-cones/frames/*.jpg "$repo"/data/driving/nuscenes-scene0061-kf0/samples/CAM_*/*.jpg
+            "$repo"/data/driving/kitti-object/training/image_2/*.png)
+    python3 "$repo/tools/gpu/clip_check.py" --bench /tmp/build-gpu/bin/bench_clip \
+      --vocab "$pack/clip/bpe_simple_vocab_16e6.txt.gz" --reference "$pack/clip/reference_tokens.json" \
+      --out "$results/clip" "${photos[@]}" > "$results/clip_check.txt" 2>&1 || { status=1; tail -n 30 "$results/clip_check.txt"; }
+    tail -n 80 "$results/clip_check.txt"
+  else
+    step "clip: skipped, the pack has no CLIP vocabulary (pack.sh copies it from ../shared/data/models/clip)"
+  fi
+fi
 mark end
 kill $sampler 2>/dev/null
 exit $status

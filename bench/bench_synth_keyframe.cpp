@@ -26,6 +26,7 @@
 #include "assetgen/asset.h"
 #include "assetgen/canonical.h"
 #include "core/log.h"
+#include "core/stage_times.h"
 #include "datasets/categories.h"
 #include "datasets/readers.h"
 #include "io/mesh_io.h"
@@ -82,14 +83,25 @@ const Inputs& GetInputs() {
 void TimeSynthesis(benchmark::State& state, const Inputs& in, const sd::Scenario& scenario,
                    const sd::SynthOptions& options) {
   size_t objects = 0, cameras = 0;
+  sd::StageTimes stages;
   for (auto _ : state) {
     sd::FrameOutcome out = sd::SynthesizeFrame(in.log, 0, in.assets, scenario, options);
     objects = out.objects.size();
     cameras = out.cameras.size();
+    stages.Merge(out.timings);
     benchmark::DoNotOptimize(out.edit.points.has_value());
   }
   state.counters["objects"] = static_cast<double>(objects);
   state.counters["cameras_touched"] = static_cast<double>(cameras);
+  // Where the frame's time went: seconds per stage and iteration (s_<stage>, in the JSON output), and one line.
+  for (const auto& [stage, seconds] : stages.entries()) {
+    std::string name = "s_" + stage;
+    for (char& ch : name)
+      if (ch == ' ') ch = '_';
+    state.counters[name] = benchmark::Counter(seconds, benchmark::Counter::kAvgIterations);
+  }
+  std::fprintf(stderr, "%zu objects, %zu cameras: %s (summed over %lld iterations)\n", objects, cameras,
+               stages.Summary().c_str(), static_cast<long long>(state.iterations()));
 }
 
 // The full frame: ground, placement, 6 cameras, LiDAR. Arg: camera samples per pixel (ao_samples 16).

@@ -56,18 +56,28 @@ ImageF ToLinear(const ImageU8& srgb) {
 
 ImageU8 ToSrgb8(const ImageF& linear) {
   ImageU8 out(linear.width(), linear.height(), linear.channels());
-  const int nc = linear.channels();
-  const size_t row = static_cast<size_t>(linear.width()) * nc;
-  // One pow per value: a whole camera image is ~4 M of them, so rows go in parallel (same result).
-  ParallelFor(0, static_cast<size_t>(linear.height()), [&](size_t y) {
-    for (size_t i = y * row; i < (y + 1) * row; ++i) {
-      const bool alpha = nc == 4 && (i % 4) == 3;
-      const float v = alpha ? std::clamp(linear.data()[i], 0.0f, 1.0f) : LinearToSrgb(linear.data()[i]);
-      out.data()[i] = static_cast<uint8_t>(std::lround(v * 255.0f));
-    }
-  }, 16);
+  ToSrgb8Region(linear, 0, 0, linear.width(), linear.height(), &out);
   return out;
 }
+
+void ToSrgb8Region(const ImageF& linear, int x0, int y0, int x1, int y1, ImageU8* out) {
+  SD_CHECK(out->width() == linear.width() && out->height() == linear.height() && out->channels() == linear.channels());
+  x0 = std::max(0, x0), y0 = std::max(0, y0), x1 = std::min(linear.width(), x1), y1 = std::min(linear.height(), y1);
+  if (x0 >= x1 || y0 >= y1) return;
+  const int nc = linear.channels();
+  // One pow per value: a whole camera image is ~4 M of them, so rows go in parallel (same result).
+  ParallelFor(static_cast<size_t>(y0), static_cast<size_t>(y1), [&](size_t y) {
+    const float* src = linear.pixel(x0, static_cast<int>(y));
+    uint8_t* dst = out->pixel(x0, static_cast<int>(y));
+    for (size_t i = 0; i < static_cast<size_t>(x1 - x0) * nc; ++i) {
+      const bool alpha = nc == 4 && (i % 4) == 3;
+      const float v = alpha ? std::clamp(src[i], 0.0f, 1.0f) : LinearToSrgb(src[i]);
+      dst[i] = static_cast<uint8_t>(std::lround(v * 255.0f));
+    }
+  }, 16);
+}
+
+float SrgbByteToLinear(uint8_t v) { return SrgbTable()[v]; }
 
 void SampleBilinear(const ImageF& img, double u, double v, float* out) { SampleBilinearImpl(img, u, v, out); }
 void SampleBilinear(const ImageU8& img, double u, double v, float* out) { SampleBilinearImpl(img, u, v, out); }

@@ -54,6 +54,11 @@ inline float LinearLuminance(const float* rgb) { return 0.2126f * rgb[0] + 0.715
 // Colour channels go through the transfer function; a 4th (alpha) channel is only rescaled.
 ImageF ToLinear(const ImageU8& srgb);
 ImageU8 ToSrgb8(const ImageF& linear);
+// ToSrgb8 of the pixels [x0, x1) x [y0, y1) only (clamped to the image), written into `out` (the same size and
+// channels): a stage that changed a region of a photograph converts that region and keeps the rest byte for byte.
+void ToSrgb8Region(const ImageF& linear, int x0, int y0, int x1, int y1, ImageU8* out);
+// SrgbToLinear(v / 255) from a table: for loops over whole 8-bit images.
+float SrgbByteToLinear(uint8_t v);
 
 // Bilinear sample at continuous coordinates (pixel centres at +0.5), clamped at the border.
 // `out` receives channels() values.

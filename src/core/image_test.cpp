@@ -71,5 +71,30 @@ TEST(Image, BilinearAtPixelCentres) {
   EXPECT_FLOAT_EQ(o, 127.5f);  // 0..255 scale, no sRGB decoding
 }
 
+// A region converted back leaves every other byte as it was, and inside equals the whole image's conversion;
+// and an 8-bit value survives the round trip through linear exactly.
+TEST(ImageConversion, Srgb8RegionKeepsTheRestAndRoundTrips) {
+  ImageU8 photo(40, 30, 3);
+  for (size_t i = 0; i < photo.size(); ++i) photo.vector()[i] = static_cast<uint8_t>((i * 37) % 256);
+  ImageF linear = ToLinear(photo);
+  EXPECT_EQ(ToSrgb8(linear).vector(), photo.vector()) << "every 8-bit value round-trips";
+  for (int v = 0; v < 256; ++v) EXPECT_EQ(SrgbByteToLinear(static_cast<uint8_t>(v)), SrgbToLinear(v / 255.0f));
+  for (int y = 5; y < 20; ++y)
+    for (int x = 10; x < 25; ++x)
+      for (int c = 0; c < 3; ++c) linear.at(x, y, c) = 0.5f * linear.at(x, y, c) + 0.1f;
+  ImageU8 out = photo;
+  ToSrgb8Region(linear, 10, 5, 25, 20, &out);
+  const ImageU8 whole = ToSrgb8(linear);
+  for (int y = 0; y < 30; ++y)
+    for (int x = 0; x < 40; ++x)
+      for (int c = 0; c < 3; ++c) {
+        const bool inside = x >= 10 && x < 25 && y >= 5 && y < 20;
+        ASSERT_EQ(out.at(x, y, c), inside ? whole.at(x, y, c) : photo.at(x, y, c)) << x << "," << y;
+      }
+  ToSrgb8Region(linear, -5, -5, 0, 100, &out);  // empty after clamping: nothing changes
+  ToSrgb8Region(linear, 35, 25, 100, 100, &out);  // clamped to the image
+  EXPECT_EQ(out.at(39, 29, 0), whole.at(39, 29, 0));
+}
+
 }  // namespace
 }  // namespace sd

@@ -98,23 +98,33 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
   out.object = Image<int>(w, h, 1, -1);
   out.shadow = ImageF(w, h, 1, 1.0f);
 
-  const bool whole = options.x0 == 0 && options.y0 == 0 && options.x1 == 0 && options.y1 == 0;
-  const int x0 = whole ? 0 : std::clamp(options.x0, 0, w), x1 = whole ? w : std::clamp(options.x1, 0, w);
-  const int y0 = whole ? 0 : std::clamp(options.y0, 0, h), y1 = whole ? h : std::clamp(options.y1, 0, h);
-  if (x0 >= x1 || y0 >= y1) return out;
+  std::vector<std::array<int, 4>> rects = options.rects;
+  if (rects.empty()) {
+    const bool whole = options.x0 == 0 && options.y0 == 0 && options.x1 == 0 && options.y1 == 0;
+    rects.push_back(whole ? std::array<int, 4>{0, 0, w, h} : std::array<int, 4>{options.x0, options.y0, options.x1, options.y1});
+  }
+  int y0 = h, y1 = 0;
+  for (const auto& r : rects)
+    if (r[0] < r[2] && r[1] < r[3]) y0 = std::min(y0, std::max(0, r[1])), y1 = std::max(y1, std::min(h, r[3]));
+  if (y0 >= y1) return out;
 
   const Eigen::Matrix3d R_scene_cam = T_scene_cam.Rotation();
   const Eigen::Vector3f origin = T_scene_cam.translation.cast<float>();
   const Eigen::Vector3f sun_dir = lighting.sun_direction.normalized();
   const Eigen::Vector3f sun = lighting.sun_irradiance, sky = lighting.sky_radiance;
   const float sun_y = Luminance(sun), sky_y = Luminance(sky);
-  const int spp = options.samples_per_pixel, n_ao = options.ao_samples;
+  const int spp = options.samples_per_pixel;
+  // The pixel's sky rays, split among its sub-samples: sub-sample s traces strata [s * ao_each, (s + 1) * ao_each)
+  // of one stratified set of ao_each * spp directions.
+  const int ao_each = options.ao_samples > 0 ? (options.ao_samples + spp - 1) / spp : 0;
+  const int n_ao_set = ao_each * spp;
   const int receiver = options.receiver_mesh;
   const float inf = std::numeric_limits<float>::infinity();
 
   ParallelFor(static_cast<size_t>(y0), static_cast<size_t>(y1), [&](size_t row) {
     const int y = static_cast<int>(row);
     std::vector<int> ids(static_cast<size_t>(spp));
+    for (const auto& [x0, x1] : RowSpans(rects, y, w))
     for (int x = x0; x < x1; ++x) {
       PixelRng rng(options.seed, x, y);
       Eigen::Vector3f color = Eigen::Vector3f::Zero();
@@ -128,7 +138,7 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
         // The receiver stands in for the real road, which is in the photo already: it never hides an object (a
         // patch laid on a kerb's slope rises metres away from its object). Objects first, the receiver where none.
         RayHit hit = scene.Intersect(origin, dir, 0.0f, inf, receiver);
-        if (!hit.Hit() && receiver >= 0) hit = scene.Intersect(origin, dir);
+        if (!hit.Hit() && receiver >= 0 && options.receiver_shadow) hit = scene.Intersect(origin, dir);
         if (!hit.Hit()) continue;
         const Frame f = ShadingFrame(scene, hit, dir);
         const float cos_sun = std::max(0.0f, f.n_shade.dot(sun_dir));
@@ -138,14 +148,14 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
           // Light the real road got (no objects) vs what it gets now; visibility ignores the road itself.
           const bool sun_visible = cos_sun > 0 && !scene.Occluded(f.p_offset, sun_dir, 0.0f, inf, receiver);
           int sky_with = 0, sky_without = 0;
-          for (int k = 0; k < n_ao; ++k) {
-            const Eigen::Vector3f d = CosineDirection(f.n_shade, Stratified(k, n_ao, rng));
+          for (int k = s * ao_each; k < (s + 1) * ao_each; ++k) {
+            const Eigen::Vector3f d = CosineDirection(f.n_shade, Stratified(k, n_ao_set, rng));
             if (d.z() <= 0) continue;
             ++sky_without;
             if (!scene.Occluded(f.p_offset, d, 0.0f, inf, receiver)) ++sky_with;
           }
-          const float ao_with = n_ao > 0 ? static_cast<float>(sky_with) / n_ao : 1.0f;
-          const float ao_without = n_ao > 0 ? static_cast<float>(sky_without) / n_ao : 1.0f;
+          const float ao_with = ao_each > 0 ? static_cast<float>(sky_with) / ao_each : 1.0f;
+          const float ao_without = ao_each > 0 ? static_cast<float>(sky_without) / ao_each : 1.0f;
           const float den = sun_y * cos_sun + sky_y * kPi * ao_without;
           const float num = sun_y * cos_sun * (sun_visible ? 1.0f : 0.0f) + sky_y * kPi * ao_with;
           shadow_sum += den > 0 ? num / den : 1.0f;
@@ -161,11 +171,11 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
         // Nor does it shade one: the real road below is already counted by the upper-hemisphere test.
         const bool sun_visible = obj_cos_sun > 0 && !scene.Occluded(f.p_offset, obj_sun_dir, 0.0f, inf, receiver);
         int sky_open = 0;
-        for (int k = 0; k < n_ao; ++k) {
-          const Eigen::Vector3f d = CosineDirection(f.n_shade, Stratified(k, n_ao, rng));
+        for (int k = s * ao_each; k < (s + 1) * ao_each; ++k) {
+          const Eigen::Vector3f d = CosineDirection(f.n_shade, Stratified(k, n_ao_set, rng));
           if (d.z() > 0 && !scene.Occluded(f.p_offset, d, 0.0f, inf, receiver)) ++sky_open;
         }
-        const float ao = n_ao > 0 ? static_cast<float>(sky_open) / n_ao : 1.0f;
+        const float ao = ao_each > 0 ? static_cast<float>(sky_open) / ao_each : 1.0f;
         const Eigen::Vector3f E = l.sun_irradiance * (sun_visible ? obj_cos_sun : 0.0f) + l.sky_radiance * (kPi * ao);
         const Eigen::Vector3f albedo = scene.BaseColor(hit).head<3>();
         color += albedo.cwiseProduct(E) / kPi;
@@ -224,6 +234,21 @@ std::optional<std::array<int, 4>> ProjectedRect(const PinholeCamera& camera, con
                                    hi(v_max, camera.height)};
   if (rect[0] >= rect[2] || rect[1] >= rect[3]) return std::nullopt;
   return rect;
+}
+
+std::vector<std::pair<int, int>> RowSpans(const std::vector<std::array<int, 4>>& rects, int y, int width) {
+  std::vector<std::pair<int, int>> spans;
+  for (const auto& r : rects) {
+    const int a = std::max(0, r[0]), b = std::min(width, r[2]);
+    if (y >= r[1] && y < r[3] && a < b) spans.emplace_back(a, b);
+  }
+  std::sort(spans.begin(), spans.end());
+  std::vector<std::pair<int, int>> merged;
+  for (const auto& s : spans) {
+    if (!merged.empty() && s.first <= merged.back().second) merged.back().second = std::max(merged.back().second, s.second);
+    else merged.push_back(s);
+  }
+  return merged;
 }
 
 }  // namespace sd

@@ -33,7 +33,10 @@ struct Lighting {
 
 struct CameraRenderOptions {
   int samples_per_pixel = 4;   // stratified sub-pixel samples (anti-aliased edges); perfect square preferred
-  int ao_samples = 16;         // hemisphere rays for sky visibility per shaded sample
+  // Hemisphere rays for sky visibility per pixel, shared among its shaded sub-samples (ceil(ao_samples / spp)
+  // each, stratified over the pixel as one set): sky light varies slowly across a pixel, so tracing the whole set
+  // at every sub-sample cost spp times the rays for little less noise.
+  int ao_samples = 16;
   int receiver_mesh = -1;      // mesh id of the road receiver (shadows only, never drawn); -1 = none
   bool receiver_shadow = true; // false: the receiver only blocks rays (shadow stays 1): for callers that shade it themselves
   // Per-mesh light (indexed by mesh id; empty: `lighting` for every mesh): objects standing in the sun and in a
@@ -42,6 +45,9 @@ struct CameraRenderOptions {
   // Pixel rectangle to render [x0, x1) x [y0, y1); outside it the result is "no object, no shadow".
   // Default (all zero) = the whole image.
   int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+  // When not empty, the rectangles {x0, y0, x1, y1} to render instead (their union; the one above is ignored):
+  // each object's own, so the space between objects far apart costs nothing.
+  std::vector<std::array<int, 4>> rects;
   uint32_t seed = 1;           // sampling is deterministic given the seed
 };
 
@@ -62,8 +68,8 @@ struct CameraRender {
 // cosine-weighted around the shading normal and stratified the same way.
 // Object samples (any mesh other than receiver_mesh): L = a * E / pi with a = BaseColor().rgb (alpha is
 // ignored), normals flipped to face the camera (double-sided), the sun visibility traced with one shadow
-// ray and AO = fraction of the ao_samples directions that point above the horizon (z > 0) and are
-// unoccluded by any mesh but the receiver. The receiver stands in for the real road: it never hides an object
+// ray and AO = fraction of the sub-sample's share of the pixel's ao_samples directions that point above the
+// horizon (z > 0) and are unoccluded by any mesh but the receiver. The receiver stands in for the real road: it never hides an object
 // from the camera (primary rays find objects through it) nor shades one (a patch laid on a kerb's slope would
 // otherwise rise over a neighbouring object). Shadow and AO rays start at the hit point offset along
 // the geometric normal by 2e-5 * (1 + max |coordinate|) metres.
@@ -83,5 +89,9 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
 // camera or the rectangle misses the image.
 std::optional<std::array<int, 4>> ProjectedRect(const PinholeCamera& camera, const Rigid3d& T_cam_scene,
                                                 const std::vector<Eigen::Vector3d>& points_scene, int pad);
+
+// Row y of a union of pixel rectangles {x0, y0, x1, y1} (half-open): its merged [x0, x1) spans, left to right,
+// clamped to [0, width). For stages that compute around each object rather than over their common bounds.
+std::vector<std::pair<int, int>> RowSpans(const std::vector<std::array<int, 4>>& rects, int y, int width);
 
 }  // namespace sd

@@ -307,5 +307,88 @@ TEST(RenderCamera, RectangleAndDeterminism) {
   EXPECT_GT(full.coverage.at(30, 20), 0.99f);
 }
 
+TEST(RowSpans, MergesOverlappingAndTouchingRectanglesAndClamps) {
+  const std::vector<std::array<int, 4>> rects = {{5, 0, 10, 4}, {8, 2, 15, 6}, {15, 3, 20, 5}, {-3, 3, 2, 4}, {30, 0, 50, 10}};
+  EXPECT_EQ(RowSpans(rects, 0, 40), (std::vector<std::pair<int, int>>{{5, 10}, {30, 40}}));
+  EXPECT_EQ(RowSpans(rects, 3, 40), (std::vector<std::pair<int, int>>{{0, 2}, {5, 20}, {30, 40}}));
+  EXPECT_EQ(RowSpans(rects, 5, 40), (std::vector<std::pair<int, int>>{{8, 15}, {30, 40}}));
+  EXPECT_TRUE(RowSpans(rects, 10, 40).empty());
+  EXPECT_TRUE(RowSpans({{4, 0, 4, 9}}, 1, 40).empty());  // an empty rectangle
+}
+
+// Several rectangles render exactly the pixels of their union, each as the whole image has it.
+TEST(RenderCamera, RectanglesRenderTheirUnionOnly) {
+  RayScene scene;
+  const int road = scene.AddMesh(Quad({0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 30, 30));
+  scene.AddMesh(Box({-0.5f, -0.5f, 0.0f}, {0.5f, 0.5f, 1.0f}));
+  scene.AddMesh(Box({1.0f, 0.6f, 0.0f}, {1.6f, 1.2f, 0.5f}));
+  scene.Commit();
+  Lighting light;
+  light.sun_direction = Eigen::Vector3f(0.3f, 0.2f, 1).normalized();
+  CameraRenderOptions opt;
+  opt.receiver_mesh = road;
+  const PinholeCamera cam = Camera(60, 40, 30, 30, 20);
+  const Rigid3d T = LookingDown({0.2, 0.1, 6});
+  const CameraRender full = RenderCamera(scene, cam, T, light, opt);
+  opt.rects = {{10, 5, 30, 25}, {25, 10, 50, 30}, {55, 35, 70, 50}};
+  const CameraRender part = RenderCamera(scene, cam, T, light, opt);
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) {
+      const bool inside = (x >= 10 && x < 30 && y >= 5 && y < 25) || (x >= 25 && x < 50 && y >= 10 && y < 30) ||
+                          (x >= 55 && y >= 35);
+      ASSERT_EQ(part.coverage.at(x, y), inside ? full.coverage.at(x, y) : 0.0f) << x << "," << y;
+      ASSERT_EQ(part.shadow.at(x, y), inside ? full.shadow.at(x, y) : 1.0f) << x << "," << y;
+      ASSERT_EQ(part.color.at(x, y, 0), inside ? full.color.at(x, y, 0) : 0.0f) << x << "," << y;
+      ASSERT_EQ(part.object.at(x, y), inside ? full.object.at(x, y) : -1) << x << "," << y;
+    }
+}
+
+// The sky rays of a pixel are shared among its sub-samples (ao_samples per pixel): against a converged render
+// (16 sub-samples, 1024 sky rays per pixel) of a box beside a wall, the default's per-pixel error is what a quarter
+// of the rays gives (about twice that of tracing the whole set at every sub-sample: measured 0.0058 against 0.0027),
+// under 1.5 % of the shaded value (about one 8-bit level), and unbiased.
+TEST(RenderCamera, SharedSkyRaysStayCloseToAConvergedRender) {
+  RayScene scene;
+  scene.AddMesh(Quad({0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 30, 30));  // the ground, drawn as an object here
+  scene.AddMesh(Box({-1.0f, -1.0f, 0.0f}, {1.0f, 1.0f, 1.5f}));
+  scene.AddMesh(Box({1.2f, -2.0f, 0.0f}, {1.5f, 2.0f, 2.5f}));  // a wall that takes part of the box's sky
+  scene.Commit();
+  Lighting light;
+  light.sun_direction = Eigen::Vector3f(-0.4f, 0.3f, 1).normalized();
+  light.sun_irradiance = Eigen::Vector3f::Constant(1.0f);
+  light.sky_radiance = Eigen::Vector3f::Constant(0.5f);
+  const PinholeCamera cam = Camera(80, 60, 35, 40, 30);
+  Eigen::Matrix3d R;  // looking down at 45 degrees from -y
+  R << 1, 0, 0, 0, -0.7071, -0.7071, 0, 0.7071, -0.7071;
+  R.transposeInPlace();
+  const Rigid3d T(R.transpose(), Eigen::Vector3d(0, -6, 6));
+  CameraRenderOptions opt;
+  opt.samples_per_pixel = 16;
+  opt.ao_samples = 1024;
+  const CameraRender reference = RenderCamera(scene, cam, T, light, opt);
+  const auto error = [&](int ao_samples) {
+    CameraRenderOptions o;
+    o.samples_per_pixel = 4;
+    o.ao_samples = ao_samples;
+    const CameraRender r = RenderCamera(scene, cam, T, light, o);
+    double se = 0, bias = 0, value = 0;
+    int n = 0;
+    for (int y = 0; y < cam.height; ++y)
+      for (int x = 0; x < cam.width; ++x) {
+        if (reference.coverage.at(x, y) < 1 || r.coverage.at(x, y) < 1) continue;
+        const double d = r.color.at(x, y, 1) - reference.color.at(x, y, 1);
+        se += d * d, bias += d, value += reference.color.at(x, y, 1), ++n;
+      }
+    EXPECT_GT(n, 1000);
+    return std::array<double, 3>{std::sqrt(se / n), bias / n, value / n};
+  };
+  const auto shared = error(16);      // the default: 4 sky rays per sub-sample
+  const auto every = error(16 * 4);  // the whole set of 16 at each of the 4 sub-samples
+  EXPECT_LT(shared[0], 2.5 * every[0]) << shared[0] << " vs " << every[0];
+  EXPECT_LT(shared[0], 0.015 * shared[2]) << shared[0] << " of " << shared[2];
+  EXPECT_LT(std::abs(shared[1]), 0.1 * shared[0]);
+  EXPECT_LT(std::abs(every[1]), 0.1 * every[0]);
+}
+
 }  // namespace
 }  // namespace sd

@@ -384,11 +384,23 @@ SaturationCap CapSaturation(ImageF* linear, const ImageF& outline, const ImageF&
   SD_CHECK(linear->channels() == 3 && outline.width() == linear->width() && outline.height() == linear->height() &&
            weight.width() == linear->width() && weight.height() == linear->height());
   // The outline's pixels, with the insert's share of each; only those change.
-  struct Pixel { int x, y; float w; };
-  std::vector<Pixel> pixels;
+  std::vector<OutlinePixel> pixels;
   for (int y = 0; y < linear->height(); ++y)
     for (int x = 0; x < linear->width(); ++x)
-      if (outline.at(x, y) > 0.5f) pixels.push_back({x, y, std::clamp(weight.at(x, y), 0.0f, 1.0f)});
+      if (outline.at(x, y) > 0.5f) pixels.push_back({x, y, weight.at(x, y)});
+  return CapSaturation(linear, pixels, ceiling, min_scale);
+}
+
+SaturationCap CapSaturation(ImageF* linear, const std::vector<OutlinePixel>& outline, double ceiling, double min_scale) {
+  SD_CHECK(linear->channels() == 3);
+  using Pixel = OutlinePixel;
+  std::vector<Pixel> pixels;
+  pixels.reserve(outline.size());
+  for (Pixel p : outline) {
+    SD_CHECK(p.x >= 0 && p.y >= 0 && p.x < linear->width() && p.y < linear->height(), << p.x << "," << p.y);
+    p.w = std::clamp(p.w, 0.0f, 1.0f);
+    pixels.push_back(p);
+  }
   SaturationCap cap;
   cap.ceiling = ceiling;
   if (pixels.empty()) return cap;

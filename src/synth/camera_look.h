@@ -122,6 +122,13 @@ struct SaturationCap {
 };
 SaturationCap CapSaturation(ImageF* linear, const ImageF& outline, const ImageF& weight, double ceiling,
                             double min_scale = 0.2);
+// The same over a list of the outline's pixels, each with its insert's share `w` (0 for a real pixel): what a
+// caller capping one object of a large image passes, instead of two masks of the image's size.
+struct OutlinePixel {
+  int x, y;
+  float w;
+};
+SaturationCap CapSaturation(ImageF* linear, const std::vector<OutlinePixel>& pixels, double ceiling, double min_scale = 0.2);
 
 // The sensor's last steps on the inserted pixels of a final sRGB image: noise of `look` (scaled by each pixel's
 // alpha), then a round trip through JPEG at the image's quality over the 8x8-aligned rectangle around them,

@@ -224,7 +224,17 @@ TEST(CameraLook, SaturationCapMovesOnlyTooColourfulInsertsToTheCeiling) {
         }
       }
     const ImageF before = linear;
+    // The same cap from the outline's pixel list (what synth passes per object).
+    ImageF by_list = linear;
+    std::vector<OutlinePixel> pixels;
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        if (outline.at(x, y) > 0.5f) pixels.push_back({x, y, weight.at(x, y)});
+    const SaturationCap listed = CapSaturation(&by_list, pixels, 0.3);
     const SaturationCap cap = CapSaturation(&linear, outline, weight, 0.3);
+    EXPECT_EQ(listed.scale, cap.scale);
+    EXPECT_EQ(listed.after, cap.after);
+    EXPECT_EQ(by_list.vector(), linear.vector());
     SCOPED_TRACE(c.colour[0]);
     if (c.capped) {
       EXPECT_GT(cap.before, 0.6);

@@ -69,7 +69,7 @@ Downsampled Downsample(const ImageU8& img, int factor, int saturated_level) {
           const uint8_t* p = img.pixel(x * factor + i, y * factor + j);
           bool s = false;
           for (int c = 0; c < 3; ++c) {
-            acc[c] += SrgbToLinear(p[c] / 255.0f);
+            acc[c] += SrgbByteToLinear(p[c]);
             s = s || p[c] >= saturated_level;
           }
           sat += s ? 1.0f : 0.0f;
@@ -658,34 +658,90 @@ namespace {
 // ReceiverShadowImage for any rule giving a hit face its light.
 template <typename LightOfFace>
 ImageF ReceiverShadowImageWith(const RayScene& scene, const PinholeCamera& camera, const Rigid3d& T_scene_cam, int receiver_mesh,
-                               const LightOfFace& light_of_face, const EnvShadingOptions& options, int x0, int y0, int x1, int y1) {
+                               const LightOfFace& light_of_face, const EnvShadingOptions& options,
+                               std::vector<std::array<int, 4>> rects) {
   ImageF out(camera.width, camera.height, 1, 1.0f);
-  if (x1 <= x0 || y1 <= y0) x0 = 0, y0 = 0, x1 = camera.width, y1 = camera.height;
-  x0 = std::max(0, x0), y0 = std::max(0, y0), x1 = std::min(camera.width, x1), y1 = std::min(camera.height, y1);
-  if (x1 <= x0 || y1 <= y0) return out;
+  if (rects.empty()) rects.push_back({0, 0, camera.width, camera.height});
+  int y0 = camera.height, y1 = 0;
+  for (const auto& r : rects)
+    if (r[0] < r[2] && r[1] < r[3]) y0 = std::min(y0, std::max(0, r[1])), y1 = std::max(y1, std::min(camera.height, r[3]));
+  if (y1 <= y0) return out;
   const Eigen::Vector3f origin = T_scene_cam.translation.cast<float>();
-  std::vector<std::exception_ptr> errors(static_cast<size_t>(y1 - y0));
-  ParallelFor(static_cast<size_t>(y0), static_cast<size_t>(y1), [&](size_t yy) {
-    const int y = static_cast<int>(yy);
-    try {
-      for (int x = x0; x < x1; ++x) {
-        const Eigen::Vector3d d = T_scene_cam.rotation * camera.RayDirection({x + 0.5, y + 0.5});
-        const RayHit hit = scene.Intersect(origin, d.cast<float>());
-        if (!hit.Hit() || hit.mesh != receiver_mesh) continue;
-        Eigen::Vector3d n = scene.GeometricNormal(hit).cast<double>();
-        if (n.squaredNorm() == 0) continue;
-        if (n.dot(d) > 0) n = -n;  // the side the camera sees
-        EnvShadingOptions o = options;
-        o.skip_mesh = receiver_mesh;
-        o.seed = options.seed * 0x9E3779B1u + static_cast<uint32_t>(y * camera.width + x);
-        out.at(x, y) = ReceiverShadowRatio(scene, scene.HitPoint(hit).cast<double>(), n, light_of_face(hit.face), o);
+  const float kNotReceiver = std::numeric_limits<float>::quiet_NaN();
+  // The ratio at pixel (x, y), or NaN where its centre ray does not reach the receiver first.
+  const auto shade = [&](int x, int y) -> float {
+    const Eigen::Vector3d d = T_scene_cam.rotation * camera.RayDirection({x + 0.5, y + 0.5});
+    const RayHit hit = scene.Intersect(origin, d.cast<float>());
+    if (!hit.Hit() || hit.mesh != receiver_mesh) return kNotReceiver;
+    Eigen::Vector3d n = scene.GeometricNormal(hit).cast<double>();
+    if (n.squaredNorm() == 0) return kNotReceiver;
+    if (n.dot(d) > 0) n = -n;  // the side the camera sees
+    EnvShadingOptions o = options;
+    o.skip_mesh = receiver_mesh;
+    o.seed = options.seed * 0x9E3779B1u + static_cast<uint32_t>(y * camera.width + x);
+    return ReceiverShadowRatio(scene, scene.HitPoint(hit).cast<double>(), n, light_of_face(hit.face), o);
+  };
+  // Rows in parallel; a throwing row keeps its exception for the caller.
+  const auto for_rows = [&](const auto& row) {
+    std::vector<std::exception_ptr> errors(static_cast<size_t>(y1 - y0));
+    ParallelFor(static_cast<size_t>(y0), static_cast<size_t>(y1), [&](size_t yy) {
+      try {
+        row(static_cast<int>(yy));
+      } catch (...) {
+        errors[yy - static_cast<size_t>(y0)] = std::current_exception();
       }
-    } catch (...) {
-      errors[yy - static_cast<size_t>(y0)] = std::current_exception();
-    }
+    });
+    for (auto& e : errors)
+      if (e) std::rethrow_exception(e);
+  };
+  const float tolerance = options.interpolate_tolerance;
+  if (!(tolerance > 0)) {
+    for_rows([&](int y) {
+      for (const auto& [x0, x1] : RowSpans(rects, y, camera.width))
+        for (int x = x0; x < x1; ++x)
+          if (const float v = shade(x, y); !std::isnan(v)) out.at(x, y) = v;
+    });
+    return out;
+  }
+  // Adaptive: the pixels of even row and column first; a pixel between four of them that all see the receiver
+  // and agree within the tolerance is their bilinear blend, any other is traced. The shade is smooth but for
+  // penumbrae and contact (where the samples disagree), and the composite blurs it further.
+  ImageF traced(camera.width, camera.height, 1, kNotReceiver);
+  Image<uint8_t> done(camera.width, camera.height, 1, 0);
+  for_rows([&](int y) {
+    if (y % 2 != 0) return;
+    for (const auto& [x0, x1] : RowSpans(rects, y, camera.width))
+      for (int x = x0 + (x0 % 2); x < x1; x += 2) {
+        traced.at(x, y) = shade(x, y);
+        done.at(x, y) = 1;
+      }
   });
-  for (auto& e : errors)
-    if (e) std::rethrow_exception(e);
+  for_rows([&](int y) {
+    for (const auto& [x0, x1] : RowSpans(rects, y, camera.width))
+      for (int x = x0; x < x1; ++x) {
+        if (!done.at(x, y)) {
+          const int gx0 = x & ~1, gy0 = y & ~1, gx1 = x % 2 ? gx0 + 2 : gx0, gy1 = y % 2 ? gy0 + 2 : gy0;
+          bool blend = gx1 < camera.width && gy1 < camera.height;
+          float lo = 2, hi = -1;
+          for (const int gy : {gy0, gy1})
+            for (const int gx : {gx0, gx1}) {
+              if (!blend) break;
+              blend = done.at(gx, gy) && !std::isnan(traced.at(gx, gy));
+              if (blend) lo = std::min(lo, traced.at(gx, gy)), hi = std::max(hi, traced.at(gx, gy));
+            }
+          if (blend && hi - lo <= tolerance) {
+            const float fx = 0.5f * static_cast<float>(x - gx0), fy = 0.5f * static_cast<float>(y - gy0);
+            const float top = (1 - fx) * traced.at(gx0, gy0) + fx * traced.at(gx1, gy0);
+            const float bottom = (1 - fx) * traced.at(gx0, gy1) + fx * traced.at(gx1, gy1);
+            out.at(x, y) = (1 - fy) * top + fy * bottom;
+            continue;
+          }
+          if (const float v = shade(x, y); !std::isnan(v)) out.at(x, y) = v;
+        } else if (!std::isnan(traced.at(x, y))) {
+          out.at(x, y) = traced.at(x, y);
+        }
+      }
+  });
   return out;
 }
 
@@ -694,19 +750,21 @@ ImageF ReceiverShadowImageWith(const RayScene& scene, const PinholeCamera& camer
 ImageF ReceiverShadowImage(const RayScene& scene, const PinholeCamera& camera, const Rigid3d& T_scene_cam, int receiver_mesh,
                            const EnvironmentLight& light, const EnvShadingOptions& options, int x0, int y0, int x1, int y1) {
   return ReceiverShadowImageWith(scene, camera, T_scene_cam, receiver_mesh,
-                                 [&](int) -> const EnvironmentLight& { return light; }, options, x0, y0, x1, y1);
+                                 [&](int) -> const EnvironmentLight& { return light; }, options,
+                                 x1 > x0 && y1 > y0 ? std::vector<std::array<int, 4>>{{x0, y0, x1, y1}}
+                                                    : std::vector<std::array<int, 4>>{});
 }
 
 ImageF ReceiverShadowImage(const RayScene& scene, const PinholeCamera& camera, const Rigid3d& T_scene_cam, int receiver_mesh,
                            const std::vector<const EnvironmentLight*>& light_of_face, const EnvShadingOptions& options,
-                           int x0, int y0, int x1, int y1) {
+                           const std::vector<std::array<int, 4>>& rects) {
   return ReceiverShadowImageWith(scene, camera, T_scene_cam, receiver_mesh,
                                  [&](int face) -> const EnvironmentLight& {
                                    SD_CHECK(face >= 0 && static_cast<size_t>(face) < light_of_face.size() && light_of_face[face],
                                             << "no light for receiver face " << face << " of " << light_of_face.size());
                                    return *light_of_face[static_cast<size_t>(face)];
                                  },
-                                 options, x0, y0, x1, y1);
+                                 options, rects);
 }
 
 Lighting RendererLighting(const EnvironmentMap& map, size_t k) {

@@ -146,6 +146,9 @@ struct EnvShadingOptions {
   uint32_t seed = 1;
   int skip_mesh = -1;     // mesh never counted as an occluder (-1 none)
   float ray_offset = 1e-3f;  // metres along the normal before tracing
+  // ReceiverShadowImage only: > 0 traces every other pixel of every other row and blends the pixels between four
+  // that see the receiver and agree within this much (of the 0..1 ratio); 0 traces every pixel.
+  float interpolate_tolerance = 0;
 };
 // Fraction of the sun disk visible from p (stratified jittered cone sampling).
 double SunVisibility(const RayScene& scene, const Eigen::Vector3d& p, const Eigen::Vector3d& normal,
@@ -165,15 +168,18 @@ float ReceiverShadowRatio(const RayScene& scene, const Eigen::Vector3d& p, const
 // Drop-in for CameraRender::shadow (render/camera_render.h) with soft shadows and radiance-weighted AO: for each
 // pixel of the rectangle [x0, x1) x [y0, y1) (all zero = whole image) a ray through the pixel centre; where it
 // first hits `receiver_mesh`, ReceiverShadowRatio there (per-pixel seed from options.seed); elsewhere 1.
+// With options.interpolate_tolerance > 0, pixels where the shade is smooth are blended from their traced
+// neighbours (a pixel's value then depends on which of its neighbours lie in the rectangle).
 ImageF ReceiverShadowImage(const RayScene& scene, const PinholeCamera& camera, const Rigid3d& T_scene_cam, int receiver_mesh,
                            const EnvironmentLight& light, const EnvShadingOptions& options = {}, int x0 = 0, int y0 = 0,
                            int x1 = 0, int y1 = 0);
 // The same with a light per receiver face: the receiver of several objects is made of their patches, each under
 // the light where its object stands (sun or shade). `light_of_face[f]` (non-null) for every face f of
-// `receiver_mesh`.
+// `receiver_mesh`. Only the pixels of `rects` ({x0, y0, x1, y1}, their union; empty = the whole image) are
+// shaded: each object's own rectangle, so the road between objects far apart costs nothing.
 ImageF ReceiverShadowImage(const RayScene& scene, const PinholeCamera& camera, const Rigid3d& T_scene_cam, int receiver_mesh,
                            const std::vector<const EnvironmentLight*>& light_of_face, const EnvShadingOptions& options = {},
-                           int x0 = 0, int y0 = 0, int x1 = 0, int y1 = 0);
+                           const std::vector<std::array<int, 4>>& rects = {});
 
 // The existing renderer's (render/camera_render.h) two-term light for camera k, from the map: the same sun,
 // and the uniform sky that gives the map's SH irradiance on an upward surface; both in camera k's pixel units.

@@ -144,7 +144,10 @@ FrameLight LightFrame(const FrameInputs& in, const Scenario& scenario, const Syn
   std::string sun_source;
   light.sun_dir = SunDirectionEgo(frame, scenario.location ? scenario.location : in.log->location, scenario.sun, &sun_source);
   if (options.light == SynthOptions::Light::kEnvironment && !placed.empty()) {
+    ScopedStage decode_stage(out ? &out->timings : nullptr, "light: decode");
     for (size_t k = 0; k < frame.cameras.size(); ++k) in.Image(k);
+    decode_stage.Stop();
+    ScopedStage map_stage(out ? &out->timings : nullptr, "light: map");
     EnvironmentOptions eo;
     eo.ephemeris_sun_ego = light.sun_dir;
     eo.detect_sun_in_images = !scenario.sun;  // a scenario's sun is the user's word
@@ -154,6 +157,7 @@ FrameLight LightFrame(const FrameInputs& in, const Scenario& scenario, const Syn
       sun_source = light.env->sun_source;
     }
     out->light = EnvironmentSummary(*light.env, sun_source);
+    map_stage.Stop();
   } else {
     out->light = options.light == SynthOptions::Light::kRoad ? "road calibration per camera" : "no objects";
   }
@@ -166,6 +170,7 @@ FrameLight LightFrame(const FrameInputs& in, const Scenario& scenario, const Syn
   light.sun_at_object.resize(placed.size());
   light.own_verdict.assign(placed.size(), false);
   if (!light.env) return light;
+  ScopedStage verdict_stage(out ? &out->timings : nullptr, "light: sun verdicts");
   std::vector<const ImageU8*> rig;
   for (size_t k = 0; k < frame.cameras.size(); ++k) rig.push_back(&in.Image(k));
   const SunVerdict all = SunVisibilityAt(*light.env, frame, rig, light.road_points);
@@ -182,47 +187,41 @@ FrameLight LightFrame(const FrameInputs& in, const Scenario& scenario, const Syn
   return light;
 }
 
-// A flat square of road under an object, large enough to catch its shadow, on the object's local plane.
+// A flat rectangle of road under an object, on the object's local plane, that catches what the object takes from
+// the road's light: its sky occlusion all round (a margin of its height, at least 1 m, beyond its footprint) and
+// its sun shadow, which falls only away from the sun (so the rectangle reaches the shadow's length further on that
+// side). Every pixel of it is shaded with soft-shadow and sky rays: a square reaching the shadow's length on all
+// four sides was 3-5 times the area, and the largest cost of a frame.
 void AddReceiverPatch(const PlacedObject& o, const Eigen::Vector3d& sun_dir, TriangleMesh* receiver) {
   const double h = o.box.size.z();
-  const double sun_el = std::asin(std::clamp(sun_dir.z(), 0.26, 1.0));  // >= 15 deg keeps patches bounded
-  const double half = 0.5 * o.box.size.head<2>().norm() + h / std::tan(sun_el) + 1.0;
-  const int n = std::clamp(static_cast<int>(2 * half / 0.25), 4, 160);
+  const Eigen::Vector3d sun_local = o.T_ego_asset.rotation.inverse() * sun_dir;
+  const double sun_el = std::asin(std::clamp(sun_local.z(), 0.26, 1.0));  // >= 15 deg keeps patches bounded
+  const double shadow_length = h / std::tan(sun_el);
+  Eigen::Vector2d away = -sun_local.head<2>();  // the direction the shadow falls in
+  if (away.norm() < 1e-6) away = Eigen::Vector2d::UnitX();  // sun overhead: no direction, and no length
+  away.normalize();
+  const Eigen::Vector2d across(-away.y(), away.x());
+  const double footprint = 0.5 * o.box.size.head<2>().norm(), margin = std::max(1.0, h);
+  const double u0 = -(footprint + margin), u1 = footprint + shadow_length + margin, v_half = footprint + margin;
+  const int nu = std::clamp(static_cast<int>(std::ceil((u1 - u0) / 0.25)), 4, 160);
+  const int nv = std::clamp(static_cast<int>(std::ceil(2 * v_half / 0.25)), 4, 160);
   const int base = static_cast<int>(receiver->positions.size());
-  for (int j = 0; j <= n; ++j)
-    for (int i = 0; i <= n; ++i) {
-      const double u = -half + 2 * half * i / n, v = -half + 2 * half * j / n;
+  for (int j = 0; j <= nv; ++j)
+    for (int i = 0; i <= nu; ++i) {
+      const Eigen::Vector2d p = (u0 + (u1 - u0) * i / nu) * away + (-v_half + 2 * v_half * j / nv) * across;
       // In the asset frame (origin on the ground, z along the local normal), lifted 1 mm so shadow rays
       // from the receiver do not start inside the object's base.
-      receiver->positions.push_back((o.T_ego_asset * Eigen::Vector3d(u, v, 0.001)).cast<float>());
+      receiver->positions.push_back((o.T_ego_asset * Eigen::Vector3d(p.x(), p.y(), 0.001)).cast<float>());
     }
-  for (int j = 0; j < n; ++j)
-    for (int i = 0; i < n; ++i) {
-      const int a = base + j * (n + 1) + i;
-      receiver->faces.push_back({a, a + 1, a + n + 2});
-      receiver->faces.push_back({a, a + n + 2, a + n + 1});
+  for (int j = 0; j < nv; ++j)
+    for (int i = 0; i < nu; ++i) {
+      const int a = base + j * (nu + 1) + i;
+      // Wound counter-clockwise seen from above whatever the shadow's direction: (away, across) is right-handed.
+      receiver->faces.push_back({a, a + 1, a + nu + 2});
+      receiver->faces.push_back({a, a + nu + 2, a + nu + 1});
     }
 }
 
-// The scene in the ego frame: the objects, then one receiver mesh for their shadows.
-ObjectScene BuildObjectScene(const std::vector<PlacedObject>& placed, const Eigen::Vector3d& sun_dir) {
-  ObjectScene s;
-  s.receiver = std::make_shared<TriangleMesh>();
-  for (const auto& o : placed) {
-    auto mesh = std::make_shared<TriangleMesh>(o.asset->mesh);
-    mesh->Transform(o.T_ego_asset);
-    if (mesh->normals.empty()) mesh->ComputeVertexNormals();
-    s.scene.AddMesh(mesh);
-    AddReceiverPatch(o, sun_dir, s.receiver.get());
-    s.receiver_faces_end.push_back(s.receiver->faces.size());
-  }
-  s.receiver_id = s.scene.AddMesh(s.receiver);
-  s.scene.Commit();
-  for (const auto& o : placed)
-    for (const auto& c : o.box.Corners()) s.extent_points.push_back(c);
-  for (const auto& p : s.receiver->positions) s.extent_points.push_back(p.cast<double>());
-  return s;
-}
 
 // Each object's label as far as placement decides it: category in the log's vocabulary, 3D box, track.
 std::vector<ObjectOutcome> LabelObjects(const Log& log, const std::vector<PlacedObject>& placed, const SequencePlan* plan,
@@ -380,6 +379,31 @@ void DropUnobserved(FrameOutcome* out) {
 }
 
 }  // namespace
+
+// The scene in the ego frame: the objects, then one receiver mesh for their shadows.
+ObjectScene BuildObjectScene(const std::vector<PlacedObject>& placed, const Eigen::Vector3d& sun_dir) {
+  ObjectScene s;
+  s.receiver = std::make_shared<TriangleMesh>();
+  for (const auto& o : placed) {
+    auto mesh = std::make_shared<TriangleMesh>(o.asset->mesh);
+    mesh->Transform(o.T_ego_asset);
+    if (mesh->normals.empty()) mesh->ComputeVertexNormals();
+    s.scene.AddMesh(mesh);
+    const size_t first_vertex = s.receiver->positions.size();
+    AddReceiverPatch(o, sun_dir, s.receiver.get());
+    s.receiver_faces_end.push_back(s.receiver->faces.size());
+    std::vector<Eigen::Vector3d> extent;
+    for (const auto& c : o.box.Corners()) extent.push_back(c);
+    // Every vertex, not only the corners: a patch reaching behind a camera still projects its part in front.
+    for (size_t v = first_vertex; v < s.receiver->positions.size(); ++v) extent.push_back(s.receiver->positions[v].cast<double>());
+    s.extent_points.insert(s.extent_points.end(), extent.begin(), extent.end());
+    s.extent_of.push_back(std::move(extent));
+  }
+  s.receiver_id = s.scene.AddMesh(s.receiver);
+  s.scene.Commit();
+  return s;
+}
+
 }  // namespace frame_stages
 
 models::Harmonizer ResolveSynthHarmonizer(const std::string& choice) {
@@ -436,20 +460,32 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
   FrameOutcome out;
   out.frame_index = frame_index;
   out.edit.frame_index = frame_index;
+  StageTimes* times = &out.timings;
+  ScopedStage read_stage(times, "read");
   const FrameInputs in = ReadFrameInputs(log, frame_index, scenario, &out);
+  read_stage.Stop();
   std::vector<int> plan_index;
+  ScopedStage place_stage(times, "place");
   const std::vector<PlacedObject> placed = PlaceFrameObjects(in, assets, scenario, plan, &plan_index);
+  place_stage.Stop();
+  ScopedStage light_stage(times, "light");
   const FrameLight light = LightFrame(in, scenario, options, placed, &out);
+  light_stage.Stop();
+  ScopedStage scene_stage(times, "scene");
   const ObjectScene scene = BuildObjectScene(placed, light.sun_dir);
+  scene_stage.Stop();
   out.objects = LabelObjects(log, placed, plan, plan_index);
 
   std::shared_ptr<const models::Harmonizer> harmonizer = options.harmonizer_model;
   if (!harmonizer && options.harmonizer != "none" && !placed.empty())
     harmonizer = std::make_shared<const models::Harmonizer>(ResolveSynthHarmonizer(options.harmonizer));
   std::map<std::string, SaturationReference> colour_reference;
+  ScopedStage reference_stage(times, "colour reference");
   if (options.camera_look.colour && !placed.empty()) colour_reference = ColourReference(in, placed, plan);
-  const CameraStageInput stage{&in, &placed, &light, &scene, harmonizer.get(), &options,
-                               options.camera_look.colour ? &colour_reference : nullptr, plan != nullptr};
+  reference_stage.Stop();
+  const CameraStageInput stage{&in,      &placed, &light, &scene, harmonizer.get(), &options,
+                               options.camera_look.colour ? &colour_reference : nullptr,
+                               plan != nullptr,  times};
   for (size_t cam_index = 0; cam_index < in.frame->cameras.size(); ++cam_index) {
     std::optional<CameraOutcome> camera = SynthesizeCamera(stage, cam_index, &out.objects);
     if (!camera) continue;
@@ -457,7 +493,9 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
     out.cameras.push_back(std::move(*camera));
   }
 
+  ScopedStage lidar_stage(times, "lidar");
   SimulateFrameLidar(in, placed, options, &out);
+  lidar_stage.Stop();
   FinishLabels(&out);
   if (plan) DropUnobserved(&out);
   return out;

@@ -31,12 +31,23 @@ constexpr int kDepthMargin = 8;
 // residual 2.8-7.6x its own) until the camera look blurs the shade (kShadeBlurSigma).
 constexpr int kShadowSunRays = 8;
 
+// Where the shade on the road varies less than this over two pixels, it is blended rather than traced at every
+// pixel (EnvShadingOptions::interpolate_tolerance): about the grain of the 8 sun rays and the sky rays in an
+// umbra or in open light, so penumbrae and contact shadows stay traced per pixel, and about three in four pixels of
+// the rest are not.
+constexpr float kShadeInterpolateTolerance = 0.03f;
+
 // The least blur of the shade map when the camera look blurs (pixels).
 constexpr double kShadeBlurSigma = 1.5;
 
 // The pixel rectangle a camera redraws: [x0, x1) x [y0, y1).
 struct Rect {
   int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+};
+
+// Per object, the pixel rectangles {x0, y0, x1, y1} of its box, and of its box with its shadow's receiver patch.
+struct PixelRects {
+  std::vector<std::array<int, 4>> boxes, with_shadows;
 };
 
 // The light at the objects in one camera. With the environment map, each object under its own sun verdict,
@@ -77,7 +88,7 @@ struct ObjectRender {
   CameraRender render;
   ImageF shadow;
 };
-ObjectRender RenderObjects(const CameraStageInput& st, const CameraSensor& cam, const CameraLight& cl, const Rect& rect) {
+ObjectRender RenderObjects(const CameraStageInput& st, const CameraSensor& cam, const CameraLight& cl, const PixelRects& rects) {
   const ObjectScene& s = *st.scene;
   CameraRenderOptions ropt;
   ropt.samples_per_pixel = st.options->samples_per_pixel;
@@ -85,25 +96,26 @@ ObjectRender RenderObjects(const CameraStageInput& st, const CameraSensor& cam, 
   ropt.receiver_mesh = s.receiver_id;
   ropt.receiver_shadow = !cl.object_light;  // the map's light shades the road below (ReceiverShadowImage)
   for (const ObjectLight& l : cl.of_object) ropt.mesh_lighting.push_back(l.lighting);  // mesh k = object k
-  ropt.x0 = rect.x0;
-  ropt.y0 = rect.y0;
-  ropt.x1 = rect.x1;
-  ropt.y1 = rect.y1;
+  // Under the map's light the renderer draws only the objects; under the road's it shades their road too.
+  ropt.rects = ropt.receiver_shadow ? rects.with_shadows : rects.boxes;
   ropt.seed = st.in->seeds.render;
   ObjectRender r;
+  ScopedStage render_stage(st.times, "camera render");
   r.render = RenderCamera(s.scene, cam.intrinsics, cam.T_ego_cam, cl.lighting, ropt);
+  render_stage.Stop();
   r.shadow = r.render.shadow;
   if (cl.object_light) {
+    ScopedStage shadow_stage(st.times, "camera shadows");
     EnvShadingOptions so;
     so.sun_rays = kShadowSunRays;
     so.sky_rays = st.options->ao_samples;
+    so.interpolate_tolerance = kShadeInterpolateTolerance;
     so.seed = ropt.seed;
     so.skip_mesh = s.receiver_id;
     std::vector<const EnvironmentLight*> light_of_face(s.receiver->faces.size());
     for (size_t k = 0, f = 0; k < st.placed->size(); ++k)
       for (; f < s.receiver_faces_end[k]; ++f) light_of_face[f] = &cl.of_object[k].shading;
-    r.shadow = ReceiverShadowImage(s.scene, cam.intrinsics, cam.T_ego_cam, s.receiver_id, light_of_face, so, rect.x0, rect.y0,
-                                   rect.x1, rect.y1);
+    r.shadow = ReceiverShadowImage(s.scene, cam.intrinsics, cam.T_ego_cam, s.receiver_id, light_of_face, so, rects.with_shadows);
   }
   return r;
 }
@@ -241,31 +253,43 @@ double RenderEdgeRise(const ObjectRender& r, const Rect& rect) {
 // surroundings they are matched to), one object at a time. Returns how many objects it harmonised.
 int HarmonizeObjects(const models::Harmonizer& harmonizer, const ObjectRender& r, const Composite& c, size_t n_objects,
                      const Rect& rect, ImageF* linear) {
-  // On a crop: the objects' rectangle grown by the widest background ring the classical transfer reads
-  // (0.25 sqrt(object pixels), HarmonizeOptions::ring_px), so the whole photograph is not converted per camera.
-  const int margin = 2 + static_cast<int>(std::ceil(0.25 * std::sqrt(double(rect.x1 - rect.x0) * (rect.y1 - rect.y0))));
-  const int cx0 = std::max(0, rect.x0 - margin), cy0 = std::max(0, rect.y0 - margin);
-  const int cx1 = std::min(linear->width(), rect.x1 + margin), cy1 = std::min(linear->height(), rect.y1 + margin);
-  ImageF composite(cx1 - cx0, cy1 - cy0, 3);
-  for (int y = cy0; y < cy1; ++y)
-    for (int x = cx0; x < cx1; ++x)
-      for (int ch = 0; ch < 3; ++ch) composite.at(x - cx0, y - cy0, ch) = LinearToSrgb(std::clamp(linear->at(x, y, ch), 0.0f, 1.0f));
+  // Each object's pixel bounds in the render.
+  std::vector<Rect> bounds(n_objects, Rect{linear->width(), linear->height(), -1, -1});
+  for (int y = rect.y0; y < rect.y1; ++y)
+    for (int x = rect.x0; x < rect.x1; ++x) {
+      const int id = r.render.object.at(x, y);
+      if (id < 0 || id >= static_cast<int>(n_objects)) continue;
+      Rect& b = bounds[static_cast<size_t>(id)];
+      b.x0 = std::min(b.x0, x), b.y0 = std::min(b.y0, y), b.x1 = std::max(b.x1, x + 1), b.y1 = std::max(b.y1, y + 1);
+    }
   int harmonized = 0;
   for (size_t k = 0; k < n_objects; ++k) {
-    if (c.visible[k] < 4) continue;
+    const Rect& b = bounds[k];
+    if (c.visible[k] < 4 || b.x1 <= b.x0) continue;
+    // On a crop of the object's bounds grown by more than the widest background ring the classical transfer reads
+    // (max(4, 0.25 sqrt(object pixels)), HarmonizeOptions::ring_px): the result is the same as on the whole image,
+    // which costs a conversion of the photograph per object.
+    const double area = static_cast<double>(b.x1 - b.x0) * (b.y1 - b.y0);
+    const int margin = 2 + std::max(4, static_cast<int>(std::ceil(0.25 * std::sqrt(area))));
+    const int cx0 = std::max(0, b.x0 - margin), cy0 = std::max(0, b.y0 - margin);
+    const int cx1 = std::min(linear->width(), b.x1 + margin), cy1 = std::min(linear->height(), b.y1 + margin);
+    ImageF composite(cx1 - cx0, cy1 - cy0, 3);
     ImageF mask(composite.width(), composite.height(), 1, 0.0f);
-    for (int y = rect.y0; y < rect.y1; ++y)
-      for (int x = rect.x0; x < rect.x1; ++x)
-        if (r.render.object.at(x, y) == static_cast<int>(k)) mask.at(x - cx0, y - cy0) = c.object_alpha.at(x, y);
-    composite = harmonizer.Harmonize(composite, mask);
+    for (int y = cy0; y < cy1; ++y)
+      for (int x = cx0; x < cx1; ++x) {
+        for (int ch = 0; ch < 3; ++ch) composite.at(x - cx0, y - cy0, ch) = LinearToSrgb(std::clamp(linear->at(x, y, ch), 0.0f, 1.0f));
+        if (x >= b.x0 && x < b.x1 && y >= b.y0 && y < b.y1 && r.render.object.at(x, y) == static_cast<int>(k))
+          mask.at(x - cx0, y - cy0) = c.object_alpha.at(x, y);
+      }
+    const ImageF out = harmonizer.Harmonize(composite, mask);
+    // Back to linear only where the object is: elsewhere the harmoniser returned the composite bit for bit, and the
+    // round trip through sRGB would not be.
+    for (int y = b.y0; y < b.y1; ++y)
+      for (int x = b.x0; x < b.x1; ++x)
+        if (mask.at(x - cx0, y - cy0) > 0)
+          for (int ch = 0; ch < 3; ++ch) linear->at(x, y, ch) = SrgbToLinear(out.at(x - cx0, y - cy0, ch));
     ++harmonized;
   }
-  // Back to linear only where an object is: elsewhere the harmoniser returned the composite bit for bit, and the
-  // round trip through sRGB would not be.
-  for (int y = rect.y0; y < rect.y1; ++y)
-    for (int x = rect.x0; x < rect.x1; ++x)
-      if (c.object_alpha.at(x, y) > 0)
-        for (int ch = 0; ch < 3; ++ch) linear->at(x, y, ch) = SrgbToLinear(composite.at(x - cx0, y - cy0, ch));
   return harmonized;
 }
 
@@ -295,11 +319,13 @@ nlohmann::json CapInsertSaturation(const CameraStageInput& st, const CameraSenso
       rec["reference"] = "image";
       rec["note"] = std::string("no real ") + category + " in the " + scope + "'s images: capped at the image's 99.5th percentile";
     }
-    ImageF weight(linear->width(), linear->height(), 1, 0.0f);
-    for (int y = rect.y0; y < rect.y1; ++y)
-      for (int x = rect.x0; x < rect.x1; ++x)
-        if (r.render.object.at(x, y) == static_cast<int>(k)) weight.at(x, y) = c.object_alpha.at(x, y);
-    const SaturationCap cap = CapSaturation(linear, ObjectOutlinesMask(cam, {placed[k].box}, 0), weight, ceiling);
+    // The outline's pixels with the insert's share of each: this object's pixels of the render.
+    std::vector<OutlinePixel> pixels;
+    for (const auto& [x, y] : ObjectOutlinePixels(cam, placed[k].box)) {
+      const bool mine = x >= rect.x0 && x < rect.x1 && y >= rect.y0 && y < rect.y1 && r.render.object.at(x, y) == static_cast<int>(k);
+      pixels.push_back({x, y, mine ? c.object_alpha.at(x, y) : 0.0f});
+    }
+    const SaturationCap cap = CapSaturation(linear, pixels, ceiling);
     rec["saturation_ceiling"] = cap.ceiling;
     rec["saturation_before"] = cap.before;
     rec["saturation_after"] = cap.after;
@@ -339,15 +365,31 @@ std::optional<CameraOutcome> SynthesizeCamera(const CameraStageInput& st, size_t
   const auto projected_rect = ProjectedRect(cam.intrinsics, cam.T_ego_cam.Inverse(), st.scene->extent_points, 2);
   if (!projected_rect) return std::nullopt;
   const Rect rect{(*projected_rect)[0], (*projected_rect)[1], (*projected_rect)[2], (*projected_rect)[3]};
+  // Each object's own rectangles, for the stages that trace rays per pixel: its box's, and its box's with its
+  // shadow's patch (the shadow stages).
+  PixelRects rects;
+  const Rigid3d T_cam_ego = cam.T_ego_cam.Inverse();
+  for (size_t k = 0; k < placed.size(); ++k) {
+    const auto corners = placed[k].box.Corners();
+    if (const auto r = ProjectedRect(cam.intrinsics, T_cam_ego, {corners.begin(), corners.end()}, 2)) rects.boxes.push_back(*r);
+    if (const auto r = ProjectedRect(cam.intrinsics, T_cam_ego, st.scene->extent_of[k], 2)) rects.with_shadows.push_back(*r);
+  }
 
+  ScopedStage read_stage(st.times, "camera read");
   const ImageU8& original = st.in->Image(cam_index);
   ImageF linear = ToLinear(original);
+  read_stage.Stop();
+  ScopedStage light_stage(st.times, "camera light");
   const CameraLight cl = LightOfCamera(st, cam_index, linear);
-  const ObjectRender r = RenderObjects(st, cam, cl, rect);
+  light_stage.Stop();
+  const ObjectRender r = RenderObjects(st, cam, cl, rects);
+  ScopedStage occlusion_stage(st.times, "camera occlusion");
   const ImageF receiver_depth = ReceiverDepth(cam, st.in->ground->seed_plane(), r, rect);
   const OcclusionMasks occ = OccludeByScene(st, cam, original, r, receiver_depth, rect);
+  occlusion_stage.Stop();
   const CameraLookOptions& look_options = st.options->camera_look;
   const bool any_look = look_options.blur || look_options.noise || look_options.jpeg || look_options.colour;
+  ScopedStage look_stage(st.times, "camera look");
   CameraLook look;
   if (any_look) {
     const ImageF real_objects = ObjectOutlinesMask(cam, st.in->real_boxes, kMinRealObjectPixels);
@@ -355,27 +397,37 @@ std::optional<CameraOutcome> SynthesizeCamera(const CameraStageInput& st, size_t
   }
   const double render_rise = look_options.blur ? RenderEdgeRise(r, rect) : 0;
   const double blur = look_options.blur ? ExtraBlurSigma(render_rise, look.TargetEdgeRise()) : 0;
+  look_stage.Stop();
+  ScopedStage composite_stage(st.times, "camera composite");
   const Composite c = CompositeObjects(r, occ, placed.size(), rect, blur, &linear);
+  composite_stage.Stop();
   if (!c.changed) return std::nullopt;
   std::string harmonized;
   if (st.harmonizer) {
+    ScopedStage harmonize_stage(st.times, "camera harmonise");
     const int n = HarmonizeObjects(*st.harmonizer, r, c, placed.size(), rect, &linear);
     harmonized = Msg() << "; harmonised: " << n << " object(s) (" << (st.harmonizer->learned() ? "learned" : "classical") << ")";
   }
+  ScopedStage colour_stage(st.times, "camera colour");
   for (int y = rect.y0; y < rect.y1; ++y)
     for (int x = rect.x0; x < rect.x1; ++x)
       for (int ch = 0; ch < 3; ++ch) linear.at(x, y, ch) = std::max(0.0f, linear.at(x, y, ch) - c.shadow_only_loss.at(x, y, ch));
 
   const nlohmann::json colour = st.colour_reference ? CapInsertSaturation(st, cam, original, r, c, rect, &linear) : nlohmann::json();
+  colour_stage.Stop();
 
+  ScopedStage sensor_stage(st.times, "camera sensor");
   CameraOutcome co;
   co.channel = cam.channel;
   co.before = original;
-  co.after = ToSrgb8(linear);
+  // Only the redrawn rectangle is converted back: every other pixel stays the photograph's own byte.
+  co.after = original;
+  ToSrgb8Region(linear, rect.x0, rect.y0, rect.x1, rect.y1, &co.after);
   // The sensor's last steps, on the inserted pixels only: its noise, then its compression.
   const uint64_t sensor_seed = st.in->seeds.sensor ^ (0x9E3779B97F4A7C15ull * (cam_index + 1));
   ApplySensorToInserts(&co.after, c.object_alpha, &c.shadow_noise, rect.x0, rect.y0, rect.x1, rect.y1, look, look_options,
                        sensor_seed);
+  sensor_stage.Stop();
   co.light = DescribeCameraLight(cl, c, *st.light) + harmonized;
   if (any_look) {
     co.look = look.ToJson();

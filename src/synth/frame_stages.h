@@ -64,7 +64,12 @@ struct ObjectScene {
   std::vector<size_t> receiver_faces_end;  // object k's patch: faces [end of k - 1, end of k) of the receiver
   int receiver_id = -1;
   std::vector<Eigen::Vector3d> extent_points;  // everything a camera may need to redraw: boxes and receivers
+  std::vector<std::vector<Eigen::Vector3d>> extent_of;  // the same per object: its box and its receiver patch
 };
+// Each object's receiver patch is a rectangle on its local ground that holds its sun shadow (the shadow of its box
+// for the sun `sun_dir` in the ego frame, at least 15 degrees up) and a margin of its height (at least 1 m) round its
+// footprint for the sky it hides.
+ObjectScene BuildObjectScene(const std::vector<PlacedObject>& placed, const Eigen::Vector3d& sun_dir);
 
 // What every camera shares.
 struct CameraStageInput {
@@ -77,6 +82,7 @@ struct CameraStageInput {
   // The camera look's colour reference (ColourReference); null when the look's colour step is off.
   const std::map<std::string, SaturationReference>* colour_reference = nullptr;
   bool sequence = false;  // that reference is a planned sequence's
+  StageTimes* times = nullptr;  // where the camera stages add their seconds (FrameOutcome::timings)
 };
 
 // The colour reference of a frame's inserts: per category placed, its most saturated real object (realism.h

@@ -10,6 +10,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/stage_times.h"
 #include "core/image.h"
 #include "core/pointcloud.h"
 #include "datasets/writers.h"
@@ -55,6 +56,9 @@ struct FrameOutcome {
   std::string lidar_model = "off";
   std::optional<LidarModel> lidar_model_fit;  // the fitted model itself; in memory only (not in parts)
   bool lidar_ego_motion = false;              // rolling shutter from the neighbouring frames' ego poses
+  // Seconds per stage of SynthesizeFrame ("read", "light", "camera render", ...; camera stages summed over the
+  // cameras): where the frame's time went. In memory only; benchmarks and --verbose print it.
+  StageTimes timings;
 };
 
 }  // namespace sd

@@ -118,6 +118,12 @@ ImageF ObjectOutlinesMask(const CameraSensor& camera, const std::vector<Box3>& b
   return mask;
 }
 
+std::vector<std::pair<int, int>> ObjectOutlinePixels(const CameraSensor& camera, const Box3& box_ego) {
+  std::vector<std::pair<int, int>> pixels;
+  ForEachOutlinePixel(camera, box_ego, [&](int x, int y) { pixels.emplace_back(x, y); });
+  return pixels;
+}
+
 LookComparison CompareLooks(const std::vector<ObjectLook>& objects) {
   LookComparison c;
   std::vector<double> noise[2], edges[2], saturation[2];

@@ -48,6 +48,9 @@ double MeasureSaturation(const ImageU8& image, const CameraSensor& camera, const
 // The projected outlines of `boxes_ego` in `camera`'s image as a mask (1 inside), skipping outlines of fewer
 // than `min_pixels` pixels inside the image: where the real objects of an image are.
 ImageF ObjectOutlinesMask(const CameraSensor& camera, const std::vector<Box3>& boxes_ego, int min_pixels);
+// The pixels (x, y) of one box's outline, the same as its mask: for per-object work that should not touch the
+// whole image.
+std::vector<std::pair<int, int>> ObjectOutlinePixels(const CameraSensor& camera, const Box3& box_ego);
 
 // Mean and spread of a statistic over objects, for the ratio inserted / real.
 struct LookComparison {

@@ -21,6 +21,14 @@ cat > "$T/one_cone.json" <<'J'
 {"seed": 3, "objects": [{"category": "traffic_cone", "count": 1, "distance_m": [6, 15], "lateral_m": [-3, 3]}]}
 J
 
+# LibTorch is loaded only by a process that runs a model (models/torch_backend.h): listing the categories maps
+# none of its libraries.
+if LD_DEBUG=files "$BIN" categories 2>&1 >/dev/null | grep -q "file=libtorch"; then
+  bad "synthdrive categories loaded LibTorch"
+else
+  ok
+fi
+
 # expect_error <name> <fragment expected in stderr> <output dir that must not exist> -- command...
 expect_error() {
   local name=$1 fragment=$2 out=$3

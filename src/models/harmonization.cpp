@@ -123,8 +123,10 @@ Harmonizer Harmonizer::Resolve(const std::string& choice, const RuntimeOptions& 
   if (choice == "auto") {
     const std::filesystem::path file = DefaultModelDir() / kHarmonizerFile;
     std::error_code ec;
-    if (RuntimeAvailable() && std::filesystem::is_regular_file(file, ec)) return FromModel(file, runtime);
-    const std::string why = RuntimeAvailable() ? file.string() + " not installed" : RuntimeDescription();
+    // The file first: asking for the runtime loads LibTorch, which a run without models should not pay for.
+    const bool installed = std::filesystem::is_regular_file(file, ec);
+    if (installed && RuntimeAvailable()) return FromModel(file, runtime);
+    const std::string why = !installed ? file.string() + " not installed" : RuntimeDescription();
     SD_LOG(Info, "harmonisation: no learned model (" << why << "); using the classical Lab statistics transfer");
     return Classical(options);
   }

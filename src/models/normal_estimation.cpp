@@ -30,7 +30,7 @@ NormalEstimator NormalEstimator::Resolve(const std::string& choice, const Runtim
   if (choice != "auto") return FromModel(choice, runtime);
   const std::filesystem::path file = DefaultModelDir() / kNormalEstimatorFile;
   std::error_code ec;
-  if (!RuntimeAvailable())
+  if (std::filesystem::is_regular_file(file, ec) && !RuntimeAvailable())
     throw InputError(file, Msg() << "normal estimation needs a learned model and " << RuntimeDescription()
                                  << " (there is no classical single-image method)");
   if (!std::filesystem::is_regular_file(file, ec))

@@ -57,14 +57,15 @@ Segmenter Segmenter::Resolve(const std::string& choice, const RuntimeOptions& ru
   if (choice == "auto") {
     const std::filesystem::path file = DefaultModelDir() / "isnet.pt";
     std::error_code ec;
-    if (!RuntimeAvailable()) {
-      SD_LOG(Warn, "segmentation: " << RuntimeDescription() << "; using the classical GrabCut");
-      return Classical();
-    }
+    // The file first: asking for the runtime loads LibTorch, which a run without models should not pay for.
     if (!std::filesystem::is_regular_file(file, ec)) {
       SD_LOG(Warn, "segmentation: no learned model installed (" << file.string()
                                                                << "; scripts/fetch_isnet.sh installs ISNet, "
                                                                   "AGPL-3.0, opt-in); using the classical GrabCut");
+      return Classical();
+    }
+    if (!RuntimeAvailable()) {
+      SD_LOG(Warn, "segmentation: " << RuntimeDescription() << "; using the classical GrabCut");
       return Classical();
     }
     return FromModel(file, runtime);

@@ -67,14 +67,15 @@ Upscaler Upscaler::Resolve(const std::string& choice, int scale, const RuntimeOp
   if (choice == "auto") {
     const std::filesystem::path file = InstalledModel("esrgan-slim", scale);
     std::error_code ec;
-    if (!RuntimeAvailable()) {
-      SD_LOG(Warn, "super-resolution: " << RuntimeDescription() << "; using the classical bicubic upscaler");
-      return Classical(scale);
-    }
+    // The file first: asking for the runtime loads LibTorch, which a run without models should not pay for.
     if (!std::filesystem::is_regular_file(file, ec)) {
       SD_LOG(Warn, "super-resolution: no learned ×" << scale << " model installed (" << file.string()
                                                    << "; scripts/fetch_models.sh installs it); "
                                                    << "using the classical bicubic upscaler");
+      return Classical(scale);
+    }
+    if (!RuntimeAvailable()) {
+      SD_LOG(Warn, "super-resolution: " << RuntimeDescription() << "; using the classical bicubic upscaler");
       return Classical(scale);
     }
     return FromModel(file, runtime, options);

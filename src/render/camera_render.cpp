@@ -83,6 +83,23 @@ Frame ShadingFrame(const RayScene& scene, const RayHit& hit, const Eigen::Vector
   return {OffsetPoint(scene.HitPoint(hit), n_geom), n_shade};
 }
 
+// The light of a pixel traced in full whose sub-samples all hit one object (RenderCamera's adaptive mode).
+struct LightAnchor {
+  int mesh = -1;  // -1: not an anchor (edge, background, several objects)
+  float sun = 0;  // sun visibility, mean over the sub-samples
+  float sky = 0;  // open sky share, mean over the sub-samples
+  Eigen::Vector3f normal = Eigen::Vector3f::Zero();  // mean shading normal, unit
+};
+// The light a pixel between four alike anchors takes instead of tracing it.
+struct LightHint {
+  int mesh;
+  float sun, sky;
+  Eigen::Vector3f normal;
+};
+// Anchors and sub-samples must face within ~18 degrees of each other for the light to carry over: across a crease
+// the sky a surface sees changes at once.
+constexpr float kHintNormalCos = 0.95f;
+
 }  // namespace
 
 CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, const Rigid3d& T_scene_cam,
@@ -121,89 +138,163 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
   const int receiver = options.receiver_mesh;
   const float inf = std::numeric_limits<float>::infinity();
 
-  ParallelFor(static_cast<size_t>(y0), static_cast<size_t>(y1), [&](size_t row) {
-    const int y = static_cast<int>(row);
-    std::vector<int> ids(static_cast<size_t>(spp));
-    for (const auto& [x0, x1] : RowSpans(rects, y, w))
-    for (int x = x0; x < x1; ++x) {
-      PixelRng rng(options.seed, x, y);
-      Eigen::Vector3f color = Eigen::Vector3f::Zero();
-      int n_obj = 0, n_recv = 0;
-      float depth = inf;
-      double shadow_sum = 0.0;
-      for (int s = 0; s < spp; ++s) {
-        const Eigen::Vector2f jitter = Stratified(s, spp, rng);
-        const Eigen::Vector3d d_cam = camera.RayDirection(Eigen::Vector2d(x + jitter.x(), y + jitter.y()));
-        const Eigen::Vector3f dir = (R_scene_cam * d_cam).cast<float>().normalized();
-        // The receiver stands in for the real road, which is in the photo already: it never hides an object (a
-        // patch laid on a kerb's slope rises metres away from its object). Objects first, the receiver where none.
-        RayHit hit = scene.Intersect(origin, dir, 0.0f, inf, receiver);
-        if (!hit.Hit() && receiver >= 0 && options.receiver_shadow) hit = scene.Intersect(origin, dir);
-        if (!hit.Hit()) continue;
-        const Frame f = ShadingFrame(scene, hit, dir);
-        const float cos_sun = std::max(0.0f, f.n_shade.dot(sun_dir));
+  const bool adaptive = options.light_blend_tolerance > 0;
 
-        if (hit.mesh == receiver) {
-          if (!options.receiver_shadow) continue;
-          // Light the real road got (no objects) vs what it gets now; visibility ignores the road itself.
-          const bool sun_visible = cos_sun > 0 && !scene.Occluded(f.p_offset, sun_dir, 0.0f, inf, receiver);
-          int sky_with = 0, sky_without = 0;
-          for (int k = s * ao_each; k < (s + 1) * ao_each; ++k) {
-            const Eigen::Vector3f d = CosineDirection(f.n_shade, Stratified(k, n_ao_set, rng));
-            if (d.z() <= 0) continue;
-            ++sky_without;
-            if (!scene.Occluded(f.p_offset, d, 0.0f, inf, receiver)) ++sky_with;
-          }
-          const float ao_with = ao_each > 0 ? static_cast<float>(sky_with) / ao_each : 1.0f;
-          const float ao_without = ao_each > 0 ? static_cast<float>(sky_without) / ao_each : 1.0f;
-          const float den = sun_y * cos_sun + sky_y * kPi * ao_without;
-          const float num = sun_y * cos_sun * (sun_visible ? 1.0f : 0.0f) + sky_y * kPi * ao_with;
-          shadow_sum += den > 0 ? num / den : 1.0f;
-          ++n_recv;
-          continue;
+  // One pixel. With `hint`, sub-samples on the hint's mesh facing its way take its light (sun visibility and
+  // open sky) instead of tracing it; with `anchor`, a pixel whose sub-samples all hit one object records its light.
+  const auto render_pixel = [&](int x, int y, const LightHint* hint, LightAnchor* anchor, bool write) {
+    PixelRng rng(options.seed, x, y);
+    Eigen::Vector3f color = Eigen::Vector3f::Zero();
+    int n_obj = 0, n_recv = 0;
+    float depth = inf;
+    double shadow_sum = 0.0;
+    std::array<int, 16> ids_small{};
+    std::vector<int> ids_large(spp > 16 ? static_cast<size_t>(spp) : 0);
+    int* ids = spp > 16 ? ids_large.data() : ids_small.data();
+    float anchor_sun = 0, anchor_sky = 0;
+    Eigen::Vector3f anchor_normal = Eigen::Vector3f::Zero();
+    for (int s = 0; s < spp; ++s) {
+      const Eigen::Vector2f jitter = Stratified(s, spp, rng);
+      const Eigen::Vector3d d_cam = camera.RayDirection(Eigen::Vector2d(x + jitter.x(), y + jitter.y()));
+      const Eigen::Vector3f dir = (R_scene_cam * d_cam).cast<float>().normalized();
+      // The receiver stands in for the real road, which is in the photo already: it never hides an object (a
+      // patch laid on a kerb's slope rises metres away from its object). Objects first, the receiver where none.
+      RayHit hit = scene.Intersect(origin, dir, 0.0f, inf, receiver);
+      if (!hit.Hit() && receiver >= 0 && options.receiver_shadow) hit = scene.Intersect(origin, dir);
+      if (!hit.Hit()) continue;
+      const Frame f = ShadingFrame(scene, hit, dir);
+      const float cos_sun = std::max(0.0f, f.n_shade.dot(sun_dir));
+
+      if (hit.mesh == receiver) {
+        if (!options.receiver_shadow) continue;
+        // Light the real road got (no objects) vs what it gets now; visibility ignores the road itself.
+        const bool sun_visible = cos_sun > 0 && !scene.Occluded(f.p_offset, sun_dir, 0.0f, inf, receiver);
+        int sky_with = 0, sky_without = 0;
+        for (int k = s * ao_each; k < (s + 1) * ao_each; ++k) {
+          const Eigen::Vector3f d = CosineDirection(f.n_shade, Stratified(k, n_ao_set, rng));
+          if (d.z() <= 0) continue;
+          ++sky_without;
+          if (!scene.Occluded(f.p_offset, d, 0.0f, inf, receiver)) ++sky_with;
         }
+        const float ao_with = ao_each > 0 ? static_cast<float>(sky_with) / ao_each : 1.0f;
+        const float ao_without = ao_each > 0 ? static_cast<float>(sky_without) / ao_each : 1.0f;
+        const float den = sun_y * cos_sun + sky_y * kPi * ao_without;
+        const float num = sun_y * cos_sun * (sun_visible ? 1.0f : 0.0f) + sky_y * kPi * ao_with;
+        shadow_sum += den > 0 ? num / den : 1.0f;
+        ++n_recv;
+        continue;
+      }
 
-        // Object: Lambertian, L = a * E / pi, under its own light where the caller gives one.
-        const bool own = static_cast<size_t>(hit.mesh) < options.mesh_lighting.size();
-        const Lighting& l = own ? options.mesh_lighting[static_cast<size_t>(hit.mesh)] : lighting;
-        const Eigen::Vector3f obj_sun_dir = own ? l.sun_direction.normalized() : sun_dir;
-        const float obj_cos_sun = own ? std::max(0.0f, f.n_shade.dot(obj_sun_dir)) : cos_sun;
-        // Nor does it shade one: the real road below is already counted by the upper-hemisphere test.
-        const bool sun_visible = obj_cos_sun > 0 && !scene.Occluded(f.p_offset, obj_sun_dir, 0.0f, inf, receiver);
+      // Object: Lambertian, L = a * E / pi, under its own light where the caller gives one.
+      const bool own = static_cast<size_t>(hit.mesh) < options.mesh_lighting.size();
+      const Lighting& l = own ? options.mesh_lighting[static_cast<size_t>(hit.mesh)] : lighting;
+      const Eigen::Vector3f obj_sun_dir = own ? l.sun_direction.normalized() : sun_dir;
+      const float obj_cos_sun = own ? std::max(0.0f, f.n_shade.dot(obj_sun_dir)) : cos_sun;
+      float sun_visible = 0, ao = 1;
+      if (hint && hit.mesh == hint->mesh && f.n_shade.dot(hint->normal) >= kHintNormalCos) {
+        sun_visible = hint->sun;
+        ao = hint->sky;
+      } else {
+        // Nor does the receiver shade an object: the real road below is already counted by the upper-hemisphere
+        // test. An anchor traces the sun where it faces away too: its neighbours may face it.
+        sun_visible = (obj_cos_sun > 0 || anchor) && !scene.Occluded(f.p_offset, obj_sun_dir, 0.0f, inf, receiver) ? 1.0f : 0.0f;
         int sky_open = 0;
         for (int k = s * ao_each; k < (s + 1) * ao_each; ++k) {
           const Eigen::Vector3f d = CosineDirection(f.n_shade, Stratified(k, n_ao_set, rng));
           if (d.z() > 0 && !scene.Occluded(f.p_offset, d, 0.0f, inf, receiver)) ++sky_open;
         }
-        const float ao = ao_each > 0 ? static_cast<float>(sky_open) / ao_each : 1.0f;
-        const Eigen::Vector3f E = l.sun_irradiance * (sun_visible ? obj_cos_sun : 0.0f) + l.sky_radiance * (kPi * ao);
-        const Eigen::Vector3f albedo = scene.BaseColor(hit).head<3>();
-        color += albedo.cwiseProduct(E) / kPi;
-        depth = std::min(depth, hit.t * static_cast<float>(d_cam.z()));
-        ids[static_cast<size_t>(n_obj++)] = hit.mesh;
+        ao = ao_each > 0 ? static_cast<float>(sky_open) / ao_each : 1.0f;
       }
+      anchor_sun += sun_visible, anchor_sky += ao, anchor_normal += f.n_shade;
+      const Eigen::Vector3f E = l.sun_irradiance * (obj_cos_sun * sun_visible) + l.sky_radiance * (kPi * ao);
+      const Eigen::Vector3f albedo = scene.BaseColor(hit).head<3>();
+      color += albedo.cwiseProduct(E) / kPi;
+      depth = std::min(depth, hit.t * static_cast<float>(d_cam.z()));
+      ids[n_obj++] = hit.mesh;
+    }
 
-      if (n_obj > 0) {
-        const float inv_spp = 1.0f / static_cast<float>(spp);
+    if (n_obj > 0) {
+      const float inv_spp = 1.0f / static_cast<float>(spp);
+      // Majority vote; ties go to the smallest mesh id so the result is independent of sample order.
+      std::sort(ids, ids + n_obj);
+      int best = ids[0], best_count = 0;
+      for (int i = 0; i < n_obj;) {
+        int j = i;
+        while (j < n_obj && ids[j] == ids[i]) ++j;
+        if (j - i > best_count) {
+          best_count = j - i;
+          best = ids[i];
+        }
+        i = j;
+      }
+      if (anchor && n_obj == spp && best_count == spp && anchor_normal.squaredNorm() > 0)
+        *anchor = {best, anchor_sun / spp, anchor_sky / spp, anchor_normal.normalized()};
+      if (write) {
         for (int c = 0; c < 3; ++c) out.color.at(x, y, c) = color[c] * inv_spp;
         out.coverage.at(x, y) = static_cast<float>(n_obj) * inv_spp;
         out.depth.at(x, y) = depth;
-        // Majority vote; ties go to the smallest mesh id so the result is independent of sample order.
-        std::sort(ids.begin(), ids.begin() + n_obj);
-        int best = ids[0], best_count = 0;
-        for (int i = 0; i < n_obj;) {
-          int j = i;
-          while (j < n_obj && ids[static_cast<size_t>(j)] == ids[static_cast<size_t>(i)]) ++j;
-          if (j - i > best_count) {
-            best_count = j - i;
-            best = ids[static_cast<size_t>(i)];
-          }
-          i = j;
-        }
         out.object.at(x, y) = best;
       }
-      if (n_recv > 0) out.shadow.at(x, y) = static_cast<float>(shadow_sum / n_recv);
     }
+    if (write && n_recv > 0) out.shadow.at(x, y) = static_cast<float>(shadow_sum / n_recv);
+  };
+
+  if (!adaptive) {
+    ParallelFor(static_cast<size_t>(y0), static_cast<size_t>(y1), [&](size_t row) {
+      const int y = static_cast<int>(row);
+      for (const auto& [x0, x1] : RowSpans(rects, y, w))
+        for (int x = x0; x < x1; ++x) render_pixel(x, y, nullptr, nullptr, true);
+    });
+    return out;
+  }
+
+  // Adaptive: the light of an object changes slowly across its surface but for shadow edges and creases. Pixels of
+  // even row and column (over the rectangles grown by the 2 pixels a neighbour reads, so a pixel's result does not
+  // depend on the rectangles) are traced in full and anchor their light; a pixel between four anchors on one
+  // object, facing alike, with the same sun visibility and open sky within the tolerance, takes their bilinear
+  // blend for its sub-samples on that object, and traces only its camera rays.
+  std::vector<std::array<int, 4>> grown;
+  for (const auto& r : rects) grown.push_back({r[0] - 2, r[1] - 2, r[2] + 2, r[3] + 2});
+  std::vector<LightAnchor> anchors(static_cast<size_t>((w + 1) / 2) * ((h + 1) / 2));
+  const auto anchor_at = [&](int gx, int gy) -> LightAnchor& { return anchors[static_cast<size_t>(gy / 2) * ((w + 1) / 2) + gx / 2]; };
+  const int gy0 = std::max(0, y0 - 2) & ~1, gy1 = std::min(h, y1 + 2);
+  ParallelFor(static_cast<size_t>(gy0 / 2), static_cast<size_t>((gy1 + 1) / 2), [&](size_t half_row) {
+    const int y = static_cast<int>(half_row) * 2;
+    if (y >= h) return;
+    // Anchors outside the rectangles only anchor: their pixels stay "nothing" in `out`.
+    for (const auto& [x0, x1] : RowSpans(grown, y, w))
+      for (int x = x0 + (x0 % 2); x < x1; x += 2) {
+        const bool inside = std::any_of(rects.begin(), rects.end(),
+                                        [&](const auto& r) { return x >= r[0] && x < r[2] && y >= r[1] && y < r[3]; });
+        render_pixel(x, y, nullptr, &anchor_at(x, y), inside);
+      }
+  });
+  ParallelFor(static_cast<size_t>(y0), static_cast<size_t>(y1), [&](size_t row) {
+    const int y = static_cast<int>(row);
+    for (const auto& [x0, x1] : RowSpans(rects, y, w))
+      for (int x = x0; x < x1; ++x) {
+        if (x % 2 == 0 && y % 2 == 0) continue;  // an anchor, done
+        const int ax0 = x & ~1, ay0 = y & ~1, ax1 = x % 2 ? ax0 + 2 : ax0, ay1 = y % 2 ? ay0 + 2 : ay0;
+        std::optional<LightHint> hint;
+        if (ax1 < w && ay1 < h) {
+          const LightAnchor* a[4] = {&anchor_at(ax0, ay0), &anchor_at(ax1, ay0), &anchor_at(ax0, ay1), &anchor_at(ax1, ay1)};
+          bool alike = a[0]->mesh >= 0;
+          float lo = 2, hi = -1;
+          for (const LightAnchor* q : a) {
+            alike = alike && q->mesh == a[0]->mesh && q->sun == a[0]->sun && q->normal.dot(a[0]->normal) >= kHintNormalCos;
+            lo = std::min(lo, q->sky), hi = std::max(hi, q->sky);
+          }
+          if (alike && hi - lo <= options.light_blend_tolerance) {
+            const float fx = 0.5f * static_cast<float>(x - ax0), fy = 0.5f * static_cast<float>(y - ay0);
+            const auto blend = [&](float v00, float v10, float v01, float v11) {
+              return (1 - fy) * ((1 - fx) * v00 + fx * v10) + fy * ((1 - fx) * v01 + fx * v11);
+            };
+            hint = LightHint{a[0]->mesh, a[0]->sun, blend(a[0]->sky, a[1]->sky, a[2]->sky, a[3]->sky),
+                             (a[0]->normal + a[1]->normal + a[2]->normal + a[3]->normal).normalized()};
+          }
+        }
+        render_pixel(x, y, hint ? &*hint : nullptr, nullptr, true);
+      }
   });
   return out;
 }

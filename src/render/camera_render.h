@@ -49,6 +49,11 @@ struct CameraRenderOptions {
   // each object's own, so the space between objects far apart costs nothing.
   std::vector<std::array<int, 4>> rects;
   uint32_t seed = 1;           // sampling is deterministic given the seed
+  // > 0: the objects' light (sun visibility and open sky) is traced at every other pixel of every other row and
+  // blended at a pixel between four that lie on one object, face alike, agree on the sun and on the open sky within
+  // this much (a share, 0..1); other pixels are traced in full. The camera rays (coverage, depth, texture) are
+  // traced at every pixel either way. 0: every pixel traced in full.
+  float light_blend_tolerance = 0;
 };
 
 struct CameraRender {

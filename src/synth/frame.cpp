@@ -191,8 +191,12 @@ FrameLight LightFrame(const FrameInputs& in, const Scenario& scenario, const Syn
 // the road's light: its sky occlusion all round (a margin of its height, at least 1 m, beyond its footprint) and
 // its sun shadow, which falls only away from the sun (so the rectangle reaches the shadow's length further on that
 // side). Every pixel of it is shaded with soft-shadow and sky rays: a square reaching the shadow's length on all
-// four sides was 3-5 times the area, and the largest cost of a frame.
-void AddReceiverPatch(const PlacedObject& o, const Eigen::Vector3d& sun_dir, TriangleMesh* receiver) {
+// four sides was 3-5 times the area, and the largest cost of a frame. Two triangles: the patch is flat, and every
+// ray of the frame traverses it (a 25 cm grid of it outnumbered the objects' own triangles). `extent` receives a
+// grid of its points, for the rectangle a camera redraws: a patch reaching behind a camera still projects the part
+// in front.
+void AddReceiverPatch(const PlacedObject& o, const Eigen::Vector3d& sun_dir, TriangleMesh* receiver,
+                      std::vector<Eigen::Vector3d>* extent) {
   const double h = o.box.size.z();
   const Eigen::Vector3d sun_local = o.T_ego_asset.rotation.inverse() * sun_dir;
   const double sun_el = std::asin(std::clamp(sun_local.z(), 0.26, 1.0));  // >= 15 deg keeps patches bounded
@@ -203,23 +207,22 @@ void AddReceiverPatch(const PlacedObject& o, const Eigen::Vector3d& sun_dir, Tri
   const Eigen::Vector2d across(-away.y(), away.x());
   const double footprint = 0.5 * o.box.size.head<2>().norm(), margin = std::max(1.0, h);
   const double u0 = -(footprint + margin), u1 = footprint + shadow_length + margin, v_half = footprint + margin;
-  const int nu = std::clamp(static_cast<int>(std::ceil((u1 - u0) / 0.25)), 4, 160);
-  const int nv = std::clamp(static_cast<int>(std::ceil(2 * v_half / 0.25)), 4, 160);
+  // In the asset frame (origin on the ground, z along the local normal), lifted 1 mm so shadow rays from the
+  // receiver do not start inside the object's base.
+  const auto at = [&](double u, double v) {
+    const Eigen::Vector2d p = u * away + v * across;
+    return o.T_ego_asset * Eigen::Vector3d(p.x(), p.y(), 0.001);
+  };
   const int base = static_cast<int>(receiver->positions.size());
-  for (int j = 0; j <= nv; ++j)
-    for (int i = 0; i <= nu; ++i) {
-      const Eigen::Vector2d p = (u0 + (u1 - u0) * i / nu) * away + (-v_half + 2 * v_half * j / nv) * across;
-      // In the asset frame (origin on the ground, z along the local normal), lifted 1 mm so shadow rays
-      // from the receiver do not start inside the object's base.
-      receiver->positions.push_back((o.T_ego_asset * Eigen::Vector3d(p.x(), p.y(), 0.001)).cast<float>());
-    }
-  for (int j = 0; j < nv; ++j)
-    for (int i = 0; i < nu; ++i) {
-      const int a = base + j * (nu + 1) + i;
-      // Wound counter-clockwise seen from above whatever the shadow's direction: (away, across) is right-handed.
-      receiver->faces.push_back({a, a + 1, a + nu + 2});
-      receiver->faces.push_back({a, a + nu + 2, a + nu + 1});
-    }
+  for (const auto& [u, v] : {std::pair{u0, -v_half}, {u1, -v_half}, {u1, v_half}, {u0, v_half}})
+    receiver->positions.push_back(at(u, v).cast<float>());
+  // Wound counter-clockwise seen from above whatever the shadow's direction: (away, across) is right-handed.
+  receiver->faces.push_back({base, base + 1, base + 2});
+  receiver->faces.push_back({base, base + 2, base + 3});
+  constexpr int kExtentGrid = 8;
+  for (int j = 0; j <= kExtentGrid; ++j)
+    for (int i = 0; i <= kExtentGrid; ++i)
+      extent->push_back(at(u0 + (u1 - u0) * i / kExtentGrid, -v_half + 2 * v_half * j / kExtentGrid));
 }
 
 
@@ -389,13 +392,10 @@ ObjectScene BuildObjectScene(const std::vector<PlacedObject>& placed, const Eige
     mesh->Transform(o.T_ego_asset);
     if (mesh->normals.empty()) mesh->ComputeVertexNormals();
     s.scene.AddMesh(mesh);
-    const size_t first_vertex = s.receiver->positions.size();
-    AddReceiverPatch(o, sun_dir, s.receiver.get());
-    s.receiver_faces_end.push_back(s.receiver->faces.size());
     std::vector<Eigen::Vector3d> extent;
     for (const auto& c : o.box.Corners()) extent.push_back(c);
-    // Every vertex, not only the corners: a patch reaching behind a camera still projects its part in front.
-    for (size_t v = first_vertex; v < s.receiver->positions.size(); ++v) extent.push_back(s.receiver->positions[v].cast<double>());
+    AddReceiverPatch(o, sun_dir, s.receiver.get(), &extent);
+    s.receiver_faces_end.push_back(s.receiver->faces.size());
     s.extent_points.insert(s.extent_points.end(), extent.begin(), extent.end());
     s.extent_of.push_back(std::move(extent));
   }

@@ -311,7 +311,7 @@ RefineResult RefineMesh(const TriangleMesh& coarse_in, const MultiViewSet& views
     const float near = std::max(1e-3f * dist, depth - 3.0f * radius), far = std::max(near * 1.001f, depth + 3.0f * radius);
     state[i].clip_from_world = raster::ClipFromWorld(v.camera, v.T_world_cam.Inverse(), near, far);
     const MultiView& mv = views[i];
-    state[i].mask_target = mv.mask.vector();
+    state[i].mask_target.assign(mv.mask.vector().begin(), mv.mask.vector().end());
     if (!mv.known.empty())
       for (size_t p = 0; p < state[i].mask_target.size(); ++p)
         if (mv.known.vector()[p] <= 0.5f) state[i].mask_target[p] = -1.0f;
@@ -333,7 +333,7 @@ RefineResult RefineMesh(const TriangleMesh& coarse_in, const MultiViewSet& views
       const ViewState& s = state[i];
       t.clip_from_world = s.clip_from_world;
       t.width = views[i].view.camera.width, t.height = views[i].view.camera.height;
-      t.normals = views[i].normals.vector();
+      t.normals.assign(views[i].normals.vector().begin(), views[i].normals.vector().end());
       t.mask = s.mask_target;
       if (options.lambda_normal > 0 && s.valid_normal_pixels > 0) {
         t.normal_grad_scale = options.lambda_normal * view_weight / static_cast<float>(s.valid_normal_pixels);

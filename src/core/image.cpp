@@ -1,8 +1,12 @@
 #include "core/image.h"
 
+#include <sys/mman.h>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdlib>
+#include <new>
 
 #include "core/parallel.h"
 
@@ -16,6 +20,24 @@ float LinearToSrgb(float v) {
   v = std::clamp(v, 0.0f, 1.0f);
   return v <= 0.0031308f ? v * 12.92f : 1.055f * std::pow(v, 1.0f / 2.4f) - 0.055f;
 }
+
+void* AllocateImageMemory(size_t bytes) {
+  constexpr size_t kLargePage = size_t{2} << 20;
+  void* p = nullptr;
+  if (bytes >= 2 * kLargePage) {
+    const size_t rounded = (bytes + kLargePage - 1) / kLargePage * kLargePage;
+    p = std::aligned_alloc(kLargePage, rounded);
+#ifdef MADV_HUGEPAGE
+    if (p) madvise(p, rounded, MADV_HUGEPAGE);  // advice only: without large pages the block works the same
+#endif
+  } else {
+    p = std::malloc(bytes > 0 ? bytes : 1);
+  }
+  if (!p) throw std::bad_alloc();
+  return p;
+}
+
+void FreeImageMemory(void* p) { std::free(p); }
 
 namespace {
 const std::array<float, 256>& SrgbTable() {

@@ -457,7 +457,7 @@ TEST(Segmenter, LearnedPathReproducesTheModuleOnAnInputSizeImage) {
   const auto expected = testing::ReadRawFloats(testing::TestModel("seg_ref_mask.f32"), &out_shape);
   ASSERT_EQ(in_shape, (std::vector<int64_t>{64, 64, 3}));
   ImageU8 image(64, 64, 3);
-  image.vector() = pixels;
+  image.vector().assign(pixels.begin(), pixels.end());
   const SegmentationResult r = seg.Segment(image, Box2{0, 0, 64, 64});
   EXPECT_EQ(r.method, "seg-tiny");
   ASSERT_EQ(r.mask.size(), expected.size());

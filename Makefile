@@ -21,6 +21,7 @@ test: build
 
 bench: build
 	build/bin/bench_synth_keyframe --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
+	bench/bench_synth_process.sh build 5
 
 clean:
 	rm -rf build build-debug build-asan build-fuzz out

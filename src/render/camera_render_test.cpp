@@ -1,6 +1,8 @@
 #include "render/camera_render.h"
 
 #include <cmath>
+#include <utility>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -273,19 +275,32 @@ TEST(ProjectedRect, CoversProjectedPointsWithPad) {
   EXPECT_FALSE(ProjectedRect(cam, T_cam_scene, {{100, 0, 1}}, 5).has_value());   // off to the right
 }
 
+// A road receiver with boxes standing on it, in a sun from the side, seen from 6 m up: the rectangle tests' scene.
+struct BoxesOnRoad {
+  RayScene scene;
+  int road = -1;
+  Lighting light;
+  PinholeCamera cam = Camera(60, 40, 30, 30, 20);
+  Rigid3d T = LookingDown({0.2, 0.1, 6});
+  CameraRenderOptions opt;
+  explicit BoxesOnRoad(const std::vector<std::pair<Eigen::Vector3f, Eigen::Vector3f>>& boxes) {
+    road = scene.AddMesh(Quad({0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 30, 30));
+    for (const auto& [lo, hi] : boxes) scene.AddMesh(Box(lo, hi));
+    scene.Commit();
+    light.sun_direction = Eigen::Vector3f(0.3f, 0.2f, 1).normalized();
+    opt.receiver_mesh = road;
+  }
+};
+
 // Rendering a rectangle gives the same pixels as the full render (per-pixel seeding), nothing outside it,
 // and the same seed gives the same image.
 TEST(RenderCamera, RectangleAndDeterminism) {
-  RayScene scene;
-  const int road = scene.AddMesh(Quad({0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 30, 30));
-  scene.AddMesh(Box({-0.5f, -0.5f, 0.0f}, {0.5f, 0.5f, 1.0f}));
-  scene.Commit();
-  Lighting light;
-  light.sun_direction = Eigen::Vector3f(0.3f, 0.2f, 1).normalized();
-  CameraRenderOptions opt;
-  opt.receiver_mesh = road;
-  const PinholeCamera cam = Camera(60, 40, 30, 30, 20);
-  const Rigid3d T = LookingDown({0.2, 0.1, 6});
+  BoxesOnRoad s({{{-0.5f, -0.5f, 0.0f}, {0.5f, 0.5f, 1.0f}}});
+  const RayScene& scene = s.scene;
+  const Lighting& light = s.light;
+  const PinholeCamera& cam = s.cam;
+  const Rigid3d& T = s.T;
+  CameraRenderOptions& opt = s.opt;
   const CameraRender full = RenderCamera(scene, cam, T, light, opt);
   const CameraRender again = RenderCamera(scene, cam, T, light, opt);
   EXPECT_EQ(full.color.vector(), again.color.vector());
@@ -316,35 +331,31 @@ TEST(RowSpans, MergesOverlappingAndTouchingRectanglesAndClamps) {
   EXPECT_TRUE(RowSpans({{4, 0, 4, 9}}, 1, 40).empty());  // an empty rectangle
 }
 
-// Several rectangles render exactly the pixels of their union, each as the whole image has it.
+// Several rectangles render exactly the pixels of their union, each as the whole image has it, with the light
+// blended too (a blend reads the anchors up to 2 pixels outside the rectangles, traced for it).
 TEST(RenderCamera, RectanglesRenderTheirUnionOnly) {
-  RayScene scene;
-  const int road = scene.AddMesh(Quad({0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 30, 30));
-  scene.AddMesh(Box({-0.5f, -0.5f, 0.0f}, {0.5f, 0.5f, 1.0f}));
-  scene.AddMesh(Box({1.0f, 0.6f, 0.0f}, {1.6f, 1.2f, 0.5f}));
-  scene.Commit();
-  Lighting light;
-  light.sun_direction = Eigen::Vector3f(0.3f, 0.2f, 1).normalized();
-  CameraRenderOptions opt;
-  opt.receiver_mesh = road;
-  const PinholeCamera cam = Camera(60, 40, 30, 30, 20);
-  const Rigid3d T = LookingDown({0.2, 0.1, 6});
+  BoxesOnRoad s({{{-0.5f, -0.5f, 0.0f}, {0.5f, 0.5f, 1.0f}}, {{1.0f, 0.6f, 0.0f}, {1.6f, 1.2f, 0.5f}}});
+  const RayScene& scene = s.scene;
+  const Lighting& light = s.light;
+  const PinholeCamera& cam = s.cam;
+  const Rigid3d& T = s.T;
+  CameraRenderOptions& opt = s.opt;
   for (const float blend : {0.0f, 0.15f}) {
-  SCOPED_TRACE(blend);
-  opt.light_blend_tolerance = blend;
-  opt.rects.clear();
-  const CameraRender full = RenderCamera(scene, cam, T, light, opt);
-  opt.rects = {{10, 5, 30, 25}, {25, 10, 50, 30}, {55, 35, 70, 50}};
-  const CameraRender part = RenderCamera(scene, cam, T, light, opt);
-  for (int y = 0; y < cam.height; ++y)
-    for (int x = 0; x < cam.width; ++x) {
-      const bool inside = (x >= 10 && x < 30 && y >= 5 && y < 25) || (x >= 25 && x < 50 && y >= 10 && y < 30) ||
-                          (x >= 55 && y >= 35);
-      ASSERT_EQ(part.coverage.at(x, y), inside ? full.coverage.at(x, y) : 0.0f) << x << "," << y;
-      ASSERT_EQ(part.shadow.at(x, y), inside ? full.shadow.at(x, y) : 1.0f) << x << "," << y;
-      ASSERT_EQ(part.color.at(x, y, 0), inside ? full.color.at(x, y, 0) : 0.0f) << x << "," << y;
-      ASSERT_EQ(part.object.at(x, y), inside ? full.object.at(x, y) : -1) << x << "," << y;
-    }
+    SCOPED_TRACE(blend);
+    opt.light_blend_tolerance = blend;
+    opt.rects.clear();
+    const CameraRender full = RenderCamera(scene, cam, T, light, opt);
+    opt.rects = {{10, 5, 30, 25}, {25, 10, 50, 30}, {55, 35, 70, 50}};
+    const CameraRender part = RenderCamera(scene, cam, T, light, opt);
+    for (int y = 0; y < cam.height; ++y)
+      for (int x = 0; x < cam.width; ++x) {
+        const bool inside = (x >= 10 && x < 30 && y >= 5 && y < 25) || (x >= 25 && x < 50 && y >= 10 && y < 30) ||
+                            (x >= 55 && y >= 35);
+        ASSERT_EQ(part.coverage.at(x, y), inside ? full.coverage.at(x, y) : 0.0f) << x << "," << y;
+        ASSERT_EQ(part.shadow.at(x, y), inside ? full.shadow.at(x, y) : 1.0f) << x << "," << y;
+        ASSERT_EQ(part.color.at(x, y, 0), inside ? full.color.at(x, y, 0) : 0.0f) << x << "," << y;
+        ASSERT_EQ(part.object.at(x, y), inside ? full.object.at(x, y) : -1) << x << "," << y;
+      }
   }
 }
 

@@ -1,5 +1,7 @@
 #include "synth/batch.h"
 
+#include <chrono>
+
 
 #include "core/log.h"
 #include "datasets/coco.h"
@@ -45,9 +47,12 @@ ShardRun SynthesizeParts(const SynthInputs& in, const SynthRequest& request, con
     SynthOptions frame_options = request.options;
     frame_options.harmonizer_model = in.harmonizer;
     const FrameOutcome outcome = SynthesizeFrame(in.log, fi, in.assets, in.scenario, frame_options, in.PlanFor(fi));
+    const auto t0 = std::chrono::steady_clock::now();
     StagingDirectory staging(part_of(i), false);
     WritePart(staging.path(), outcome, in, request.options);
     staging.Commit();
+    SD_LOG(Debug, "frame " << fi << ": " << outcome.timings.Summary() << ", write "
+                           << Fixed(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 2) << " s");
   };
   BatchOptions batch;
   batch.label = "synthesising frames";

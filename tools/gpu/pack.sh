@@ -16,9 +16,9 @@ rm -rf "$out.tmp" && mkdir -p "$out.tmp"/{deps/include,deps/lib,bin,lib,models,c
 
 inc=/usr/include
 cp -r $inc/eigen3 $inc/nlohmann $inc/stb $inc/oneapi $inc/tbb "$out.tmp/deps/include/"
-cp $inc/tiny_gltf.h $inc/tiny_obj_loader.h $inc/nanoflann.hpp "$out.tmp/deps/include/"
+cp $inc/tiny_gltf.h $inc/tiny_obj_loader.h $inc/nanoflann.hpp $inc/zlib.h $inc/zconf.h "$out.tmp/deps/include/"
 lib=/usr/lib/x86_64-linux-gnu
-cp -L $lib/libtbb.so.12 $lib/libstb.so $lib/libtinyobjloader.so "$out.tmp/deps/lib/"
+cp -L $lib/libtbb.so.12 $lib/libstb.so $lib/libtinyobjloader.so $lib/libz.so.1 "$out.tmp/deps/lib/"
 cp -r /usr/src/googletest "$out.tmp/deps/googletest"
 
 if [[ $build != - ]]; then

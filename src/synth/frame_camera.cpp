@@ -33,8 +33,8 @@ constexpr int kShadowSunRays = 8;
 
 // Where the shade on the road varies less than this over two pixels, it is blended rather than traced at every
 // pixel (EnvShadingOptions::interpolate_tolerance): about the grain of the 8 sun rays and the sky rays in an
-// umbra or in open light, so penumbrae and contact shadows stay traced per pixel, and about three in four pixels of
-// the rest are not.
+// umbra or in open light, so penumbrae and contact shadows stay traced per pixel and most of the rest is blended
+// (the 20-object keyframe's shade: 1.61 s at 0.03, 1.21 s at 0.06).
 constexpr float kShadeInterpolateTolerance = 0.06f;
 
 // Where an object's open sky varies less than this share between pixels two apart (on one surface, in the same sun),

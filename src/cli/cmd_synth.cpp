@@ -39,7 +39,7 @@ Runner AddSynthCommand(CLI::App& app) {
       ->check(CLI::IsMember(LogFormatOptions()));
   app.add_option("--data-root", *data_root, "Directory the log's relative sensor paths resolve against (default: probe)");
   app.add_option("--spp", req->options.samples_per_pixel, "Camera samples per pixel (anti-aliasing)")->check(CLI::Range(1, 64));
-  app.add_option("--ao-samples", req->options.ao_samples, "Sky-visibility rays per pixel, shared among its --spp samples")->check(CLI::Range(1, 256));
+  app.add_option("--ao-samples", req->options.ao_samples, "Sky-visibility rays per shaded sample (objects) and per pixel (their shadows on the road)")->check(CLI::Range(1, 256));
   app.add_option("--jpeg-quality", req->options.write.jpeg_quality, "Quality of re-encoded JPEG images")->check(CLI::Range(1, 100));
   app.add_flag("--symlink-unchanged", *symlink, "Symlink unchanged sensor files instead of copying them");
   app.add_flag("--overwrite", req->options.overwrite, "Replace an existing output directory (only once the new one is complete)");

@@ -131,10 +131,7 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
   const Eigen::Vector3f sun = lighting.sun_irradiance, sky = lighting.sky_radiance;
   const float sun_y = Luminance(sun), sky_y = Luminance(sky);
   const int spp = options.samples_per_pixel;
-  // The pixel's sky rays, split among its sub-samples: sub-sample s traces strata [s * ao_each, (s + 1) * ao_each)
-  // of one stratified set of ao_each * spp directions.
-  const int ao_each = options.ao_samples > 0 ? (options.ao_samples + spp - 1) / spp : 0;
-  const int n_ao_set = ao_each * spp;
+  const int n_ao = options.ao_samples;
   const int receiver = options.receiver_mesh;
   const float inf = std::numeric_limits<float>::infinity();
 
@@ -170,14 +167,14 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
         // Light the real road got (no objects) vs what it gets now; visibility ignores the road itself.
         const bool sun_visible = cos_sun > 0 && !scene.Occluded(f.p_offset, sun_dir, 0.0f, inf, receiver);
         int sky_with = 0, sky_without = 0;
-        for (int k = s * ao_each; k < (s + 1) * ao_each; ++k) {
-          const Eigen::Vector3f d = CosineDirection(f.n_shade, Stratified(k, n_ao_set, rng));
+        for (int k = 0; k < n_ao; ++k) {
+          const Eigen::Vector3f d = CosineDirection(f.n_shade, Stratified(k, n_ao, rng));
           if (d.z() <= 0) continue;
           ++sky_without;
           if (!scene.Occluded(f.p_offset, d, 0.0f, inf, receiver)) ++sky_with;
         }
-        const float ao_with = ao_each > 0 ? static_cast<float>(sky_with) / ao_each : 1.0f;
-        const float ao_without = ao_each > 0 ? static_cast<float>(sky_without) / ao_each : 1.0f;
+        const float ao_with = n_ao > 0 ? static_cast<float>(sky_with) / n_ao : 1.0f;
+        const float ao_without = n_ao > 0 ? static_cast<float>(sky_without) / n_ao : 1.0f;
         const float den = sun_y * cos_sun + sky_y * kPi * ao_without;
         const float num = sun_y * cos_sun * (sun_visible ? 1.0f : 0.0f) + sky_y * kPi * ao_with;
         shadow_sum += den > 0 ? num / den : 1.0f;
@@ -199,11 +196,11 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
         // test. An anchor traces the sun where it faces away too: its neighbours may face it.
         sun_visible = (obj_cos_sun > 0 || anchor) && !scene.Occluded(f.p_offset, obj_sun_dir, 0.0f, inf, receiver) ? 1.0f : 0.0f;
         int sky_open = 0;
-        for (int k = s * ao_each; k < (s + 1) * ao_each; ++k) {
-          const Eigen::Vector3f d = CosineDirection(f.n_shade, Stratified(k, n_ao_set, rng));
+        for (int k = 0; k < n_ao; ++k) {
+          const Eigen::Vector3f d = CosineDirection(f.n_shade, Stratified(k, n_ao, rng));
           if (d.z() > 0 && !scene.Occluded(f.p_offset, d, 0.0f, inf, receiver)) ++sky_open;
         }
-        ao = ao_each > 0 ? static_cast<float>(sky_open) / ao_each : 1.0f;
+        ao = n_ao > 0 ? static_cast<float>(sky_open) / n_ao : 1.0f;
       }
       anchor_sun += sun_visible, anchor_sky += ao, anchor_normal += f.n_shade;
       const Eigen::Vector3f E = l.sun_irradiance * (obj_cos_sun * sun_visible) + l.sky_radiance * (kPi * ao);

@@ -31,18 +31,6 @@ constexpr int kDepthMargin = 8;
 // residual 2.8-7.6x its own) until the camera look blurs the shade (kShadeBlurSigma).
 constexpr int kShadowSunRays = 8;
 
-// Where the shade on the road varies less than this over two pixels, it is blended rather than traced at every
-// pixel (EnvShadingOptions::interpolate_tolerance): about the grain of the 8 sun rays and the sky rays in an
-// umbra or in open light, so penumbrae and contact shadows stay traced per pixel and most of the rest is blended
-// (the 20-object keyframe's shade: 1.61 s at 0.03, 1.21 s at 0.06).
-constexpr float kShadeInterpolateTolerance = 0.06f;
-
-// Where an object's open sky varies less than this share between pixels two apart (on one surface, in the same sun),
-// its light is blended rather than traced at every pixel (CameraRenderOptions::light_blend_tolerance): the grain of
-// 16 sky rays a pixel is about 0.1, so the blends are of estimates that agree within their noise, and a crease or a
-// contact shadow, where the sky changes by more, is traced.
-constexpr float kLightBlendTolerance = 0.15f;
-
 // The least blur of the shade map when the camera look blurs (pixels).
 constexpr double kShadeBlurSigma = 1.5;
 
@@ -104,7 +92,6 @@ ObjectRender RenderObjects(const CameraStageInput& st, const CameraSensor& cam, 
   for (const ObjectLight& l : cl.of_object) ropt.mesh_lighting.push_back(l.lighting);  // mesh k = object k
   // Under the map's light the renderer draws only the objects; under the road's it shades their road too.
   ropt.rects = ropt.receiver_shadow ? rects.with_shadows : rects.boxes;
-  ropt.light_blend_tolerance = kLightBlendTolerance;
   ropt.seed = st.in->seeds.render;
   ObjectRender r;
   ScopedStage render_stage(st.times, "camera render");
@@ -116,7 +103,6 @@ ObjectRender RenderObjects(const CameraStageInput& st, const CameraSensor& cam, 
     EnvShadingOptions so;
     so.sun_rays = kShadowSunRays;
     so.sky_rays = st.options->ao_samples;
-    so.interpolate_tolerance = kShadeInterpolateTolerance;
     so.seed = ropt.seed;
     so.skip_mesh = s.receiver_id;
     std::vector<const EnvironmentLight*> light_of_face(s.receiver->faces.size());

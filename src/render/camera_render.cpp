@@ -83,23 +83,6 @@ Frame ShadingFrame(const RayScene& scene, const RayHit& hit, const Eigen::Vector
   return {OffsetPoint(scene.HitPoint(hit), n_geom), n_shade};
 }
 
-// The light of a pixel traced in full whose sub-samples all hit one object (RenderCamera's adaptive mode).
-struct LightAnchor {
-  int mesh = -1;  // -1: not an anchor (edge, background, several objects)
-  float sun = 0;  // sun visibility, mean over the sub-samples
-  float sky = 0;  // open sky share, mean over the sub-samples
-  Eigen::Vector3f normal = Eigen::Vector3f::Zero();  // mean shading normal, unit
-};
-// The light a pixel between four alike anchors takes instead of tracing it.
-struct LightHint {
-  int mesh;
-  float sun, sky;
-  Eigen::Vector3f normal;
-};
-// Anchors and sub-samples must face within ~18 degrees of each other for the light to carry over: across a crease
-// the sky a surface sees changes at once.
-constexpr float kHintNormalCos = 0.95f;
-
 }  // namespace
 
 CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, const Rigid3d& T_scene_cam,
@@ -120,9 +103,7 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
     const bool whole = options.x0 == 0 && options.y0 == 0 && options.x1 == 0 && options.y1 == 0;
     rects.push_back(whole ? std::array<int, 4>{0, 0, w, h} : std::array<int, 4>{options.x0, options.y0, options.x1, options.y1});
   }
-  int y0 = h, y1 = 0;
-  for (const auto& r : rects)
-    if (r[0] < r[2] && r[1] < r[3]) y0 = std::min(y0, std::max(0, r[1])), y1 = std::max(y1, std::min(h, r[3]));
+  const auto [y0, y1] = RowRange(rects, h);
   if (y0 >= y1) return out;
 
   const Eigen::Matrix3d R_scene_cam = T_scene_cam.Rotation();
@@ -135,11 +116,7 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
   const int receiver = options.receiver_mesh;
   const float inf = std::numeric_limits<float>::infinity();
 
-  const bool adaptive = options.light_blend_tolerance > 0;
-
-  // One pixel. With `hint`, sub-samples on the hint's mesh facing its way take its light (sun visibility and
-  // open sky) instead of tracing it; with `anchor`, a pixel whose sub-samples all hit one object records its light.
-  const auto render_pixel = [&](int x, int y, const LightHint* hint, LightAnchor* anchor, bool write) {
+  const auto render_pixel = [&](int x, int y) {
     PixelRng rng(options.seed, x, y);
     Eigen::Vector3f color = Eigen::Vector3f::Zero();
     int n_obj = 0, n_recv = 0;
@@ -148,8 +125,6 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
     std::array<int, 16> ids_small{};
     std::vector<int> ids_large(spp > 16 ? static_cast<size_t>(spp) : 0);
     int* ids = spp > 16 ? ids_large.data() : ids_small.data();
-    float anchor_sun = 0, anchor_sky = 0;
-    Eigen::Vector3f anchor_normal = Eigen::Vector3f::Zero();
     for (int s = 0; s < spp; ++s) {
       const Eigen::Vector2f jitter = Stratified(s, spp, rng);
       const Eigen::Vector3d d_cam = camera.RayDirection(Eigen::Vector2d(x + jitter.x(), y + jitter.y()));
@@ -187,23 +162,15 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
       const Lighting& l = own ? options.mesh_lighting[static_cast<size_t>(hit.mesh)] : lighting;
       const Eigen::Vector3f obj_sun_dir = own ? l.sun_direction.normalized() : sun_dir;
       const float obj_cos_sun = own ? std::max(0.0f, f.n_shade.dot(obj_sun_dir)) : cos_sun;
-      float sun_visible = 0, ao = 1;
-      if (hint && hit.mesh == hint->mesh && f.n_shade.dot(hint->normal) >= kHintNormalCos) {
-        sun_visible = hint->sun;
-        ao = hint->sky;
-      } else {
-        // Nor does the receiver shade an object: the real road below is already counted by the upper-hemisphere
-        // test. An anchor traces the sun where it faces away too: its neighbours may face it.
-        sun_visible = (obj_cos_sun > 0 || anchor) && !scene.Occluded(f.p_offset, obj_sun_dir, 0.0f, inf, receiver) ? 1.0f : 0.0f;
-        int sky_open = 0;
-        for (int k = 0; k < n_ao; ++k) {
-          const Eigen::Vector3f d = CosineDirection(f.n_shade, Stratified(k, n_ao, rng));
-          if (d.z() > 0 && !scene.Occluded(f.p_offset, d, 0.0f, inf, receiver)) ++sky_open;
-        }
-        ao = n_ao > 0 ? static_cast<float>(sky_open) / n_ao : 1.0f;
+      // Nor does the receiver shade an object: the real road below is already counted by the upper-hemisphere test.
+      const bool sun_visible = obj_cos_sun > 0 && !scene.Occluded(f.p_offset, obj_sun_dir, 0.0f, inf, receiver);
+      int sky_open = 0;
+      for (int k = 0; k < n_ao; ++k) {
+        const Eigen::Vector3f d = CosineDirection(f.n_shade, Stratified(k, n_ao, rng));
+        if (d.z() > 0 && !scene.Occluded(f.p_offset, d, 0.0f, inf, receiver)) ++sky_open;
       }
-      anchor_sun += sun_visible, anchor_sky += ao, anchor_normal += f.n_shade;
-      const Eigen::Vector3f E = l.sun_irradiance * (obj_cos_sun * sun_visible) + l.sky_radiance * (kPi * ao);
+      const float ao = n_ao > 0 ? static_cast<float>(sky_open) / n_ao : 1.0f;
+      const Eigen::Vector3f E = l.sun_irradiance * (sun_visible ? obj_cos_sun : 0.0f) + l.sky_radiance * (kPi * ao);
       const Eigen::Vector3f albedo = scene.BaseColor(hit).head<3>();
       color += albedo.cwiseProduct(E) / kPi;
       depth = std::min(depth, hit.t * static_cast<float>(d_cam.z()));
@@ -224,74 +191,18 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
         }
         i = j;
       }
-      if (anchor && n_obj == spp && best_count == spp && anchor_normal.squaredNorm() > 0)
-        *anchor = {best, anchor_sun / spp, anchor_sky / spp, anchor_normal.normalized()};
-      if (write) {
-        for (int c = 0; c < 3; ++c) out.color.at(x, y, c) = color[c] * inv_spp;
-        out.coverage.at(x, y) = static_cast<float>(n_obj) * inv_spp;
-        out.depth.at(x, y) = depth;
-        out.object.at(x, y) = best;
-      }
+      for (int c = 0; c < 3; ++c) out.color.at(x, y, c) = color[c] * inv_spp;
+      out.coverage.at(x, y) = static_cast<float>(n_obj) * inv_spp;
+      out.depth.at(x, y) = depth;
+      out.object.at(x, y) = best;
     }
-    if (write && n_recv > 0) out.shadow.at(x, y) = static_cast<float>(shadow_sum / n_recv);
+    if (n_recv > 0) out.shadow.at(x, y) = static_cast<float>(shadow_sum / n_recv);
   };
 
-  if (!adaptive) {
-    ParallelFor(static_cast<size_t>(y0), static_cast<size_t>(y1), [&](size_t row) {
-      const int y = static_cast<int>(row);
-      for (const auto& [x0, x1] : RowSpans(rects, y, w))
-        for (int x = x0; x < x1; ++x) render_pixel(x, y, nullptr, nullptr, true);
-    });
-    return out;
-  }
-
-  // Adaptive: the light of an object changes slowly across its surface but for shadow edges and creases. Pixels of
-  // even row and column (over the rectangles grown by the 2 pixels a neighbour reads, so a pixel's result does not
-  // depend on the rectangles) are traced in full and anchor their light; a pixel between four anchors on one
-  // object, facing alike, with the same sun visibility and open sky within the tolerance, takes their bilinear
-  // blend for its sub-samples on that object, and traces only its camera rays.
-  std::vector<std::array<int, 4>> grown;
-  for (const auto& r : rects) grown.push_back({r[0] - 2, r[1] - 2, r[2] + 2, r[3] + 2});
-  std::vector<LightAnchor> anchors(static_cast<size_t>((w + 1) / 2) * ((h + 1) / 2));
-  const auto anchor_at = [&](int gx, int gy) -> LightAnchor& { return anchors[static_cast<size_t>(gy / 2) * ((w + 1) / 2) + gx / 2]; };
-  const int gy0 = std::max(0, y0 - 2) & ~1, gy1 = std::min(h, y1 + 2);
-  ParallelFor(static_cast<size_t>(gy0 / 2), static_cast<size_t>((gy1 + 1) / 2), [&](size_t half_row) {
-    const int y = static_cast<int>(half_row) * 2;
-    if (y >= h) return;
-    // Anchors outside the rectangles only anchor: their pixels stay "nothing" in `out`.
-    for (const auto& [x0, x1] : RowSpans(grown, y, w))
-      for (int x = x0 + (x0 % 2); x < x1; x += 2) {
-        const bool inside = std::any_of(rects.begin(), rects.end(),
-                                        [&](const auto& r) { return x >= r[0] && x < r[2] && y >= r[1] && y < r[3]; });
-        render_pixel(x, y, nullptr, &anchor_at(x, y), inside);
-      }
-  });
   ParallelFor(static_cast<size_t>(y0), static_cast<size_t>(y1), [&](size_t row) {
     const int y = static_cast<int>(row);
     for (const auto& [x0, x1] : RowSpans(rects, y, w))
-      for (int x = x0; x < x1; ++x) {
-        if (x % 2 == 0 && y % 2 == 0) continue;  // an anchor, done
-        const int ax0 = x & ~1, ay0 = y & ~1, ax1 = x % 2 ? ax0 + 2 : ax0, ay1 = y % 2 ? ay0 + 2 : ay0;
-        std::optional<LightHint> hint;
-        if (ax1 < w && ay1 < h) {
-          const LightAnchor* a[4] = {&anchor_at(ax0, ay0), &anchor_at(ax1, ay0), &anchor_at(ax0, ay1), &anchor_at(ax1, ay1)};
-          bool alike = a[0]->mesh >= 0;
-          float lo = 2, hi = -1;
-          for (const LightAnchor* q : a) {
-            alike = alike && q->mesh == a[0]->mesh && q->sun == a[0]->sun && q->normal.dot(a[0]->normal) >= kHintNormalCos;
-            lo = std::min(lo, q->sky), hi = std::max(hi, q->sky);
-          }
-          if (alike && hi - lo <= options.light_blend_tolerance) {
-            const float fx = 0.5f * static_cast<float>(x - ax0), fy = 0.5f * static_cast<float>(y - ay0);
-            const auto blend = [&](float v00, float v10, float v01, float v11) {
-              return (1 - fy) * ((1 - fx) * v00 + fx * v10) + fy * ((1 - fx) * v01 + fx * v11);
-            };
-            hint = LightHint{a[0]->mesh, a[0]->sun, blend(a[0]->sky, a[1]->sky, a[2]->sky, a[3]->sky),
-                             (a[0]->normal + a[1]->normal + a[2]->normal + a[3]->normal).normalized()};
-          }
-        }
-        render_pixel(x, y, hint ? &*hint : nullptr, nullptr, true);
-      }
+      for (int x = x0; x < x1; ++x) render_pixel(x, y);
   });
   return out;
 }
@@ -322,6 +233,13 @@ std::optional<std::array<int, 4>> ProjectedRect(const PinholeCamera& camera, con
                                    hi(v_max, camera.height)};
   if (rect[0] >= rect[2] || rect[1] >= rect[3]) return std::nullopt;
   return rect;
+}
+
+std::pair<int, int> RowRange(const std::vector<std::array<int, 4>>& rects, int height) {
+  int first = height, last = 0;
+  for (const auto& r : rects)
+    if (r[0] < r[2] && r[1] < r[3]) first = std::min(first, std::max(0, r[1])), last = std::max(last, std::min(height, r[3]));
+  return {first, last};
 }
 
 std::vector<std::pair<int, int>> RowSpans(const std::vector<std::array<int, 4>>& rects, int y, int width) {

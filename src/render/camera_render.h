@@ -48,14 +48,6 @@ struct CameraRenderOptions {
   // each object's own, so the space between objects far apart costs nothing.
   std::vector<std::array<int, 4>> rects;
   uint32_t seed = 1;           // sampling is deterministic given the seed
-  // > 0: the objects' light (sun visibility and open sky) is traced at every other pixel of every other row and
-  // blended at a pixel between four that lie on one object, face alike, agree on the sun and on the open sky within
-  // this much (a share, 0..1); other pixels are traced in full. The camera rays (coverage, depth, texture) are
-  // traced at every pixel either way. 0: every pixel traced in full.
-  // Off in synth: at 0.15 it cut the 20-object keyframe's render by a quarter and lowered the per-pixel error, but
-  // at full resolution the mix of blended and traced pixels showed as mottling on a car's bumper (at 0.05 too).
-  // Filtering the traced light (a denoiser guided by normal and depth) rather than blending it is what is left.
-  float light_blend_tolerance = 0;
 };
 
 struct CameraRender {
@@ -100,5 +92,7 @@ std::optional<std::array<int, 4>> ProjectedRect(const PinholeCamera& camera, con
 // Row y of a union of pixel rectangles {x0, y0, x1, y1} (half-open): its merged [x0, x1) spans, left to right,
 // clamped to [0, width). For stages that compute around each object rather than over their common bounds.
 std::vector<std::pair<int, int>> RowSpans(const std::vector<std::array<int, 4>>& rects, int y, int width);
+// The rows [first, last) the non-empty rectangles cover, clamped to [0, height); first >= last when none.
+std::pair<int, int> RowRange(const std::vector<std::array<int, 4>>& rects, int height);
 
 }  // namespace sd

@@ -662,86 +662,32 @@ ImageF ReceiverShadowImageWith(const RayScene& scene, const PinholeCamera& camer
                                std::vector<std::array<int, 4>> rects) {
   ImageF out(camera.width, camera.height, 1, 1.0f);
   if (rects.empty()) rects.push_back({0, 0, camera.width, camera.height});
-  int y0 = camera.height, y1 = 0;
-  for (const auto& r : rects)
-    if (r[0] < r[2] && r[1] < r[3]) y0 = std::min(y0, std::max(0, r[1])), y1 = std::max(y1, std::min(camera.height, r[3]));
+  const auto [y0, y1] = RowRange(rects, camera.height);
   if (y1 <= y0) return out;
   const Eigen::Vector3f origin = T_scene_cam.translation.cast<float>();
-  const float kNotReceiver = std::numeric_limits<float>::quiet_NaN();
-  // The ratio at pixel (x, y), or NaN where its centre ray does not reach the receiver first.
-  const auto shade = [&](int x, int y) -> float {
-    const Eigen::Vector3d d = T_scene_cam.rotation * camera.RayDirection({x + 0.5, y + 0.5});
-    const RayHit hit = scene.Intersect(origin, d.cast<float>());
-    if (!hit.Hit() || hit.mesh != receiver_mesh) return kNotReceiver;
-    Eigen::Vector3d n = scene.GeometricNormal(hit).cast<double>();
-    if (n.squaredNorm() == 0) return kNotReceiver;
-    if (n.dot(d) > 0) n = -n;  // the side the camera sees
-    EnvShadingOptions o = options;
-    o.skip_mesh = receiver_mesh;
-    o.seed = options.seed * 0x9E3779B1u + static_cast<uint32_t>(y * camera.width + x);
-    return ReceiverShadowRatio(scene, scene.HitPoint(hit).cast<double>(), n, light_of_face(hit.face), o);
-  };
-  // Rows in parallel; a throwing row keeps its exception for the caller.
-  const auto for_rows = [&](const auto& row) {
-    std::vector<std::exception_ptr> errors(static_cast<size_t>(y1 - y0));
-    ParallelFor(static_cast<size_t>(y0), static_cast<size_t>(y1), [&](size_t yy) {
-      try {
-        row(static_cast<int>(yy));
-      } catch (...) {
-        errors[yy - static_cast<size_t>(y0)] = std::current_exception();
-      }
-    });
-    for (auto& e : errors)
-      if (e) std::rethrow_exception(e);
-  };
-  const float tolerance = options.interpolate_tolerance;
-  if (!(tolerance > 0)) {
-    for_rows([&](int y) {
+  std::vector<std::exception_ptr> errors(static_cast<size_t>(y1 - y0));
+  ParallelFor(static_cast<size_t>(y0), static_cast<size_t>(y1), [&](size_t yy) {
+    const int y = static_cast<int>(yy);
+    try {
       for (const auto& [x0, x1] : RowSpans(rects, y, camera.width))
-        for (int x = x0; x < x1; ++x)
-          if (const float v = shade(x, y); !std::isnan(v)) out.at(x, y) = v;
-    });
-    return out;
-  }
-  // Adaptive: the pixels of even row and column first; a pixel between four of them that all see the receiver
-  // and agree within the tolerance is their bilinear blend, any other is traced. The shade is smooth but for
-  // penumbrae and contact (where the samples disagree), and the composite blurs it further.
-  ImageF traced(camera.width, camera.height, 1, kNotReceiver);
-  Image<uint8_t> done(camera.width, camera.height, 1, 0);
-  for_rows([&](int y) {
-    if (y % 2 != 0) return;
-    for (const auto& [x0, x1] : RowSpans(rects, y, camera.width))
-      for (int x = x0 + (x0 % 2); x < x1; x += 2) {
-        traced.at(x, y) = shade(x, y);
-        done.at(x, y) = 1;
-      }
-  });
-  for_rows([&](int y) {
-    for (const auto& [x0, x1] : RowSpans(rects, y, camera.width))
-      for (int x = x0; x < x1; ++x) {
-        if (!done.at(x, y)) {
-          const int gx0 = x & ~1, gy0 = y & ~1, gx1 = x % 2 ? gx0 + 2 : gx0, gy1 = y % 2 ? gy0 + 2 : gy0;
-          bool blend = gx1 < camera.width && gy1 < camera.height;
-          float lo = 2, hi = -1;
-          for (const int gy : {gy0, gy1})
-            for (const int gx : {gx0, gx1}) {
-              if (!blend) break;
-              blend = done.at(gx, gy) && !std::isnan(traced.at(gx, gy));
-              if (blend) lo = std::min(lo, traced.at(gx, gy)), hi = std::max(hi, traced.at(gx, gy));
-            }
-          if (blend && hi - lo <= tolerance) {
-            const float fx = 0.5f * static_cast<float>(x - gx0), fy = 0.5f * static_cast<float>(y - gy0);
-            const float top = (1 - fx) * traced.at(gx0, gy0) + fx * traced.at(gx1, gy0);
-            const float bottom = (1 - fx) * traced.at(gx0, gy1) + fx * traced.at(gx1, gy1);
-            out.at(x, y) = (1 - fy) * top + fy * bottom;
-            continue;
-          }
-          if (const float v = shade(x, y); !std::isnan(v)) out.at(x, y) = v;
-        } else if (!std::isnan(traced.at(x, y))) {
-          out.at(x, y) = traced.at(x, y);
+        for (int x = x0; x < x1; ++x) {
+          const Eigen::Vector3d d = T_scene_cam.rotation * camera.RayDirection({x + 0.5, y + 0.5});
+          const RayHit hit = scene.Intersect(origin, d.cast<float>());
+          if (!hit.Hit() || hit.mesh != receiver_mesh) continue;
+          Eigen::Vector3d n = scene.GeometricNormal(hit).cast<double>();
+          if (n.squaredNorm() == 0) continue;
+          if (n.dot(d) > 0) n = -n;  // the side the camera sees
+          EnvShadingOptions o = options;
+          o.skip_mesh = receiver_mesh;
+          o.seed = options.seed * 0x9E3779B1u + static_cast<uint32_t>(y * camera.width + x);
+          out.at(x, y) = ReceiverShadowRatio(scene, scene.HitPoint(hit).cast<double>(), n, light_of_face(hit.face), o);
         }
-      }
+    } catch (...) {
+      errors[yy - static_cast<size_t>(y0)] = std::current_exception();
+    }
   });
+  for (auto& e : errors)
+    if (e) std::rethrow_exception(e);
   return out;
 }
 

@@ -146,11 +146,6 @@ struct EnvShadingOptions {
   uint32_t seed = 1;
   int skip_mesh = -1;     // mesh never counted as an occluder (-1 none)
   float ray_offset = 1e-3f;  // metres along the normal before tracing
-  // ReceiverShadowImage only: > 0 traces every other pixel of every other row and blends the pixels between four
-  // that see the receiver and agree within this much (of the 0..1 ratio); 0 traces every pixel. Off in synth: at
-  // 0.03-0.06 it halved the road shade's cost, but the shade under a car showed speckle at full resolution where
-  // traced pixels sat among blended ones.
-  float interpolate_tolerance = 0;
 };
 // Fraction of the sun disk visible from p (stratified jittered cone sampling).
 double SunVisibility(const RayScene& scene, const Eigen::Vector3d& p, const Eigen::Vector3d& normal,
@@ -170,8 +165,6 @@ float ReceiverShadowRatio(const RayScene& scene, const Eigen::Vector3d& p, const
 // Drop-in for CameraRender::shadow (render/camera_render.h) with soft shadows and radiance-weighted AO: for each
 // pixel of the rectangle [x0, x1) x [y0, y1) (all zero = whole image) a ray through the pixel centre; where it
 // first hits `receiver_mesh`, ReceiverShadowRatio there (per-pixel seed from options.seed); elsewhere 1.
-// With options.interpolate_tolerance > 0, pixels where the shade is smooth are blended from their traced
-// neighbours (a pixel's value then depends on which of its neighbours lie in the rectangle).
 ImageF ReceiverShadowImage(const RayScene& scene, const PinholeCamera& camera, const Rigid3d& T_scene_cam, int receiver_mesh,
                            const EnvironmentLight& light, const EnvShadingOptions& options = {}, int x0 = 0, int y0 = 0,
                            int x1 = 0, int y1 = 0);

@@ -245,47 +245,6 @@ TEST(EnvShading, ReceiverShadowImageTakesEachFacesLight) {
   EXPECT_LT(RoofScene::At(shaded, -1.8, 0), 1.0f);
 }
 
-// Blending where the shade is smooth: the same image as tracing every pixel, to within the tolerance plus the
-// sampling grain in the open and the umbra, unbiased over the shadow, with about three in four of those pixels
-// not traced; in the penumbra (the roof's edge) the pixels are traced as before.
-TEST(EnvShading, ReceiverShadowImageBlendsOnlyWhereTheShadeIsSmooth) {
-  const RoofScene r;
-  Rigid3d T = r.T_scene_cam;
-  T.translation.z() = 5;  // closer than the scene's camera: the roof's shade fills ~6000 pixels
-  EnvShadingOptions o;
-  o.sun_rays = 8;
-  o.sky_rays = 16;
-  const std::vector<const EnvironmentLight*> light(r.ground_mesh->faces.size(), &r.light);
-  const ImageF traced = ReceiverShadowImage(r.scene, r.cam, T, r.ground, light, o);
-  o.interpolate_tolerance = 0.03f;
-  const std::vector<std::array<int, 4>> rects = {{10, 10, 190, 190}};
-  const ImageF blended = ReceiverShadowImage(r.scene, r.cam, T, r.ground, light, o, rects);
-  double max_diff = 0, sum_traced = 0, sum_blended = 0;
-  int same = 0, pixels = 0;  // over the shaded ground: where tracing finds the roof in the way
-  for (int y = 10; y < 190; ++y)
-    for (int x = 10; x < 190; ++x) {
-      const float a = traced.at(x, y), b = blended.at(x, y);
-      max_diff = std::max(max_diff, static_cast<double>(std::abs(a - b)));
-      // The sums over every pixel: choosing pixels by the traced value would pick its grain's low draws.
-      sum_traced += a, sum_blended += b;
-      if (a >= 1.0f) continue;
-      same += a == b;
-      ++pixels;
-    }
-  // Outside the rectangle nothing was shaded.
-  EXPECT_EQ(blended.at(5, 5), 1.0f);
-  EXPECT_EQ(blended.at(195, 100), 1.0f);
-  EXPECT_GT(pixels, 4000);
-  // Pixels traced (the even grid, the penumbra, the roof's outline) equal the traced image's; the rest are blends.
-  EXPECT_GT(same, pixels / 4);
-  EXPECT_LT(same, pixels * 3 / 4) << "much of the umbra and the sky-occluded ground is blended";
-  EXPECT_LT(max_diff, 0.12) << "never further than the grain of 8 sun and 16 sky rays";
-  EXPECT_NEAR(sum_blended / pixels, sum_traced / pixels, 0.003) << "the light the shadow takes, per shaded pixel";
-  // Ground (gx, gy) in this camera: x = 100 + 20 gx, y = 100 - 20 gy. The umbra keeps its depth.
-  EXPECT_NEAR(blended.at(100 - 36, 100), traced.at(100 - 36, 100), 0.06);
-  EXPECT_LT(blended.at(100 - 36, 100), 0.35f);
-}
-
 // ---- Shadows: synthetic ground truth ----
 
 // Slab test of the ray o + t d (t > 0) against an oriented box.

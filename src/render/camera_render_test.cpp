@@ -290,25 +290,22 @@ struct BoxesOnRoad {
     light.sun_direction = Eigen::Vector3f(0.3f, 0.2f, 1).normalized();
     opt.receiver_mesh = road;
   }
+  CameraRender Render() const { return RenderCamera(scene, cam, T, light, opt); }
 };
 
 // Rendering a rectangle gives the same pixels as the full render (per-pixel seeding), nothing outside it,
 // and the same seed gives the same image.
 TEST(RenderCamera, RectangleAndDeterminism) {
   BoxesOnRoad s({{{-0.5f, -0.5f, 0.0f}, {0.5f, 0.5f, 1.0f}}});
-  const RayScene& scene = s.scene;
-  const Lighting& light = s.light;
-  const PinholeCamera& cam = s.cam;
-  const Rigid3d& T = s.T;
   CameraRenderOptions& opt = s.opt;
-  const CameraRender full = RenderCamera(scene, cam, T, light, opt);
-  const CameraRender again = RenderCamera(scene, cam, T, light, opt);
+  const CameraRender full = s.Render();
+  const CameraRender again = s.Render();
   EXPECT_EQ(full.color.vector(), again.color.vector());
   EXPECT_EQ(full.shadow.vector(), again.shadow.vector());
   opt.x0 = 10, opt.x1 = 50, opt.y0 = 5, opt.y1 = 30;
-  const CameraRender part = RenderCamera(scene, cam, T, light, opt);
-  for (int y = 0; y < cam.height; ++y) {
-    for (int x = 0; x < cam.width; ++x) {
+  const CameraRender part = s.Render();
+  for (int y = 0; y < s.cam.height; ++y) {
+    for (int x = 0; x < s.cam.width; ++x) {
       const bool inside = x >= 10 && x < 50 && y >= 5 && y < 30;
       ASSERT_EQ(part.coverage.at(x, y), inside ? full.coverage.at(x, y) : 0.0f);
       ASSERT_EQ(part.shadow.at(x, y), inside ? full.shadow.at(x, y) : 1.0f);
@@ -334,16 +331,12 @@ TEST(RowSpans, MergesOverlappingAndTouchingRectanglesAndClamps) {
 // Several rectangles render exactly the pixels of their union, each as the whole image has it.
 TEST(RenderCamera, RectanglesRenderTheirUnionOnly) {
   BoxesOnRoad s({{{-0.5f, -0.5f, 0.0f}, {0.5f, 0.5f, 1.0f}}, {{1.0f, 0.6f, 0.0f}, {1.6f, 1.2f, 0.5f}}});
-  const RayScene& scene = s.scene;
-  const Lighting& light = s.light;
-  const PinholeCamera& cam = s.cam;
-  const Rigid3d& T = s.T;
   CameraRenderOptions& opt = s.opt;
-  const CameraRender full = RenderCamera(scene, cam, T, light, opt);
+  const CameraRender full = s.Render();
   opt.rects = {{10, 5, 30, 25}, {25, 10, 50, 30}, {55, 35, 70, 50}};
-  const CameraRender part = RenderCamera(scene, cam, T, light, opt);
-  for (int y = 0; y < cam.height; ++y)
-    for (int x = 0; x < cam.width; ++x) {
+  const CameraRender part = s.Render();
+  for (int y = 0; y < s.cam.height; ++y)
+    for (int x = 0; x < s.cam.width; ++x) {
       const bool inside = (x >= 10 && x < 30 && y >= 5 && y < 25) || (x >= 25 && x < 50 && y >= 10 && y < 30) ||
                           (x >= 55 && y >= 35);
       ASSERT_EQ(part.coverage.at(x, y), inside ? full.coverage.at(x, y) : 0.0f) << x << "," << y;

@@ -104,4 +104,24 @@ float SrgbByteToLinear(uint8_t v) { return SrgbTable()[v]; }
 void SampleBilinear(const ImageF& img, double u, double v, float* out) { SampleBilinearImpl(img, u, v, out); }
 void SampleBilinear(const ImageU8& img, double u, double v, float* out) { SampleBilinearImpl(img, u, v, out); }
 
+void SampleBilinearLinear(const ImageU8& srgb, double u, double v, const float* gain, float* out) {
+  // The arithmetic of SampleBilinearImpl on the texels ToLinear and a gain multiply would have stored.
+  const auto& table = SrgbTable();
+  const double x = std::clamp(u - 0.5, 0.0, srgb.width() - 1.0);
+  const double y = std::clamp(v - 0.5, 0.0, srgb.height() - 1.0);
+  const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+  const int x1 = std::min(x0 + 1, srgb.width() - 1), y1 = std::min(y0 + 1, srgb.height() - 1);
+  const float fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
+  for (int c = 0; c < srgb.channels(); ++c) {
+    const bool alpha = srgb.channels() == 4 && c == 3;
+    const auto texel = [&](int xx, int yy) {
+      const uint8_t b = srgb.at(xx, yy, c);
+      return alpha ? b / 255.0f : table[b] * gain[c];
+    };
+    const float a = texel(x0, y0) * (1 - fx) + texel(x1, y0) * fx;
+    const float b = texel(x0, y1) * (1 - fx) + texel(x1, y1) * fx;
+    out[c] = a * (1 - fy) + b * fy;
+  }
+}
+
 }  // namespace sd

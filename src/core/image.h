@@ -87,5 +87,8 @@ float SrgbByteToLinear(uint8_t v);
 // `out` receives channels() values.
 void SampleBilinear(const ImageF& img, double u, double v, float* out);
 void SampleBilinear(const ImageU8& img, double u, double v, float* out);  // out in 0..255
+// SampleBilinear(ToLinear(srgb)) with colour channel c scaled by gain[c] before filtering, bit for bit, without the
+// float copy of the image (a camera image's is 17 MB): for the few thousand samples a check reads of a whole rig.
+void SampleBilinearLinear(const ImageU8& srgb, double u, double v, const float* gain, float* out);
 
 }  // namespace sd

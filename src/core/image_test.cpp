@@ -71,6 +71,26 @@ TEST(Image, BilinearAtPixelCentres) {
   EXPECT_FLOAT_EQ(o, 127.5f);  // 0..255 scale, no sRGB decoding
 }
 
+// Sampling the 8-bit image as linear light with a gain gives, bit for bit, what sampling its float copy does.
+TEST(Image, BilinearLinearEqualsBilinearOfTheLinearCopy) {
+  for (int channels : {3, 4}) {
+    ImageU8 srgb(7, 5, channels);
+    for (size_t i = 0; i < srgb.size(); ++i) srgb.data()[i] = static_cast<uint8_t>((i * 37 + 11) % 256);
+    const float gain[3] = {1.0f, 0.83f, 1.27f};
+    ImageF linear = ToLinear(srgb);
+    for (int y = 0; y < srgb.height(); ++y)
+      for (int x = 0; x < srgb.width(); ++x)
+        for (int c = 0; c < 3; ++c) linear.at(x, y, c) *= gain[c];
+    for (double v = -1.0; v < 6.5; v += 0.37)
+      for (double u = -1.0; u < 8.5; u += 0.29) {
+        float want[4], got[4];
+        SampleBilinear(linear, u, v, want);
+        SampleBilinearLinear(srgb, u, v, gain, got);
+        for (int c = 0; c < channels; ++c) ASSERT_EQ(got[c], want[c]) << u << ", " << v << " channel " << c;
+      }
+  }
+}
+
 // A region converted back leaves every other byte as it was, and inside equals the whole image's conversion;
 // and an 8-bit value survives the round trip through linear exactly.
 TEST(ImageConversion, Srgb8RegionKeepsTheRestAndRoundTrips) {

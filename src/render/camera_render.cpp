@@ -1,6 +1,7 @@
 #include "render/camera_render.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <limits>
 
@@ -36,27 +37,69 @@ class PixelRng {
   uint32_t state_;
 };
 
-// k-th of n stratified points in [0,1)^2: cells of a cols x rows grid (cols = ceil(sqrt(n))), jittered.
-Eigen::Vector2f Stratified(int k, int n, PixelRng& rng) {
-  const int cols = static_cast<int>(std::ceil(std::sqrt(static_cast<double>(n))));
-  const int rows = (n + cols - 1) / cols;
-  const float jx = rng.Next(), jy = rng.Next();
-  return {(static_cast<float>(k % cols) + jx) / static_cast<float>(cols),
-          (static_cast<float>(k / cols) + jy) / static_cast<float>(rows)};
-}
+// Stratified points in [0,1)^2: cells of a cols x rows grid (cols = ceil(sqrt(n))), each jittered.
+class StratifiedGrid {
+ public:
+  explicit StratifiedGrid(int n)
+      : cols_(static_cast<int>(std::ceil(std::sqrt(static_cast<double>(n))))), rows_(n > 0 ? (n + cols_ - 1) / cols_ : 1) {}
+  // The k-th point.
+  Eigen::Vector2f operator()(int k, PixelRng& rng) const {
+    const float jx = rng.Next(), jy = rng.Next();
+    return {(static_cast<float>(k % cols_) + jx) / static_cast<float>(cols_),
+            (static_cast<float>(k / cols_) + jy) / static_cast<float>(rows_)};
+  }
 
-// Cosine-weighted direction around unit `n` from a point in [0,1)^2 (Malley's method); the orthonormal
-// basis is Duff et al. 2017, "Building an Orthonormal Basis, Revisited".
-Eigen::Vector3f CosineDirection(const Eigen::Vector3f& n, const Eigen::Vector2f& xi) {
-  const float r = std::sqrt(xi.x());
-  const float phi = 2.0f * kPi * xi.y();
-  const float lx = r * std::cos(phi), ly = r * std::sin(phi), lz = std::sqrt(std::max(0.0f, 1.0f - xi.x()));
-  const float sign = std::copysign(1.0f, n.z());
-  const float a = -1.0f / (sign + n.z());
-  const float b = n.x() * n.y() * a;
-  const Eigen::Vector3f t(1.0f + sign * n.x() * n.x() * a, sign * b, -sign * n.x());
-  const Eigen::Vector3f bt(b, sign + n.y() * n.y() * a, -n.y());
-  return (lx * t + ly * bt + lz * n).normalized();
+ private:
+  int cols_, rows_;
+};
+
+// Cosine-weighted directions around a unit normal from points in [0,1)^2 (Malley's method). The orthonormal
+// basis (Duff et al. 2017, "Building an Orthonormal Basis, Revisited") is built once per shaded point.
+class CosineLobe {
+ public:
+  explicit CosineLobe(const Eigen::Vector3f& n) : n_(n) {
+    const float sign = std::copysign(1.0f, n.z());
+    const float a = -1.0f / (sign + n.z());
+    const float b = n.x() * n.y() * a;
+    t_ = Eigen::Vector3f(1.0f + sign * n.x() * n.x() * a, sign * b, -sign * n.x());
+    bt_ = Eigen::Vector3f(b, sign + n.y() * n.y() * a, -n.y());
+  }
+  Eigen::Vector3f Direction(const Eigen::Vector2f& xi) const {
+    const float r = std::sqrt(xi.x());
+    const float phi = 2.0f * kPi * xi.y();
+    const float lx = r * std::cos(phi), ly = r * std::sin(phi), lz = std::sqrt(std::max(0.0f, 1.0f - xi.x()));
+    return (lx * t_ + ly * bt_ + lz * n_).normalized();
+  }
+
+ private:
+  Eigen::Vector3f n_, t_, bt_;
+};
+
+// Of `n` cosine-weighted sky directions around `lobe`, how many are above the horizon (z > 0), and how many of
+// those no mesh but `skip_mesh` occludes. The directions are drawn in order from `rng` (every one, so the stream
+// does not depend on the scene); the rays above the horizon are traced in packets.
+struct SkyCount {
+  int above = 0, open = 0;
+};
+SkyCount CountOpenSky(const RayScene& scene, const Eigen::Vector3f& origin, const CosineLobe& lobe, const StratifiedGrid& grid,
+                      int n, PixelRng& rng, int skip_mesh) {
+  SkyCount c;
+  std::array<Eigen::Vector3f, RayScene::kMaxFanRays> fan;
+  int in_fan = 0;
+  const auto trace = [&] {
+    c.open += in_fan - std::popcount(scene.OccludedFan(origin, fan.data(), in_fan, 0.0f,
+                                                       std::numeric_limits<float>::infinity(), skip_mesh));
+    in_fan = 0;
+  };
+  for (int k = 0; k < n; ++k) {
+    const Eigen::Vector3f d = lobe.Direction(grid(k, rng));
+    if (d.z() <= 0) continue;
+    ++c.above;
+    fan[in_fan++] = d;
+    if (in_fan == RayScene::kMaxFanRays) trace();
+  }
+  if (in_fan > 0) trace();
+  return c;
 }
 
 float Luminance(const Eigen::Vector3f& c) { return LinearLuminance(c.data()); }
@@ -115,6 +158,7 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
   const int n_ao = options.ao_samples;
   const int receiver = options.receiver_mesh;
   const float inf = std::numeric_limits<float>::infinity();
+  const StratifiedGrid pixel_grid(spp), ao_grid(n_ao);
 
   const auto render_pixel = [&](int x, int y) {
     PixelRng rng(options.seed, x, y);
@@ -126,7 +170,7 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
     std::vector<int> ids_large(spp > 16 ? static_cast<size_t>(spp) : 0);
     int* ids = spp > 16 ? ids_large.data() : ids_small.data();
     for (int s = 0; s < spp; ++s) {
-      const Eigen::Vector2f jitter = Stratified(s, spp, rng);
+      const Eigen::Vector2f jitter = pixel_grid(s, rng);
       const Eigen::Vector3d d_cam = camera.RayDirection(Eigen::Vector2d(x + jitter.x(), y + jitter.y()));
       const Eigen::Vector3f dir = (R_scene_cam * d_cam).cast<float>().normalized();
       // The receiver stands in for the real road, which is in the photo already: it never hides an object (a
@@ -141,13 +185,8 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
         if (!options.receiver_shadow) continue;
         // Light the real road got (no objects) vs what it gets now; visibility ignores the road itself.
         const bool sun_visible = cos_sun > 0 && !scene.Occluded(f.p_offset, sun_dir, 0.0f, inf, receiver);
-        int sky_with = 0, sky_without = 0;
-        for (int k = 0; k < n_ao; ++k) {
-          const Eigen::Vector3f d = CosineDirection(f.n_shade, Stratified(k, n_ao, rng));
-          if (d.z() <= 0) continue;
-          ++sky_without;
-          if (!scene.Occluded(f.p_offset, d, 0.0f, inf, receiver)) ++sky_with;
-        }
+        const SkyCount sky_count = CountOpenSky(scene, f.p_offset, CosineLobe(f.n_shade), ao_grid, n_ao, rng, receiver);
+        const int sky_with = sky_count.open, sky_without = sky_count.above;
         const float ao_with = n_ao > 0 ? static_cast<float>(sky_with) / n_ao : 1.0f;
         const float ao_without = n_ao > 0 ? static_cast<float>(sky_without) / n_ao : 1.0f;
         const float den = sun_y * cos_sun + sky_y * kPi * ao_without;
@@ -164,11 +203,7 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
       const float obj_cos_sun = own ? std::max(0.0f, f.n_shade.dot(obj_sun_dir)) : cos_sun;
       // Nor does the receiver shade an object: the real road below is already counted by the upper-hemisphere test.
       const bool sun_visible = obj_cos_sun > 0 && !scene.Occluded(f.p_offset, obj_sun_dir, 0.0f, inf, receiver);
-      int sky_open = 0;
-      for (int k = 0; k < n_ao; ++k) {
-        const Eigen::Vector3f d = CosineDirection(f.n_shade, Stratified(k, n_ao, rng));
-        if (d.z() > 0 && !scene.Occluded(f.p_offset, d, 0.0f, inf, receiver)) ++sky_open;
-      }
+      const int sky_open = CountOpenSky(scene, f.p_offset, CosineLobe(f.n_shade), ao_grid, n_ao, rng, receiver).open;
       const float ao = n_ao > 0 ? static_cast<float>(sky_open) / n_ao : 1.0f;
       const Eigen::Vector3f E = l.sun_irradiance * (sun_visible ? obj_cos_sun : 0.0f) + l.sky_radiance * (kPi * ao);
       const Eigen::Vector3f albedo = scene.BaseColor(hit).head<3>();

@@ -245,6 +245,46 @@ bool RayScene::Occluded(const Eigen::Vector3f& origin, const Eigen::Vector3f& di
   return ray.tfar < 0.0f;
 }
 
+uint32_t RayScene::OccludedFan(const Eigen::Vector3f& origin, const Eigen::Vector3f* dirs, int count, float t_near,
+                               float t_far, int skip_mesh) const {
+  SD_CHECK(impl_->committed, << "query before Commit");
+  SD_CHECK(count >= 0 && count <= kMaxFanRays, << count << " rays in one fan (at most " << kMaxFanRays << ")");
+  SkipContext ctx;
+  rtcInitIntersectContext(&ctx.context);
+  ctx.skip_geom = RTC_INVALID_GEOMETRY_ID;
+  if (skip_mesh >= 0) {
+    ctx.context.filter = SkipFilter;
+    ctx.skip_geom = static_cast<unsigned>(skip_mesh);
+  }
+  alignas(64) int valid[16];
+  RTCRay16 rays;
+  bool any = false;
+  for (int i = 0; i < 16; ++i) {
+    // Lanes past `count` and rays outside the contract still get finite values: Embree may read them.
+    const bool ok = i < count && RayWithinEmbreeContract(origin, dirs[i], t_near, t_far);
+    valid[i] = ok ? -1 : 0;
+    any = any || ok;
+    rays.org_x[i] = ok ? origin.x() : 0.0f;
+    rays.org_y[i] = ok ? origin.y() : 0.0f;
+    rays.org_z[i] = ok ? origin.z() : 0.0f;
+    rays.dir_x[i] = ok ? dirs[i].x() : 0.0f;
+    rays.dir_y[i] = ok ? dirs[i].y() : 0.0f;
+    rays.dir_z[i] = ok ? dirs[i].z() : 1.0f;
+    rays.tnear[i] = ok ? t_near : 0.0f;
+    rays.tfar[i] = ok ? t_far : 0.0f;
+    rays.time[i] = 0.0f;
+    rays.mask[i] = 0xFFFFFFFFu;
+    rays.id[i] = static_cast<unsigned>(i);
+    rays.flags[i] = 0;
+  }
+  if (!any) return 0;
+  rtcOccluded16(valid, impl_->scene, &ctx.context, &rays);
+  uint32_t occluded = 0;
+  for (int i = 0; i < count; ++i)
+    if (valid[i] && rays.tfar[i] < 0.0f) occluded |= 1u << i;  // Embree sets tfar to -inf when occluded
+  return occluded;
+}
+
 std::vector<RayHit> RayScene::IntersectMany(const std::vector<Eigen::Vector3f>& origins,
                                             const std::vector<Eigen::Vector3f>& dirs, float t_near) const {
   SD_CHECK(origins.size() == dirs.size(), << origins.size() << " origins vs " << dirs.size() << " dirs");

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <limits>
+#include <vector>
 
 #include "core/image.h"
 #include "render/test_meshes.h"
@@ -115,6 +116,42 @@ TEST(RayScene, OccludedSkipMesh) {
   EXPECT_TRUE(scene.Occluded(o, d, 0, 1.5f, far_id));
   EXPECT_EQ(scene.Intersect(o, d).mesh, near_id);
   EXPECT_EQ(scene.Intersect(o, d, 1.5f).mesh, far_id);
+}
+
+// A fan traced as one packet answers exactly as its rays traced one by one: random fans round points inside,
+// on and outside boxes, with and without a skipped mesh, of every size up to the packet's, with rays outside the
+// contract mixed in (answered "not occluded", as Occluded answers them).
+TEST(RayScene, OccludedFanAnswersAsOccludedDoes) {
+  RayScene scene;
+  const int ground = scene.AddMesh(Quad({0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 20, 20));
+  scene.AddMesh(Box({-1, -1, 0}, {1, 1, 2}));
+  scene.AddMesh(Box({2, -0.5f, 0}, {3, 0.5f, 3}));
+  scene.Commit();
+  uint32_t state = 12345;
+  const auto uniform = [&] {  // [-1, 1)
+    state = state * 1664525u + 1013904223u;
+    return static_cast<float>(state >> 8) / 8388608.0f - 1.0f;
+  };
+  const float inf = std::numeric_limits<float>::infinity(), nan = std::numeric_limits<float>::quiet_NaN();
+  int occluded = 0, open = 0;
+  for (int trial = 0; trial < 400; ++trial) {
+    const Eigen::Vector3f origin(3 * uniform(), 3 * uniform(), 1.5f + 1.5f * uniform());
+    const int count = trial % (RayScene::kMaxFanRays + 1);
+    std::vector<Eigen::Vector3f> dirs(static_cast<size_t>(count));
+    for (auto& d : dirs) d = Eigen::Vector3f(uniform(), uniform(), uniform()).normalized();
+    if (count > 3) dirs[1] = Eigen::Vector3f(nan, 0, 0), dirs[2] = Eigen::Vector3f::Zero();
+    const int skip = trial % 3 == 0 ? ground : -1;
+    const float t_far = trial % 4 == 0 ? 1.0f : inf;
+    const uint32_t fan = scene.OccludedFan(origin, dirs.data(), count, 0.0f, t_far, skip);
+    for (int i = 0; i < count; ++i) {
+      const bool one = scene.Occluded(origin, dirs[static_cast<size_t>(i)], 0.0f, t_far, skip);
+      ASSERT_EQ((fan >> i & 1u) != 0, one) << "trial " << trial << " ray " << i;
+      (one ? occluded : open)++;
+    }
+    EXPECT_EQ(fan >> count, 0u);
+  }
+  EXPECT_GT(occluded, 500);  // both answers were exercised
+  EXPECT_GT(open, 500);
 }
 
 // Rays outside Embree's contract (non-finite or zero origin or direction, t_near < 0 or past t_far) are misses;

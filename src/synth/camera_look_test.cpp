@@ -335,7 +335,7 @@ TEST(Realism, ShadowContrastOfRealAndInsertedObjectsOnASyntheticRoad) {
         if (geometry::InsideConvexPolygon(ShadowHull(b, sun), p)) value = std::min(value, 0.15f);
       for (int c = 0; c < 3; ++c) img.at(x, y, c) = value;
     }
-  const std::vector<ShadowContrast> shadows = MeasureShadowContrasts(f, inserted, {img}, sun);
+  const std::vector<ShadowContrast> shadows = MeasureShadowContrasts(f, inserted, std::vector<ImageF>{img}, sun);
   int real = 0, ins = 0;
   for (const ShadowContrast& s : shadows) {
     EXPECT_EQ(s.frame, "synthetic");
@@ -358,7 +358,7 @@ TEST(Realism, ShadowContrastOfRealAndInsertedObjectsOnASyntheticRoad) {
   EXPECT_NEAR(c.inserted_contrast / c.real_contrast, 0.5, 0.05);
   // Without a sun-lit shadow drawn, the contrast is 1.
   const ImageF flat(cam.intrinsics.width, cam.intrinsics.height, 3, 0.3f);
-  for (const ShadowContrast& s : MeasureShadowContrasts(f, inserted, {flat}, sun)) EXPECT_NEAR(s.contrast, 1.0, 1e-6);
+  for (const ShadowContrast& s : MeasureShadowContrasts(f, inserted, std::vector<ImageF>{flat}, sun)) EXPECT_NEAR(s.contrast, 1.0, 1e-6);
 }
 
 // Contact darkening on the same kind of synthetic road: the ground within 25 cm of each real car's footprint at
@@ -396,7 +396,7 @@ TEST(Realism, ContactDarkeningOfRealAndInsertedObjectsOnASyntheticRoad) {
       }
     return img;
   };
-  const std::vector<ContactDarkening> contacts = MeasureContactDarkening(f, inserted, {draw(true)}, sun);
+  const std::vector<ContactDarkening> contacts = MeasureContactDarkening(f, inserted, std::vector<ImageF>{draw(true)}, sun);
   int real = 0, ins = 0;
   for (const ContactDarkening& c : contacts) {
     EXPECT_EQ(c.frame, "synthetic");
@@ -420,13 +420,13 @@ TEST(Realism, ContactDarkeningOfRealAndInsertedObjectsOnASyntheticRoad) {
   EXPECT_EQ(by[1].inserted, 2);
   EXPECT_NEAR(by[1].inserted_darkening, 1.5, 0.05);
   // The sun unknown, the cars' shadows fall into their bands and the measure no longer reads their rim.
-  for (const ContactDarkening& c : MeasureContactDarkening(f, inserted, {draw(true)}, std::nullopt)) {
+  for (const ContactDarkening& c : MeasureContactDarkening(f, inserted, std::vector<ImageF>{draw(true)}, std::nullopt)) {
     if (c.category == "car") {
       EXPECT_GT(std::abs(c.darkening - 2.0), 0.3);
     }
   }
   const ImageF flat(cam.intrinsics.width, cam.intrinsics.height, 3, 0.3f);
-  const auto plain = MeasureContactDarkening(f, inserted, {flat}, sun);
+  const auto plain = MeasureContactDarkening(f, inserted, std::vector<ImageF>{flat}, sun);
   EXPECT_EQ(plain.size(), 4u);
   for (const ContactDarkening& c : plain) EXPECT_NEAR(c.darkening, 1.0, 1e-6);
 }

@@ -1,6 +1,7 @@
 #include "synth/environment.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <exception>
 #include <limits>
@@ -482,15 +483,7 @@ EnvironmentMap BuildEnvironmentMap(const Frame& frame, const std::vector<ImageU8
   const double sin_el = std::max(0.1, map.sun_direction.z());
   double contrast = 0;
   if (!frame.annotations.empty()) {
-    std::vector<ImageF> linear(nc);
-    for (size_t k = 0; k < nc; ++k) {
-      linear[k] = ToLinear(images[k]);
-      float* p = linear[k].data();
-      const size_t n = linear[k].size() / linear[k].channels();
-      for (size_t q = 0; q < n; ++q)
-        for (int c = 0; c < 3; ++c) p[q * linear[k].channels() + c] *= gains[k][c];
-    }
-    const ShadowCheck check = CheckSunAgainstShadows(frame, linear, map.sun_direction);
+    const ShadowCheck check = CheckSunAgainstShadows(frame, LinearImages(images, gains), map.sun_direction);
     map.shadow_objects = static_cast<int>(check.boxes.size());
     map.shadow_agreement = check.agreement;
     std::vector<double> ratios;
@@ -571,45 +564,89 @@ namespace {
 Eigen::Vector3f Offset(const Eigen::Vector3d& p, const Eigen::Vector3d& n, float off) {
   return (p + n.normalized() * off).cast<float>();
 }
-Eigen::Vector3d SunRay(const EnvironmentLight& light, int k, int n, uint32_t seed) {
-  const Eigen::Vector3d s = light.sun_direction.normalized();
-  Eigen::Vector3d t, b;
-  Basis(s, &t, &b);
-  const Eigen::Vector2d r = Stratified(k, n, seed, 17);
-  const double rad = std::tan(light.sun_angular_radius_rad) * std::sqrt(r.x()), phi = 2 * M_PI * r.y();  // uniform on the disk
-  return (s + rad * (std::cos(phi) * t + std::sin(phi) * b)).normalized();
-}
-Eigen::Vector3d CosineRay(const Eigen::Vector3d& n, int k, int count, uint32_t seed) {
-  Eigen::Vector3d t, b;
-  Basis(n.normalized(), &t, &b);
-  const Eigen::Vector2d r = Stratified(k, count, seed, 29);
-  const double rr = std::sqrt(r.x()), phi = 2 * M_PI * r.y();
-  return (rr * std::cos(phi) * t + rr * std::sin(phi) * b + std::sqrt(std::max(0.0, 1 - r.x())) * n.normalized()).normalized();
-}
+// Directions uniform on the sun's disk; the basis round the sun built once.
+class SunDisk {
+ public:
+  explicit SunDisk(const EnvironmentLight& light)
+      : s_(light.sun_direction.normalized()), tan_radius_(std::tan(light.sun_angular_radius_rad)) {
+    Basis(s_, &t_, &b_);
+  }
+  Eigen::Vector3d Ray(int k, int n, uint32_t seed) const {
+    const Eigen::Vector2d r = Stratified(k, n, seed, 17);
+    const double rad = tan_radius_ * std::sqrt(r.x()), phi = 2 * M_PI * r.y();
+    return (s_ + rad * (std::cos(phi) * t_ + std::sin(phi) * b_)).normalized();
+  }
+
+ private:
+  Eigen::Vector3d s_, t_, b_;
+  double tan_radius_;
+};
+
+// Cosine-weighted directions round a normal; the basis built once per shaded point.
+class CosineLobe {
+ public:
+  explicit CosineLobe(const Eigen::Vector3d& normal) : n_(normal.normalized()) { Basis(n_, &t_, &b_); }
+  Eigen::Vector3d Ray(int k, int count, uint32_t seed) const {
+    const Eigen::Vector2d r = Stratified(k, count, seed, 29);
+    const double rr = std::sqrt(r.x()), phi = 2 * M_PI * r.y();
+    return (rr * std::cos(phi) * t_ + rr * std::sin(phi) * b_ + std::sqrt(std::max(0.0, 1 - r.x())) * n_).normalized();
+  }
+
+ private:
+  Eigen::Vector3d n_, t_, b_;
+};
+
+// Rays leaving one point, gathered and traced in packets (RayScene::OccludedFan): Add a ray with a weight; the
+// weights of the rays nothing occludes are summed in the order the rays were added.
+class FanTracer {
+ public:
+  FanTracer(const RayScene& scene, const Eigen::Vector3f& origin, int skip_mesh)
+      : scene_(scene), origin_(origin), skip_mesh_(skip_mesh) {}
+  void Add(const Eigen::Vector3f& dir, double weight) {
+    dirs_[count_] = dir;
+    weights_[count_++] = weight;
+    if (count_ == RayScene::kMaxFanRays) Trace();
+  }
+  double OpenWeight() {
+    if (count_ > 0) Trace();
+    return open_;
+  }
+
+ private:
+  void Trace() {
+    const uint32_t occluded = scene_.OccludedFan(origin_, dirs_.data(), count_, 0.0f, std::numeric_limits<float>::infinity(), skip_mesh_);
+    for (int i = 0; i < count_; ++i)
+      if (!(occluded >> i & 1u)) open_ += weights_[static_cast<size_t>(i)];
+    count_ = 0;
+  }
+  const RayScene& scene_;
+  Eigen::Vector3f origin_;
+  int skip_mesh_;
+  std::array<Eigen::Vector3f, RayScene::kMaxFanRays> dirs_;
+  std::array<double, RayScene::kMaxFanRays> weights_;
+  int count_ = 0;
+  double open_ = 0;
+};
 }  // namespace
 
 double SunVisibility(const RayScene& scene, const Eigen::Vector3d& p, const Eigen::Vector3d& normal, const EnvironmentLight& light,
                      const EnvShadingOptions& o) {
   const int n = std::max(1, o.sun_rays);
-  const Eigen::Vector3f origin = Offset(p, normal, o.ray_offset);
-  int visible = 0;
-  for (int k = 0; k < n; ++k) {
-    const Eigen::Vector3f d = SunRay(light, k, n, o.seed).cast<float>();
-    if (!scene.Occluded(origin, d, 0.0f, std::numeric_limits<float>::infinity(), o.skip_mesh)) ++visible;
-  }
-  return static_cast<double>(visible) / n;
+  const SunDisk disk(light);
+  FanTracer fan(scene, Offset(p, normal, o.ray_offset), o.skip_mesh);
+  for (int k = 0; k < n; ++k) fan.Add(disk.Ray(k, n, o.seed).cast<float>(), 1.0);
+  return fan.OpenWeight() / n;
 }
 
 double AmbientOcclusion(const RayScene& scene, const Eigen::Vector3d& p, const Eigen::Vector3d& normal, const EnvShadingOptions& o) {
   const int n = std::max(1, o.sky_rays);
-  const Eigen::Vector3f origin = Offset(p, normal, o.ray_offset);
-  int open = 0;
+  const CosineLobe lobe(normal);
+  FanTracer fan(scene, Offset(p, normal, o.ray_offset), o.skip_mesh);
   for (int k = 0; k < n; ++k) {
-    const Eigen::Vector3d d = CosineRay(normal, k, n, o.seed);
-    if (d.z() <= 0) continue;
-    if (!scene.Occluded(origin, d.cast<float>(), 0.0f, std::numeric_limits<float>::infinity(), o.skip_mesh)) ++open;
+    const Eigen::Vector3d d = lobe.Ray(k, n, o.seed);
+    if (d.z() > 0) fan.Add(d.cast<float>(), 1.0);
   }
-  return static_cast<double>(open) / n;
+  return fan.OpenWeight() / n;
 }
 
 Eigen::Vector3f ObjectIrradiance(const RayScene& scene, const Eigen::Vector3d& p, const Eigen::Vector3d& normal,
@@ -626,10 +663,12 @@ float ReceiverShadowRatio(const RayScene& scene, const Eigen::Vector3d& p, const
   const Eigen::Vector3f origin = Offset(p, n, o.ray_offset);
   // Sky: cosine-weighted directions, each weighted by the map's luminance there (the same directions for
   // numerator and denominator so that their noise cancels).
-  double sky_all = 0, sky_open = 0;
+  double sky_all = 0;
   const int ns = std::max(1, o.sky_rays);
+  const CosineLobe lobe(n);
+  FanTracer fan(scene, origin, o.skip_mesh);
   for (int k = 0; k < ns; ++k) {
-    const Eigen::Vector3d d = CosineRay(n, k, ns, o.seed);
+    const Eigen::Vector3d d = lobe.Ray(k, ns, o.seed);
     if (d.z() <= 0) continue;
     double L = 1.0;
     if (light.radiance && !light.radiance->empty()) {
@@ -639,8 +678,9 @@ float ReceiverShadowRatio(const RayScene& scene, const Eigen::Vector3d& p, const
       L = Luma(rgb);
     }
     sky_all += L;
-    if (!scene.Occluded(origin, d.cast<float>(), 0.0f, std::numeric_limits<float>::infinity(), o.skip_mesh)) sky_open += L;
+    fan.Add(d.cast<float>(), L);
   }
+  const double sky_open = fan.OpenWeight();
   // Monte Carlo estimate of the sky irradiance: pi * mean(L) over cosine-weighted directions; the SH value
   // is the better-converged unoccluded total, scaled by the sampled open share.
   const double E_sky = Luma(light.sh.Irradiance(n));

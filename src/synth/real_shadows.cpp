@@ -6,10 +6,25 @@
 #include <optional>
 #include <utility>
 
+#include "core/error.h"
 #include "core/parallel.h"
 #include "geometry/polygon.h"
 
 namespace sd {
+
+LinearImages::LinearImages(const std::vector<ImageF>& linear) : linear_(&linear) {}
+
+LinearImages::LinearImages(const std::vector<ImageU8>& srgb, std::vector<Eigen::Vector3f> gains)
+    : srgb_(&srgb), gains_(std::move(gains)) {
+  SD_CHECK(gains_.empty() || gains_.size() == srgb.size(), << gains_.size() << " gains for " << srgb.size() << " images");
+}
+
+void LinearImages::SampleBilinear(size_t k, double u, double v, float* out) const {
+  if (linear_) return sd::SampleBilinear((*linear_)[k], u, v, out);
+  static const Eigen::Vector3f kOne = Eigen::Vector3f::Ones();
+  sd::SampleBilinearLinear((*srgb_)[k], u, v, (gains_.empty() ? kOne : gains_[k]).data(), out);
+}
+
 namespace {
 
 constexpr double kDeg = M_PI / 180.0;
@@ -66,7 +81,7 @@ PatchSpec ShadowSpec(const ShadowCheckOptions& opt) {
   return {opt.min_height_m, opt.max_distance_m, opt.cell_m, opt.footprint_margin_m, std::nullopt, 0.05};
 }
 
-std::vector<GroundPatch> SampleGroundPatches(const Frame& frame, const std::vector<ImageF>& linear, const PatchSpec& opt) {
+std::vector<GroundPatch> SampleGroundPatches(const Frame& frame, const LinearImages& linear, const PatchSpec& opt) {
   // One patch per annotation, in parallel; each cell tests only the boxes that can reach it (the answers are
   // those of testing every box: the others are farther than their bounding circle).
   std::vector<std::optional<GroundPatch>> slots(frame.annotations.size());
@@ -131,7 +146,7 @@ std::vector<GroundPatch> SampleGroundPatches(const Frame& frame, const std::vect
           }
         if (blocked) continue;
         float rgb[3];
-        SampleBilinear(linear[best], uv->x(), uv->y(), rgb);
+        linear.SampleBilinear(static_cast<size_t>(best), uv->x(), uv->y(), rgb);
         g.lum[static_cast<size_t>(j) * g.n + i] = LinearLuminance(rgb);
       }
     slots[ai] = std::move(g);
@@ -208,12 +223,12 @@ std::vector<Eigen::Vector2d> ShadowHull(const Box3& box, const Eigen::Vector3d& 
   return geometry::ConvexHull2D(std::move(pts));
 }
 
-ShadowCheck CheckSunAgainstShadows(const Frame& frame, const std::vector<ImageF>& linear, const Eigen::Vector3d& sun,
+ShadowCheck CheckSunAgainstShadows(const Frame& frame, const LinearImages& linear, const Eigen::Vector3d& sun,
                                    const ShadowCheckOptions& options) {
   return Judge(SampleGroundPatches(frame, linear, ShadowSpec(options)), sun, options, /*core=*/true);
 }
 
-std::optional<Eigen::Vector3d> EstimateSunFromShadows(const Frame& frame, const std::vector<ImageF>& linear,
+std::optional<Eigen::Vector3d> EstimateSunFromShadows(const Frame& frame, const LinearImages& linear,
                                                       const ShadowCheckOptions& options, ShadowCheck* best,
                                                       std::optional<double> elevation_deg) {
   const auto patches = SampleGroundPatches(frame, linear, ShadowSpec(options));
@@ -243,7 +258,7 @@ std::optional<Eigen::Vector3d> EstimateSunFromShadows(const Frame& frame, const 
   return out;
 }
 
-std::vector<ContactCheckBox> CheckContactDarkening(const Frame& frame, const std::vector<ImageF>& linear,
+std::vector<ContactCheckBox> CheckContactDarkening(const Frame& frame, const LinearImages& linear,
                                                    const std::optional<Eigen::Vector3d>& sun_dir_ego,
                                                    const ContactCheckOptions& opt) {
   PatchSpec spec;

@@ -16,6 +16,26 @@
 
 namespace sd {
 
+// A frame's camera images read as linear light, parallel to frame.cameras: float images (ToLinear), or the 8-bit
+// sRGB images themselves read through the sRGB table and scaled by a gain per camera at each sample (the
+// environment map's exposure and white balance). The checks below read a few thousand ground cells of a rig, so
+// the second form spares the float copies (17 MB per 1600x900 camera) with the same values, bit for bit. A view:
+// the images (and the vector) must outlive it.
+class LinearImages {
+ public:
+  LinearImages(const std::vector<ImageF>& linear);  // NOLINT(google-explicit-constructor): float images pass as they are
+  // `gains` empty: 1 for every camera; otherwise one per image.
+  explicit LinearImages(const std::vector<ImageU8>& srgb, std::vector<Eigen::Vector3f> gains = {});
+  size_t size() const { return linear_ ? linear_->size() : srgb_->size(); }
+  // SampleBilinear of image k (core/image.h): its channels' linear values at (u, v).
+  void SampleBilinear(size_t k, double u, double v, float* out) const;
+
+ private:
+  const std::vector<ImageF>* linear_ = nullptr;
+  const std::vector<ImageU8>* srgb_ = nullptr;
+  std::vector<Eigen::Vector3f> gains_;
+};
+
 // Ground polygon (ego frame, z = box bottom, convex, counter-clockwise) covered by the box's footprint and its
 // shadow for a sun direction; `mirrored` reflects the shadow through the footprint (the "no shadow" control).
 std::vector<Eigen::Vector2d> ShadowHull(const Box3& box, const Eigen::Vector3d& sun_dir_ego, bool mirrored = false);
@@ -46,13 +66,13 @@ struct ShadowCheck {
 // `linear`: the frame's camera images, linear (ToLinear), parallel to frame.cameras. Each annotated box is
 // judged in the camera that sees it closest to its image centre; ground cells hidden behind any annotated
 // box (ray-box test from the camera) are left out.
-ShadowCheck CheckSunAgainstShadows(const Frame& frame, const std::vector<ImageF>& linear, const Eigen::Vector3d& sun_dir_ego,
+ShadowCheck CheckSunAgainstShadows(const Frame& frame, const LinearImages& linear, const Eigen::Vector3d& sun_dir_ego,
                                    const ShadowCheckOptions& options = {});
 // The sun direction (5 deg azimuth x 10 deg elevation grid, elevation 20..80) whose shadows best explain the
 // images: the largest mean_log_ratio x sqrt(objects judged). With `elevation_deg`, only the azimuth is searched
 // (shadow length is the weak cue; a known elevation, e.g. the ephemeris', makes it an azimuth check). Empty
 // when no box can be judged.
-std::optional<Eigen::Vector3d> EstimateSunFromShadows(const Frame& frame, const std::vector<ImageF>& linear,
+std::optional<Eigen::Vector3d> EstimateSunFromShadows(const Frame& frame, const LinearImages& linear,
                                                       const ShadowCheckOptions& options = {}, ShadowCheck* best = nullptr,
                                                       std::optional<double> elevation_deg = std::nullopt);
 
@@ -76,7 +96,7 @@ struct ContactCheckBox {
   double near_luminance = 0, far_luminance = 0;  // medians of linear Y
   double Darkening() const { return near_luminance > 0 ? far_luminance / near_luminance : 0; }  // 1 = none
 };
-std::vector<ContactCheckBox> CheckContactDarkening(const Frame& frame, const std::vector<ImageF>& linear,
+std::vector<ContactCheckBox> CheckContactDarkening(const Frame& frame, const LinearImages& linear,
                                                    const std::optional<Eigen::Vector3d>& sun_dir_ego,
                                                    const ContactCheckOptions& options = {});
 

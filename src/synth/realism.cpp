@@ -363,7 +363,7 @@ Frame WithInsertsAsAnnotations(const Frame& frame, const std::vector<std::pair<s
 
 std::vector<ShadowContrast> MeasureShadowContrasts(const Frame& frame,
                                                    const std::vector<std::pair<std::string, Box3>>& inserted,
-                                                   const std::vector<ImageF>& linear, const Eigen::Vector3d& sun_dir_ego) {
+                                                   const LinearImages& linear, const Eigen::Vector3d& sun_dir_ego) {
   const Frame scene = WithInsertsAsAnnotations(frame, inserted);
   const size_t real = frame.annotations.size();
   ShadowCheckOptions options;
@@ -403,7 +403,7 @@ ShadowComparison CompareShadows(const std::vector<ShadowContrast>& shadows) {
 
 std::vector<ContactDarkening> MeasureContactDarkening(const Frame& frame,
                                                       const std::vector<std::pair<std::string, Box3>>& inserted,
-                                                      const std::vector<ImageF>& linear,
+                                                      const LinearImages& linear,
                                                       const std::optional<Eigen::Vector3d>& sun_dir_ego) {
   const Frame scene = WithInsertsAsAnnotations(frame, inserted);
   const size_t real = frame.annotations.size();
@@ -482,8 +482,7 @@ RealismReport EvaluateRealism(const std::filesystem::path& synth_out) {
         final_images[k] = ReadImage(cam.image_path, 3);
       }
     }
-    std::vector<ImageF> linear;
-    for (const ImageU8& image : final_images) linear.push_back(ToLinear(image));
+    const LinearImages linear(final_images);
     std::optional<Eigen::Vector3d> sun;
     if (shadows) {
       sun.emplace();

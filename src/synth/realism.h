@@ -22,6 +22,7 @@
 #include "core/image.h"
 #include "datasets/log.h"
 #include "synth/camera_look.h"
+#include "synth/real_shadows.h"
 
 namespace sd {
 
@@ -105,7 +106,7 @@ struct ShadowContrast {
 };
 std::vector<ShadowContrast> MeasureShadowContrasts(const Frame& frame,
                                                    const std::vector<std::pair<std::string, Box3>>& inserted,
-                                                   const std::vector<ImageF>& linear, const Eigen::Vector3d& sun_dir_ego);
+                                                   const LinearImages& linear, const Eigen::Vector3d& sun_dir_ego);
 struct ShadowComparison {
   int real = 0, inserted = 0;
   double real_contrast = 0, inserted_contrast = 0;  // medians; 0 with none
@@ -123,7 +124,7 @@ struct ContactDarkening {
 };
 std::vector<ContactDarkening> MeasureContactDarkening(const Frame& frame,
                                                       const std::vector<std::pair<std::string, Box3>>& inserted,
-                                                      const std::vector<ImageF>& linear,
+                                                      const LinearImages& linear,
                                                       const std::optional<Eigen::Vector3d>& sun_dir_ego);
 struct ContactComparison {
   std::string category;  // "" = all objects

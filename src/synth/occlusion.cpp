@@ -99,16 +99,6 @@ std::vector<float> MinFilter(const std::vector<float>& in, int w, int h, int r) 
   return out;
 }
 
-// The guide colour, 0..255. Not smoothed: at an edge, smoothing gives the pixels beside it a colour between
-// both sides, which no point matches.
-ImageF ToFloat(const ImageU8& image) {
-  ImageF out(image.width(), image.height(), 3);
-  for (int y = 0; y < image.height(); ++y)
-    for (int x = 0; x < image.width(); ++x)
-      for (int c = 0; c < 3; ++c) out.at(x, y, c) = image.at(x, y, c);
-  return out;
-}
-
 struct Candidate {
   float u, v, depth;
   float rgb[3];
@@ -163,9 +153,18 @@ float RaySurfaceDepth(const SurfaceModel& surface, const Rigid3d& T_world_cam, c
 
 }  // namespace
 
-std::vector<ProjectedPoint> FilterHiddenPoints(const std::vector<ProjectedPoint>& points, int width, int height,
-                                               const DenseDepthOptions& options) {
-  std::vector<float> zb(static_cast<size_t>(width) * height, kInf);
+namespace {
+// FilterHiddenPoints for the points that project into the pixels [x0, x1) x [y0, y1) only: the z-buffer and its
+// minimum filter cover that box grown by the window, not the whole image, and each point's answer is the one the
+// whole image gives (its window lies in the grown box).
+std::vector<ProjectedPoint> FilterHiddenPointsIn(const std::vector<ProjectedPoint>& points, int width, int height, int x0,
+                                                 int y0, int x1, int y1, const DenseDepthOptions& options) {
+  const int r = std::max(0, options.hidden_window_px);
+  const int zx0 = std::max(0, x0 - r), zy0 = std::max(0, y0 - r);
+  const int zx1 = std::min(width, x1 + r), zy1 = std::min(height, y1 + r);
+  const int zw = zx1 - zx0, zh = zy1 - zy0;
+  if (zw <= 0 || zh <= 0) return {};
+  std::vector<float> zb(static_cast<size_t>(zw) * zh, kInf);
   const auto pixel_of = [&](const ProjectedPoint& p, int* x, int* y) {
     *x = static_cast<int>(std::floor(p.u));
     *y = static_cast<int>(std::floor(p.v));
@@ -173,16 +172,25 @@ std::vector<ProjectedPoint> FilterHiddenPoints(const std::vector<ProjectedPoint>
   };
   int x = 0, y = 0;
   for (const auto& p : points)
-    if (pixel_of(p, &x, &y)) zb[Idx(x, y, width)] = std::min(zb[Idx(x, y, width)], p.depth);
-  const std::vector<float> nearest = MinFilter(zb, width, height, std::max(0, options.hidden_window_px));
+    if (pixel_of(p, &x, &y) && x >= zx0 && x < zx1 && y >= zy0 && y < zy1) {
+      float& z = zb[Idx(x - zx0, y - zy0, zw)];
+      z = std::min(z, p.depth);
+    }
+  const std::vector<float> nearest = MinFilter(zb, zw, zh, r);
   std::vector<ProjectedPoint> kept;
   kept.reserve(points.size());
   for (const auto& p : points) {
-    if (!pixel_of(p, &x, &y)) continue;
-    if (nearest[Idx(x, y, width)] < p.depth / (1.0 + options.hidden_rel) - 0.3) continue;
+    if (!pixel_of(p, &x, &y) || x < x0 || x >= x1 || y < y0 || y >= y1) continue;
+    if (nearest[Idx(x - zx0, y - zy0, zw)] < p.depth / (1.0 + options.hidden_rel) - 0.3) continue;
     kept.push_back(p);
   }
   return kept;
+}
+}  // namespace
+
+std::vector<ProjectedPoint> FilterHiddenPoints(const std::vector<ProjectedPoint>& points, int width, int height,
+                                               const DenseDepthOptions& options) {
+  return FilterHiddenPointsIn(points, width, height, 0, 0, width, height, options);
 }
 
 DepthMap DenseDepth(const std::vector<ProjectedPoint>& points, const ImageU8& image, const PinholeCamera& camera,
@@ -198,21 +206,28 @@ DepthMap DenseDepth(const std::vector<ProjectedPoint>& points, const ImageU8& im
   const int rx0 = whole ? 0 : std::clamp(options.x0, 0, W), rx1 = whole ? W : std::clamp(options.x1, 0, W);
   const int ry0 = whole ? 0 : std::clamp(options.y0, 0, H), ry1 = whole ? H : std::clamp(options.y1, 0, H);
 
-  const std::vector<ProjectedPoint> kept = FilterHiddenPoints(points, W, H, options);
+  // Points reach the pixels within max_fill_px of them: only those projecting into the region grown by that much
+  // (and a pixel) can be candidates, so the hidden-point filter and the per-pixel map cover that box alone.
+  const int reach = options.max_fill_px + 1;
+  const int bx0 = std::max(0, rx0 - reach), by0 = std::max(0, ry0 - reach);
+  const int bx1 = std::min(W, rx1 + reach), by1 = std::min(H, ry1 + reach);
+  const int bw = std::max(0, bx1 - bx0), bh = std::max(0, by1 - by0);
+  const std::vector<ProjectedPoint> kept = FilterHiddenPointsIn(points, W, H, bx0, by0, bx1, by1, options);
   // One candidate per pixel: its nearest kept point.
-  std::vector<int> at(static_cast<size_t>(W) * H, -1);
+  std::vector<int> at(static_cast<size_t>(bw) * bh, -1);
   for (size_t i = 0; i < kept.size(); ++i) {
-    const size_t k = Idx(static_cast<int>(kept[i].u), static_cast<int>(kept[i].v), W);
+    const size_t k = Idx(static_cast<int>(kept[i].u) - bx0, static_cast<int>(kept[i].v) - by0, bw);
     if (at[k] < 0 || kept[i].depth < kept[static_cast<size_t>(at[k])].depth) at[k] = static_cast<int>(i);
   }
-  const ImageF colour = options.edge_aware ? ToFloat(image) : ImageF();
+  // The guide colour is the image's own 0..255 values. Not smoothed: at an edge, smoothing gives the pixels beside
+  // it a colour between both sides, which no point matches.
   std::vector<Candidate> cands;
   for (size_t k = 0; k < at.size(); ++k) {
     if (at[k] < 0) continue;
     const ProjectedPoint& p = kept[static_cast<size_t>(at[k])];
     Candidate c{p.u, p.v, p.depth, {0, 0, 0}, p.ground};
     if (options.edge_aware)
-      for (int ch = 0; ch < 3; ++ch) c.rgb[ch] = colour.at(static_cast<int>(k % W), static_cast<int>(k / W), ch);
+      for (int ch = 0; ch < 3; ++ch) c.rgb[ch] = image.at(bx0 + static_cast<int>(k % bw), by0 + static_cast<int>(k / bw), ch);
     cands.push_back(c);
   }
   constexpr int kCell = 16;
@@ -235,7 +250,10 @@ DepthMap DenseDepth(const std::vector<ProjectedPoint>& points, const ImageU8& im
       votes.clear();
       float best_r2 = kInf, nn_depth = kInf;
       bool nn_ground = false;
-      const float* rgb = options.edge_aware ? colour.pixel(x, y) : nullptr;
+      float guide[3] = {0, 0, 0};
+      if (options.edge_aware)
+        for (int ch = 0; ch < 3; ++ch) guide[ch] = image.at(x, y, ch);
+      const float* rgb = options.edge_aware ? guide : nullptr;
       for (int cy = cy0; cy <= cy1; ++cy)
         for (int cx = cx0; cx <= cx1; ++cx)
           for (int i : grid[Idx(cx, cy, gw)]) {

@@ -17,6 +17,8 @@ PACKAGES=(
   libtorch-dev python3-torch python3-onnx
   # Python's own pickle consumers: the tests check that numpy and pandas load the pickles we write.
   python3-numpy python3-pandas
+  # WordNet 3.0 (noun files), for prompts without CLIP: `mine query` reads "lorry" as a truck (mining/lexicon.h).
+  wordnet-base
   libgtest-dev libgmock-dev libbenchmark-dev
 )
 # npm fetches the super-resolution weights and three.js; Node may already come from elsewhere (keep that one).

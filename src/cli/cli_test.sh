@@ -237,7 +237,17 @@ expect_error "mine: missing log" "nope.json: no such file" "$T/mi2" -- "$BIN" -q
 expect_error "mine: bad shard" "--shard '2/2'" "$T/mi3" -- "$BIN" -q mine index --log "$INFO" --out "$T/mi3" --clip none --shard 2/2
 mkdir -p "$T/not_an_index"
 expect_error "mine: not an index" "not a mining index" "$T/mr2" -- "$BIN" -q mine query --index "$T/not_an_index" --prompt car --out "$T/mr2"
-expect_error "mine: prompt without a category and no CLIP" "names no known category" "$T/mr3" -- "$BIN" -q mine query --index "$T/mi" --prompt "purple elephant" --out "$T/mr3"
+expect_error "mine: prompt without a category and no CLIP" "names no category" "$T/mr3" -- "$BIN" -q mine query --index "$T/mi" --prompt "purple elephant" --out "$T/mr3"
+expect_error "mine: an unknown prompt suggests example mode" "mine query --example" "$T/mr3" -- "$BIN" -q mine query --index "$T/mi" --prompt "purple elephant" --out "$T/mr3"
+# Prompts that are no dataset label (mining/lexicon.h): a road word, and with WordNet a synonym, each hit of the
+# category they name and the run saying why.
+"$BIN" -q mine query --index "$T/mi" --prompt pylons --prompt automobile --prompt giraffe --out "$T/mr_lex" \
+  && [ "$(grep -c '"prompt":"pylons"' "$T/mr_lex/manifest.jsonl")" -gt 0 ] \
+  && [ "$(grep -c '"category":"traffic_cone".*"prompt":"pylons"' "$T/mr_lex/manifest.jsonl")" -eq "$(grep -c '"prompt":"pylons"' "$T/mr_lex/manifest.jsonl")" ] \
+  && grep -q 'road word for traffic_cone' "$T/mr_lex/run.json" && grep -q "'giraffe' names no category" "$T/mr_lex/run.json" \
+  && { [ ! -f /usr/share/wordnet/index.noun ] || { grep -q 'automobile = car#1' "$T/mr_lex/run.json" \
+       && [ "$(grep -c '"category":"car".*"prompt":"automobile"' "$T/mr_lex/manifest.jsonl")" -gt 0 ]; }; } \
+  && ok || bad "mine query by lexical prompts"
 expect_error "mine: existing run" "mr: exists" "" -- "$BIN" -q mine query --index "$T/mi" --prompt car --out "$T/mr"
 printf '{"id": 1}\n' > "$T/bad_manifest.jsonl"
 expect_error "generate: malformed manifest" "bad_manifest.jsonl:1" "$T/g5" -- "$BIN" -q generate --manifest "$T/bad_manifest.jsonl" --out "$T/g5"

@@ -154,7 +154,7 @@ void AddQueryCommand(CLI::App& app, std::function<int()>& run) {
   app.add_option("--out", a->out, "Mining run folder: manifest.jsonl, crops/, masks/, run.json, index.html")
       ->required();
   app.add_option("--k", o.k, "Hits per prompt")->default_val(20)->check(CLI::Range(1, 100000));
-  app.add_option("--mode", a->mode, "auto, clip, label or example")->default_val("auto");
+  app.add_option("--mode", a->mode, "auto, clip, label, lexical or example")->default_val("auto");
   app.add_option("--clip", a->clip, "CLIP model folder, auto or none")->default_val("auto");
   app.add_option("--device", a->device, "cpu, cuda or cuda:N (CLIP)")->default_val("cpu");
   app.add_option("--min-score", o.min_clip_score, "Minimum CLIP cosine")->default_val(0.2)->check(CLI::Range(-1.0, 1.0));
@@ -197,6 +197,15 @@ void AddQueryCommand(CLI::App& app, std::function<int()>& run) {
     const std::optional<models::ClipEncoder> clip =
         index.has_clip() && o.mode != mining::QueryMode::kLabel ? LoadClip(a->clip, a->device) : std::nullopt;
     o.clip = clip ? &*clip : nullptr;
+    // WordNet for prompts CLIP does not serve (a 20 MB read: only then).
+    std::optional<mining::Lexicon> lexicon;
+    if (!o.prompts.empty() && !o.clip && (o.mode == mining::QueryMode::kAuto || o.mode == mining::QueryMode::kLexical)) {
+      lexicon = mining::Lexicon::Load();
+      o.lexicon = &*lexicon;
+      if (!lexicon->has_wordnet())
+        SD_LOG(Warn, "WordNet not found in " << mining::DefaultWordNetDir().string()
+                                                << " (Debian's wordnet-base): prompts are read by category names and road words only");
+    }
     const std::vector<mining::PromptResult> results = mining::RunQuery(index, o);
     mining::WriteMiningRun(a->out, index, results, o, a->overwrite);
     size_t hits = 0;

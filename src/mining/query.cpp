@@ -28,15 +28,16 @@ const char* ToString(QueryMode mode) {
     case QueryMode::kAuto: return "auto";
     case QueryMode::kClip: return "clip";
     case QueryMode::kLabel: return "label";
+    case QueryMode::kLexical: return "lexical";
     case QueryMode::kExample: return "example";
   }
   return "?";
 }
 
 QueryMode QueryModeFromString(const std::string& s) {
-  for (QueryMode m : {QueryMode::kAuto, QueryMode::kClip, QueryMode::kLabel, QueryMode::kExample})
+  for (QueryMode m : {QueryMode::kAuto, QueryMode::kClip, QueryMode::kLabel, QueryMode::kLexical, QueryMode::kExample})
     if (s == ToString(m)) return m;
-  throw InputError({}, Msg() << "unknown query mode '" << s << "' (expected auto, clip, label or example)");
+  throw InputError({}, Msg() << "unknown query mode '" << s << "' (expected auto, clip, label, lexical or example)");
 }
 
 namespace {
@@ -180,30 +181,52 @@ std::vector<PromptResult> RunQuery(const MiningIndex& index, const QueryOptions&
                                                    : "has no CLIP embeddings: rebuild with --clip, or use --mode label");
 
   std::vector<PromptResult> results;
+  const Lexicon names_only = Lexicon::Load("");
+  size_t unserved = 0;  // prompts that named no category
   for (const std::string& prompt : o.prompts) {
     PromptResult r;
     r.prompt = prompt;
     if (o.mode == QueryMode::kExample)
       throw InputError({}, Msg() << "prompt '" << prompt << "' given with --mode example (examples are images)");
-    const std::string category = CategoryForPrompt(prompt);
     const bool use_clip = o.mode == QueryMode::kClip || (o.mode == QueryMode::kAuto && clip_ready);
     if (use_clip) {
       r.mode = QueryMode::kClip;
       const auto text = o.clip->EmbedTexts({prompt});
       SelectBySearch(index, VectorKind::kClip, text[0], o.min_clip_score, o, r);
     } else {
-      if (category.empty())
-        throw InputError({}, Msg() << "prompt '" << prompt << "' names no known category (`synthdrive categories` "
-                                   << "lists them), and "
-                                   << (index.has_clip() ? "no --clip model was given for CLIP search"
-                                                        : "the index has no CLIP embeddings for free-text search"));
-      r.mode = QueryMode::kLabel;
-      r.category = category;
+      std::vector<std::string> categories;
+      if (o.mode == QueryMode::kLabel) {
+        r.mode = QueryMode::kLabel;
+        if (std::string c = CategoryForPrompt(prompt); !c.empty()) categories.push_back(c);
+        if (categories.empty())
+          throw InputError({}, Msg() << "prompt '" << prompt << "' names no known category (`synthdrive categories` "
+                                     << "lists them); --mode lexical reads synonyms and related nouns");
+      } else {
+        const LexicalMatch m = (o.lexicon ? *o.lexicon : names_only).Match(prompt);
+        // A category's own name is a label query, whichever way auto reached it.
+        r.mode = o.mode == QueryMode::kAuto && m.how == "category name" ? QueryMode::kLabel : QueryMode::kLexical;
+        for (const CategoryMatch& c : m.matches) {
+          categories.push_back(c.category);
+          r.why.push_back(c.chain);
+        }
+        if (categories.empty()) {
+          r.why.push_back("'" + prompt + "' names no category (read as '" + m.head + "', " + m.how + ")" +
+                          (o.lexicon && o.lexicon->has_wordnet() ? "" : "; WordNet is not installed (Debian's wordnet-base)") +
+                          (index.has_clip() ? "" : "; the index has no CLIP embeddings for free-text search") +
+                          ": try --example with photos of the object (mine query --example photo.jpg)");
+          SD_LOG(Warn, r.why.back());
+          ++unserved;
+        }
+        for (const std::string& why : r.why)
+          if (!categories.empty()) SD_LOG(Info, "\"" << prompt << "\": " << why);
+      }
+      for (const std::string& c : categories) r.category += (r.category.empty() ? "" : ",") + c;
       // Ranked from the shards' tables: a label query over a million items parses only the records it keeps.
+      const std::set<std::string> wanted(categories.begin(), categories.end());
       std::vector<std::pair<Candidate, double>> ranked_by_quality;
-      for (size_t row = 0; row < index.size(); ++row) {
+      for (size_t row = 0; row < index.size() && !wanted.empty(); ++row) {
         const ItemSummary s = index.summary(row);
-        if (s.category == category) ranked_by_quality.push_back({{row, 1.0}, ImageQuality(s)});
+        if (wanted.count(std::string(s.category))) ranked_by_quality.push_back({{row, 1.0}, ImageQuality(s)});
       }
       std::stable_sort(ranked_by_quality.begin(), ranked_by_quality.end(),
                        [](const auto& a, const auto& b) { return a.second > b.second; });
@@ -219,6 +242,9 @@ std::vector<PromptResult> RunQuery(const MiningIndex& index, const QueryOptions&
                       << r.rejected_diversity << " diversity)");
     results.push_back(std::move(r));
   }
+  if (!o.prompts.empty() && unserved == o.prompts.size() && o.examples.empty())
+    throw InputError({}, Msg() << (o.prompts.size() == 1 ? "" : "no prompt names a category; the first: ")
+                               << results.front().why.front());
   for (const fs::path& example : o.examples) {
     PromptResult r;
     r.prompt = example.string();
@@ -247,7 +273,9 @@ std::string ContactSheet(const MiningIndex& index, const std::vector<PromptResul
        ".pair{display:flex;gap:2px}.pair img{width:98px;height:98px;object-fit:contain;background:#222}"
        "</style></head><body><h1>Mining run</h1>";
   for (const PromptResult& r : results) {
-    h << "<h2>" << EscapeHtml(r.prompt) << "</h2><p>" << ToString(r.mode) << " mode"
+    h << "<h2>" << EscapeHtml(r.prompt) << "</h2>";
+    for (const std::string& why : r.why) h << "<p><i>" << EscapeHtml(why) << "</i></p>";
+    h << "<p>" << ToString(r.mode) << " mode"
       << (r.category.empty() ? "" : ", category " + EscapeHtml(r.category)) << "; " << r.hits.size() << " hits of "
       << r.candidates << " candidates; rejected " << r.rejected_score << " by score, " << r.rejected_quality
       << " by quality, " << r.rejected_duplicate << " as near-duplicates, " << r.rejected_diversity
@@ -305,6 +333,7 @@ void WriteMiningRun(const fs::path& run_dir, const MiningIndex& index, const std
     prompts.push_back({{"prompt", r.prompt},
                        {"mode", ToString(r.mode)},
                        {"category", r.category},
+                       {"why", r.why},
                        {"hits", r.hits.size()},
                        {"candidates", r.candidates},
                        {"rejected", {{"score", r.rejected_score},

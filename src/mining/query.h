@@ -7,9 +7,14 @@
 //  - label:   no embeddings: the prompt names a category ("traffic cone" -> traffic_cone, datasets/categories.h)
 //             and every crop annotated with it is a candidate, ranked by image quality. Only log crops carry
 //             labels, so folder and URL images are never label hits.
+//  - lexical: no embeddings either: the prompt is read through WordNet and the road words WordNet lacks
+//             (lexicon.h: "lorry" -> truck, "pylon" -> traffic_cone, "motor vehicle" -> car, truck, ...), and every
+//             crop annotated with a category it names is a candidate, ranked as in label mode. Each result keeps
+//             the chain of relations that led there.
 //  - example: an example image's classical descriptor (descriptor.h) against the crops' descriptors.
-// `auto` picks clip when the index has CLIP vectors and a CLIP model is given, else label for prompts that
-// name a category; a prompt that neither can serve is an InputError saying what is missing.
+// `auto` picks clip when the index has CLIP vectors and a CLIP model is given, else lexical. A prompt that names
+// no category gets no hits and says so, suggesting example mode with the user's own photos; when no prompt (and
+// no example) can be served, that is an InputError.
 //
 // After ranking, in this order: thresholds (score, object size, truncation, occlusion, sharpness, visibility),
 // near-duplicate removal (perceptual-hash Hamming distance against every hit already kept, so the best-ranked
@@ -20,10 +25,11 @@
 #include <vector>
 
 #include "mining/index.h"
+#include "mining/lexicon.h"
 
 namespace sd::mining {
 
-enum class QueryMode { kAuto, kClip, kLabel, kExample };
+enum class QueryMode { kAuto, kClip, kLabel, kLexical, kExample };
 const char* ToString(QueryMode mode);
 QueryMode QueryModeFromString(const std::string& s);  // InputError on an unknown mode
 
@@ -44,6 +50,8 @@ struct QueryOptions {
   int max_per_frame = 3;           // <= 0: unlimited
   int max_per_instance = 1;        // <= 0: unlimited
   const models::ClipEncoder* clip = nullptr;
+  // Lexical mode's reader; null: category names and road words only (no WordNet).
+  const Lexicon* lexicon = nullptr;
 };
 
 struct QueryHit {
@@ -56,7 +64,8 @@ struct QueryHit {
 struct PromptResult {
   std::string prompt;      // the text, or the example image's path
   QueryMode mode = QueryMode::kAuto;  // the mode that ran
-  std::string category;    // label mode: the category the prompt named
+  std::string category;    // label / lexical mode: the categories the prompt named, comma-separated
+  std::vector<std::string> why;  // lexical mode: per category, the chain of relations; or why none was found
   size_t candidates = 0;   // ranked candidates examined
   size_t rejected_score = 0, rejected_quality = 0, rejected_duplicate = 0, rejected_diversity = 0;
   std::vector<QueryHit> hits;

@@ -63,6 +63,17 @@ class TextEncoder(torch.nn.Module):
         return self.model.encode_text(tokens.to(torch.int64)).float()
 
 
+def _run_layers(layers, x, mask):
+    """transformers' encoder layers over x with an additive attention mask (None: none)."""
+    for layer in layers:
+        try:  # transformers 4.x takes the causal mask apart; 5.x one mask
+            out = layer(x, attention_mask=mask, causal_attention_mask=None)
+        except TypeError:
+            out = layer(x, attention_mask=mask)
+        x = out[0] if isinstance(out, (tuple, list)) else out
+    return x
+
+
 class HFClip(torch.nn.Module):
     """A transformers CLIPModel behind the open_clip / OpenAI interface the encoders above use."""
 
@@ -72,7 +83,19 @@ class HFClip(torch.nn.Module):
             self.vision_model, self.projection = model.vision_model, model.visual_projection
 
         def forward(self, pixels):
-            return self.projection(self.vision_model(pixel_values=pixels).pooler_output)
+            # The vision tower step by step: transformers casts the pixels to the patch weights' dtype, which a
+            # trace records as a constant (float32), so the module converted to half (RuntimeOptions::half)
+            # fed float32 into half weights. Here every dtype follows the input's.
+            vm = self.vision_model
+            emb = vm.embeddings
+            x = emb.patch_embedding(pixels).flatten(2).transpose(1, 2)
+            cls = emb.class_embedding.view(1, 1, -1).expand(x.shape[0], 1, -1)
+            # Position rows read from the table itself: the position_ids buffer is int64, and LibTorch's
+            # Module::to(kHalf) converts it too.
+            x = torch.cat([cls, x], dim=1) + emb.position_embedding.weight[: x.shape[1] + 1][None]
+            x = vm.pre_layrnorm(x)
+            x = _run_layers(vm.encoder.layers, x, None)
+            return self.projection(vm.post_layernorm(x[:, 0, :]))
 
     def __init__(self, model):
         super().__init__()
@@ -85,9 +108,22 @@ class HFClip(torch.nn.Module):
         return self.visual(pixels)
 
     def encode_text(self, ids):
-        # The text tower pools at the end-of-text token; OpenAI's padding (zeros after it) is what the C++
-        # tokenizer writes, and the causal mask keeps padding from reaching the tokens before it.
-        return self.model.text_projection(self.model.text_model(input_ids=ids).pooler_output)
+        # The text tower, layer by layer, with the causal mask made from the input: transformers builds its own
+        # mask with the device of the tracing run as a constant, so a module traced on the CPU failed on CUDA
+        # ("attn_bias is on cpu"). A mask derived from `ids` follows the input's device in the trace.
+        tm = self.model.text_model
+        te = tm.embeddings  # the token and position tables, without the int64 position_ids buffer (see Visual)
+        x = te.token_embedding(ids) + te.position_embedding.weight[: ids.shape[1]][None]
+        ones = torch.ones_like(x[0, :, 0])
+        blocked = torch.triu(ones[:, None] * ones[None, :], diagonal=1)
+        # -65504, half's lowest: a trace keeps the constant, and float32's lowest would be -inf in half (0 * -inf
+        # is NaN); exp(-65504) is 0 in both.
+        mask = (blocked * -65504.0)[None, None].expand(ids.shape[0], 1, -1, -1)
+        x = tm.final_layer_norm(_run_layers(tm.encoder.layers, x, mask))
+        # Pooled at the end-of-text token, the largest id in OpenAI's vocabulary (clip.model.encode_text's rule);
+        # the padding after it is zeros, which the causal mask keeps from reaching the tokens before it.
+        pooled = x[torch.arange(x.shape[0], device=x.device), ids.argmax(dim=-1)]
+        return self.model.text_projection(pooled)
 
 
 def openai_tokenize(bpe_path, context):

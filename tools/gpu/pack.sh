@@ -19,6 +19,11 @@ cp -r $inc/eigen3 $inc/nlohmann $inc/stb $inc/oneapi $inc/tbb "$out.tmp/deps/inc
 cp $inc/tiny_gltf.h $inc/tiny_obj_loader.h $inc/nanoflann.hpp $inc/zlib.h $inc/zconf.h "$out.tmp/deps/include/"
 lib=/usr/lib/x86_64-linux-gnu
 cp -L $lib/libtbb.so.12 $lib/libstb.so $lib/libtinyobjloader.so $lib/libz.so.1 "$out.tmp/deps/lib/"
+# Programs linked against them ask for their sonames (libstb.so.0, ...), not the development links' names.
+for so in libstb.so libtinyobjloader.so; do
+  soname=$(objdump -p "$lib/$so" | awk '/SONAME/ {print $2}')
+  [[ -n $soname && $soname != "$so" ]] && ln -sf "$so" "$out.tmp/deps/lib/$soname"
+done
 cp -r /usr/src/googletest "$out.tmp/deps/googletest"
 
 if [[ $build != - ]]; then

@@ -49,18 +49,25 @@ const std::array<float, 256>& SrgbTable() {
   return table;
 }
 
-template <typename T>
-void SampleBilinearImpl(const Image<T>& img, double u, double v, float* out) {
+// Bilinear filtering of `texel(x, y, c)` (a float) at (u, v) over a width x height grid: one arithmetic for every
+// way a pixel's value is read.
+template <typename T, typename Texel>
+void SampleBilinearOf(const Image<T>& img, double u, double v, const Texel& texel, float* out) {
   const double x = std::clamp(u - 0.5, 0.0, img.width() - 1.0);
   const double y = std::clamp(v - 0.5, 0.0, img.height() - 1.0);
   const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
   const int x1 = std::min(x0 + 1, img.width() - 1), y1 = std::min(y0 + 1, img.height() - 1);
   const float fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
   for (int c = 0; c < img.channels(); ++c) {
-    const float a = static_cast<float>(img.at(x0, y0, c)) * (1 - fx) + static_cast<float>(img.at(x1, y0, c)) * fx;
-    const float b = static_cast<float>(img.at(x0, y1, c)) * (1 - fx) + static_cast<float>(img.at(x1, y1, c)) * fx;
+    const float a = texel(x0, y0, c) * (1 - fx) + texel(x1, y0, c) * fx;
+    const float b = texel(x0, y1, c) * (1 - fx) + texel(x1, y1, c) * fx;
     out[c] = a * (1 - fy) + b * fy;
   }
+}
+
+template <typename T>
+void SampleBilinearImpl(const Image<T>& img, double u, double v, float* out) {
+  SampleBilinearOf(img, u, v, [&](int x, int y, int c) { return static_cast<float>(img.at(x, y, c)); }, out);
 }
 }  // namespace
 
@@ -105,23 +112,13 @@ void SampleBilinear(const ImageF& img, double u, double v, float* out) { SampleB
 void SampleBilinear(const ImageU8& img, double u, double v, float* out) { SampleBilinearImpl(img, u, v, out); }
 
 void SampleBilinearLinear(const ImageU8& srgb, double u, double v, const float* gain, float* out) {
-  // The arithmetic of SampleBilinearImpl on the texels ToLinear and a gain multiply would have stored.
+  // The texels ToLinear and a gain multiply would have stored.
   const auto& table = SrgbTable();
-  const double x = std::clamp(u - 0.5, 0.0, srgb.width() - 1.0);
-  const double y = std::clamp(v - 0.5, 0.0, srgb.height() - 1.0);
-  const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
-  const int x1 = std::min(x0 + 1, srgb.width() - 1), y1 = std::min(y0 + 1, srgb.height() - 1);
-  const float fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
-  for (int c = 0; c < srgb.channels(); ++c) {
-    const bool alpha = srgb.channels() == 4 && c == 3;
-    const auto texel = [&](int xx, int yy) {
-      const uint8_t b = srgb.at(xx, yy, c);
-      return alpha ? b / 255.0f : table[b] * gain[c];
-    };
-    const float a = texel(x0, y0) * (1 - fx) + texel(x1, y0) * fx;
-    const float b = texel(x0, y1) * (1 - fx) + texel(x1, y1) * fx;
-    out[c] = a * (1 - fy) + b * fy;
-  }
+  const bool has_alpha = srgb.channels() == 4;
+  SampleBilinearOf(srgb, u, v, [&](int x, int y, int c) {
+    const uint8_t b = srgb.at(x, y, c);
+    return has_alpha && c == 3 ? b / 255.0f : table[b] * gain[c];
+  }, out);
 }
 
 }  // namespace sd

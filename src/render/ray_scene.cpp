@@ -45,6 +45,16 @@ void SkipFilter(const RTCFilterFunctionNArguments* args) {
   }
 }
 
+// In place: Embree keeps the context's address for the query.
+void InitSkipContext(SkipContext* ctx, int skip_mesh) {
+  rtcInitIntersectContext(&ctx->context);
+  ctx->skip_geom = RTC_INVALID_GEOMETRY_ID;
+  if (skip_mesh >= 0) {
+    ctx->context.filter = SkipFilter;
+    ctx->skip_geom = static_cast<unsigned>(skip_mesh);
+  }
+}
+
 // Embree's contract (rtcIntersect1): a finite origin and direction, 0 <= tnear <= tfar. Outside it the traversal
 // is undefined (an fx = 0 camera once reached it with infinite directions and aborted in bvh_intersector1.cpp).
 // Such a ray is answered as a miss here instead: the readers refuse the inputs that made them, so what remains
@@ -209,12 +219,7 @@ RayHit RayScene::Intersect(const Eigen::Vector3f& origin, const Eigen::Vector3f&
   SD_CHECK(impl_->committed, << "query before Commit");
   if (!RayWithinEmbreeContract(origin, dir, t_near, t_far)) return RayHit{};
   SkipContext ctx;
-  rtcInitIntersectContext(&ctx.context);
-  ctx.skip_geom = RTC_INVALID_GEOMETRY_ID;
-  if (skip_mesh >= 0) {
-    ctx.context.filter = SkipFilter;
-    ctx.skip_geom = static_cast<unsigned>(skip_mesh);
-  }
+  InitSkipContext(&ctx, skip_mesh);
   RTCRayHit rh = MakeRayHit(origin, dir, t_near, t_far);
   rtcIntersect1(impl_->scene, &ctx.context, &rh);
   RayHit hit;
@@ -233,12 +238,7 @@ bool RayScene::Occluded(const Eigen::Vector3f& origin, const Eigen::Vector3f& di
   SD_CHECK(impl_->committed, << "query before Commit");
   if (!RayWithinEmbreeContract(origin, dir, t_near, t_far)) return false;
   SkipContext ctx;
-  rtcInitIntersectContext(&ctx.context);
-  ctx.skip_geom = RTC_INVALID_GEOMETRY_ID;
-  if (skip_mesh >= 0) {
-    ctx.context.filter = SkipFilter;
-    ctx.skip_geom = static_cast<unsigned>(skip_mesh);
-  }
+  InitSkipContext(&ctx, skip_mesh);
   RTCRay ray = MakeRayHit(origin, dir, t_near, t_far).ray;
   rtcOccluded1(impl_->scene, &ctx.context, &ray);
   // Embree sets tfar to -inf when the ray is occluded.
@@ -250,12 +250,7 @@ uint32_t RayScene::OccludedFan(const Eigen::Vector3f& origin, const Eigen::Vecto
   SD_CHECK(impl_->committed, << "query before Commit");
   SD_CHECK(count >= 0 && count <= kMaxFanRays, << count << " rays in one fan (at most " << kMaxFanRays << ")");
   SkipContext ctx;
-  rtcInitIntersectContext(&ctx.context);
-  ctx.skip_geom = RTC_INVALID_GEOMETRY_ID;
-  if (skip_mesh >= 0) {
-    ctx.context.filter = SkipFilter;
-    ctx.skip_geom = static_cast<unsigned>(skip_mesh);
-  }
+  InitSkipContext(&ctx, skip_mesh);
   alignas(64) int valid[16];
   RTCRay16 rays;
   bool any = false;

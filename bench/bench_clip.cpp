@@ -170,13 +170,14 @@ int main(int argc, char** argv) {
         for (int n = 0; n < batch; ++n)
           std::copy(synthetic[n % synthetic.size()].vector().begin(), synthetic[n % synthetic.size()].vector().end(),
                     ready.values.begin() + static_cast<std::ptrdiff_t>(n) * 3 * s * s);  // layout immaterial here
+        const std::vector<sd::models::Tensor> ready_inputs = {std::move(ready)};  // built once: not a 38 MB copy per pass
         const int passes = std::max(1, throughput / batch);
         for (int r = 0; r <= repeats; ++r) {  // r == 0 warms up (cuDNN / allocator)
           auto t0 = std::chrono::steady_clock::now();
           (void)batched.EmbedImages(synthetic);
           const double e = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
           t0 = std::chrono::steady_clock::now();
-          for (int p = 0; p < passes; ++p) (void)image_model.Run({ready});
+          for (int p = 0; p < passes; ++p) (void)image_model.Run(ready_inputs);
           const double f = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
           if (r > 0) {
             embed_s.push_back(e);

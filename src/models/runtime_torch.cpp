@@ -93,6 +93,13 @@ bool Run(const Module* m, const std::vector<Tensor>& inputs, const std::vector<b
       const Tensor& t = inputs[i];
       // from_blob does not copy; .to() below makes the copy the module may keep, so `inputs` stay the caller's.
       torch::Tensor x = torch::from_blob(const_cast<float*>(t.values.data()), t.shape, torch::kFloat32);
+      if (m->device.is_cuda()) {
+        // Pageable memory reaches the GPU through the driver's small bounce buffers; a pinned copy (PyTorch caches
+        // the pinned blocks) goes at the bus's speed.
+        torch::Tensor pinned = torch::empty(t.shape, torch::TensorOptions().dtype(torch::kFloat32).pinned_memory(true));
+        pinned.copy_(x);
+        x = pinned;
+      }
       x = x.to(m->device, to_half[i] ? torch::kHalf : torch::kFloat32, /*non_blocking=*/false, /*copy=*/true);
       args.emplace_back(std::move(x));
     }

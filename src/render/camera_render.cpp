@@ -1,7 +1,6 @@
 #include "render/camera_render.h"
 
 #include <algorithm>
-#include <bit>
 #include <cmath>
 #include <limits>
 
@@ -84,21 +83,14 @@ struct SkyCount {
 SkyCount CountOpenSky(const RayScene& scene, const Eigen::Vector3f& origin, const CosineLobe& lobe, const StratifiedGrid& grid,
                       int n, PixelRng& rng, int skip_mesh) {
   SkyCount c;
-  std::array<Eigen::Vector3f, RayScene::kMaxFanRays> fan;
-  int in_fan = 0;
-  const auto trace = [&] {
-    c.open += in_fan - std::popcount(scene.OccludedFan(origin, fan.data(), in_fan, 0.0f,
-                                                       std::numeric_limits<float>::infinity(), skip_mesh));
-    in_fan = 0;
-  };
+  OcclusionFan fan(scene, origin, skip_mesh);
   for (int k = 0; k < n; ++k) {
     const Eigen::Vector3f d = lobe.Direction(grid(k, rng));
     if (d.z() <= 0) continue;
     ++c.above;
-    fan[in_fan++] = d;
-    if (in_fan == RayScene::kMaxFanRays) trace();
+    fan.Add(d);
   }
-  if (in_fan > 0) trace();
+  c.open = static_cast<int>(fan.OpenWeight());  // a sum of ones: exact
   return c;
 }
 

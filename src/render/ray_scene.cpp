@@ -280,6 +280,25 @@ uint32_t RayScene::OccludedFan(const Eigen::Vector3f& origin, const Eigen::Vecto
   return occluded;
 }
 
+void OcclusionFan::Add(const Eigen::Vector3f& dir, double weight) {
+  dirs_[static_cast<size_t>(count_)] = dir;
+  weights_[static_cast<size_t>(count_++)] = weight;
+  if (count_ == RayScene::kMaxFanRays) Trace();
+}
+
+double OcclusionFan::OpenWeight() {
+  if (count_ > 0) Trace();
+  return open_;
+}
+
+void OcclusionFan::Trace() {
+  const uint32_t occluded =
+      scene_.OccludedFan(origin_, dirs_.data(), count_, 0.0f, std::numeric_limits<float>::infinity(), skip_mesh_);
+  for (int i = 0; i < count_; ++i)
+    if (!(occluded >> i & 1u)) open_ += weights_[static_cast<size_t>(i)];
+  count_ = 0;
+}
+
 std::vector<RayHit> RayScene::IntersectMany(const std::vector<Eigen::Vector3f>& origins,
                                             const std::vector<Eigen::Vector3f>& dirs, float t_near) const {
   SD_CHECK(origins.size() == dirs.size(), << origins.size() << " origins vs " << dirs.size() << " dirs");

@@ -1,6 +1,7 @@
 #pragma once
 // Ray casting against triangle meshes. Embree is an implementation detail (pimpl): no rtc* type leaves
 // this module. A scene holds meshes already placed in one common frame (the caller transforms them).
+#include <array>
 #include <cstdint>
 #include <limits>
 #include <memory>
@@ -70,6 +71,27 @@ class RayScene {
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
+};
+
+// Rays leaving one point (its sky or sun rays), gathered and traced in packets with OccludedFan as each packet
+// fills: Add a ray with a weight; OpenWeight traces what is left and returns the summed weights of the rays nothing
+// (but `skip_mesh`) occludes, added in the order the rays were.
+class OcclusionFan {
+ public:
+  OcclusionFan(const RayScene& scene, const Eigen::Vector3f& origin, int skip_mesh = -1)
+      : scene_(scene), origin_(origin), skip_mesh_(skip_mesh) {}
+  void Add(const Eigen::Vector3f& dir, double weight = 1.0);
+  double OpenWeight();
+
+ private:
+  void Trace();
+  const RayScene& scene_;
+  Eigen::Vector3f origin_;
+  int skip_mesh_;
+  std::array<Eigen::Vector3f, RayScene::kMaxFanRays> dirs_;
+  std::array<double, RayScene::kMaxFanRays> weights_;
+  int count_ = 0;
+  double open_ = 0;
 };
 
 }  // namespace sd

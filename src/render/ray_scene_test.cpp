@@ -154,6 +154,27 @@ TEST(RayScene, OccludedFanAnswersAsOccludedDoes) {
   EXPECT_GT(open, 500);
 }
 
+// The gatherer sums the weights of the open rays over several packets, as ray-by-ray tracing does.
+TEST(RayScene, OcclusionFanSumsTheOpenRaysWeightsAcrossPackets) {
+  RayScene scene;
+  scene.AddMesh(Box({-1, -1, 0}, {1, 1, 2}));
+  scene.Commit();
+  const Eigen::Vector3f origin(1.5f, 0, 0.5f);
+  OcclusionFan fan(scene, origin);
+  double want = 0;
+  for (int k = 0; k < 2 * RayScene::kMaxFanRays + 5; ++k) {  // two full packets and a part
+    const float a = 0.37f * static_cast<float>(k);
+    const Eigen::Vector3f d = Eigen::Vector3f(std::cos(a), std::sin(a), 0.3f).normalized();
+    const double weight = 1.0 + 0.1 * k;
+    fan.Add(d, weight);
+    if (!scene.Occluded(origin, d, 0.0f, std::numeric_limits<float>::infinity())) want += weight;
+  }
+  const double got = fan.OpenWeight();
+  EXPECT_EQ(got, want);
+  EXPECT_GT(want, 0.0);
+  EXPECT_LT(want, 37 * 1.0 + 0.1 * 36 * 37 / 2);  // some rays hit the box
+}
+
 // Rays outside Embree's contract (non-finite or zero origin or direction, t_near < 0 or past t_far) are misses;
 // they used to reach the traversal, where an infinite direction aborted Embree.
 TEST(RayScene, RaysOutsideEmbreesContractAreMisses) {

@@ -596,44 +596,13 @@ class CosineLobe {
   Eigen::Vector3d n_, t_, b_;
 };
 
-// Rays leaving one point, gathered and traced in packets (RayScene::OccludedFan): Add a ray with a weight; the
-// weights of the rays nothing occludes are summed in the order the rays were added.
-class FanTracer {
- public:
-  FanTracer(const RayScene& scene, const Eigen::Vector3f& origin, int skip_mesh)
-      : scene_(scene), origin_(origin), skip_mesh_(skip_mesh) {}
-  void Add(const Eigen::Vector3f& dir, double weight) {
-    dirs_[count_] = dir;
-    weights_[count_++] = weight;
-    if (count_ == RayScene::kMaxFanRays) Trace();
-  }
-  double OpenWeight() {
-    if (count_ > 0) Trace();
-    return open_;
-  }
-
- private:
-  void Trace() {
-    const uint32_t occluded = scene_.OccludedFan(origin_, dirs_.data(), count_, 0.0f, std::numeric_limits<float>::infinity(), skip_mesh_);
-    for (int i = 0; i < count_; ++i)
-      if (!(occluded >> i & 1u)) open_ += weights_[static_cast<size_t>(i)];
-    count_ = 0;
-  }
-  const RayScene& scene_;
-  Eigen::Vector3f origin_;
-  int skip_mesh_;
-  std::array<Eigen::Vector3f, RayScene::kMaxFanRays> dirs_;
-  std::array<double, RayScene::kMaxFanRays> weights_;
-  int count_ = 0;
-  double open_ = 0;
-};
 }  // namespace
 
 double SunVisibility(const RayScene& scene, const Eigen::Vector3d& p, const Eigen::Vector3d& normal, const EnvironmentLight& light,
                      const EnvShadingOptions& o) {
   const int n = std::max(1, o.sun_rays);
   const SunDisk disk(light);
-  FanTracer fan(scene, Offset(p, normal, o.ray_offset), o.skip_mesh);
+  OcclusionFan fan(scene, Offset(p, normal, o.ray_offset), o.skip_mesh);
   for (int k = 0; k < n; ++k) fan.Add(disk.Ray(k, n, o.seed).cast<float>(), 1.0);
   return fan.OpenWeight() / n;
 }
@@ -641,7 +610,7 @@ double SunVisibility(const RayScene& scene, const Eigen::Vector3d& p, const Eige
 double AmbientOcclusion(const RayScene& scene, const Eigen::Vector3d& p, const Eigen::Vector3d& normal, const EnvShadingOptions& o) {
   const int n = std::max(1, o.sky_rays);
   const CosineLobe lobe(normal);
-  FanTracer fan(scene, Offset(p, normal, o.ray_offset), o.skip_mesh);
+  OcclusionFan fan(scene, Offset(p, normal, o.ray_offset), o.skip_mesh);
   for (int k = 0; k < n; ++k) {
     const Eigen::Vector3d d = lobe.Ray(k, n, o.seed);
     if (d.z() > 0) fan.Add(d.cast<float>(), 1.0);
@@ -666,7 +635,7 @@ float ReceiverShadowRatio(const RayScene& scene, const Eigen::Vector3d& p, const
   double sky_all = 0;
   const int ns = std::max(1, o.sky_rays);
   const CosineLobe lobe(n);
-  FanTracer fan(scene, origin, o.skip_mesh);
+  OcclusionFan fan(scene, origin, o.skip_mesh);
   for (int k = 0; k < ns; ++k) {
     const Eigen::Vector3d d = lobe.Ray(k, ns, o.seed);
     if (d.z() <= 0) continue;

@@ -151,9 +151,6 @@ float RaySurfaceDepth(const SurfaceModel& surface, const Rigid3d& T_world_cam, c
   return kInf;
 }
 
-}  // namespace
-
-namespace {
 // FilterHiddenPoints for the points that project into the pixels [x0, x1) x [y0, y1) only: the z-buffer and its
 // minimum filter cover that box grown by the window, not the whole image, and each point's answer is the one the
 // whole image gives (its window lies in the grown box).

@@ -287,7 +287,7 @@ struct Lexicon::Impl {
     joined.erase(std::remove(joined.begin(), joined.end(), '_'), joined.end());
     for (const std::string& form : {spaced, phrase, joined})
       if (const auto c = FindCategory(form))
-        return LexicalMatch{spaced, "category name", {{c->name, "'" + spaced + "' is a name of " + c->name}}};
+        return LexicalMatch{spaced, "category name", {{c->name, "'" + spaced + "' is a name of " + c->name}}, true};
     for (const RoadWord& r : kRoadWords)
       if (phrase == r.phrase)
         return LexicalMatch{spaced, "road word", {{r.category, "'" + spaced + "' is a road word for " + r.category +
@@ -409,6 +409,7 @@ LexicalMatch Lexicon::Match(const std::string& prompt) const {
       continue;
     }
     m->how += ", one edit from '" + last + "'";
+    m->category_name = false;  // the name is the correction's, not the prompt's
     best = std::move(m);
   }
   if (best) return *best;

@@ -29,6 +29,7 @@ struct LexicalMatch {
   std::string head;                     // the prompt's words that were read ("traffic cone"), after any correction
   std::string how;                      // "category name", "road word", "WordNet", "WordNet, one edit from 'x'"
   std::vector<CategoryMatch> matches;   // empty: the prompt names no category
+  bool category_name = false;           // the head, as written, is a category's own name (a label query)
 };
 
 // $SYNTHDRIVE_WORDNET, else /usr/share/wordnet.

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <functional>
 #include <map>
 #include <set>
 #include <sstream>
@@ -204,7 +205,7 @@ std::vector<PromptResult> RunQuery(const MiningIndex& index, const QueryOptions&
       } else {
         const LexicalMatch m = (o.lexicon ? *o.lexicon : names_only).Match(prompt);
         // A category's own name is a label query, whichever way auto reached it.
-        r.mode = o.mode == QueryMode::kAuto && m.how == "category name" ? QueryMode::kLabel : QueryMode::kLexical;
+        r.mode = o.mode == QueryMode::kAuto && m.category_name ? QueryMode::kLabel : QueryMode::kLexical;
         for (const CategoryMatch& c : m.matches) {
           categories.push_back(c.category);
           r.why.push_back(c.chain);
@@ -217,16 +218,16 @@ std::vector<PromptResult> RunQuery(const MiningIndex& index, const QueryOptions&
           SD_LOG(Warn, r.why.back());
           ++unserved;
         }
-        for (const std::string& why : r.why)
-          if (!categories.empty()) SD_LOG(Info, "\"" << prompt << "\": " << why);
+        if (!categories.empty())
+          for (const std::string& why : r.why) SD_LOG(Info, "\"" << prompt << "\": " << why);
       }
       for (const std::string& c : categories) r.category += (r.category.empty() ? "" : ",") + c;
       // Ranked from the shards' tables: a label query over a million items parses only the records it keeps.
-      const std::set<std::string> wanted(categories.begin(), categories.end());
+      const std::set<std::string, std::less<>> wanted(categories.begin(), categories.end());  // found by string_view
       std::vector<std::pair<Candidate, double>> ranked_by_quality;
       for (size_t row = 0; row < index.size() && !wanted.empty(); ++row) {
         const ItemSummary s = index.summary(row);
-        if (wanted.count(std::string(s.category))) ranked_by_quality.push_back({{row, 1.0}, ImageQuality(s)});
+        if (wanted.count(s.category)) ranked_by_quality.push_back({{row, 1.0}, ImageQuality(s)});
       }
       std::stable_sort(ranked_by_quality.begin(), ranked_by_quality.end(),
                        [](const auto& a, const auto& b) { return a.second > b.second; });

@@ -11,7 +11,9 @@
 // Usage: bench_refine [--objects name,name] [--conditions clean,degraded] [--repeats N] [--steps N] [--iters N]
 //                     [--device cpu|cuda]
 //                     [--hull N] [--lambda-normal X] [--lambda-lap X] [--lambda-mask X] [--lr X] [--edge-min X] [--edge-max X]
-// Seconds per object are the median of --repeats runs of the refinement (visual hull and metrics excluded).
+// Seconds per object are the median of --repeats runs of the refinement (visual hull and metrics excluded),
+// split into remesh / views / update as refine.h's RefineStepLog defines them (each the median over the runs,
+// so the three need not add up to s/obj exactly).
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
@@ -170,9 +172,10 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "bench_refine: unknown condition %s (clean, degraded)\n", condition.c_str());
       return 2;
     }
-    std::printf("== %s ==\n%-26s %9s %9s %7s %7s %7s %7s %7s %7s %8s %7s\n", condition.c_str(), "object", "CD coarse",
-                "CD refine", "F coar", "F ref", "IoU co", "IoU ref", "NC co", "NC ref", "faces", "s/obj");
-    std::vector<double> cd_c, cd_r, f_c, f_r, iou_c, iou_r, secs;
+    std::printf("== %s ==\n%-26s %9s %9s %7s %7s %7s %7s %7s %7s %8s %7s %7s %7s %7s\n", condition.c_str(), "object",
+                "CD coarse", "CD refine", "F coar", "F ref", "IoU co", "IoU ref", "NC co", "NC ref", "faces", "s/obj",
+                "remesh", "views", "update");
+    std::vector<double> cd_c, cd_r, f_c, f_r, iou_c, iou_r, secs, remesh_secs, views_secs, update_secs;
     for (const BenchObject& obj : Objects()) {
       if (!only.empty() && std::find(only.begin(), only.end(), obj.name) == only.end()) continue;
       TriangleMesh gt = LoadGeometry(assets / obj.file, fs::temp_directory_path());
@@ -183,17 +186,24 @@ int main(int argc, char** argv) {
       const MultiViewSet views = RenderOracleViews(gt, rig, 2, degradation);
       const TriangleMesh coarse = CoarseMeshFromViews(views, hull_resolution);
       RefineResult refined;
-      std::vector<double> times;
+      // Seconds per run, and per run where they went (refine.h RefineStepLog), summed over the steps.
+      std::vector<double> times, remesh_times, views_times, update_times;
       for (int r = 0; r < repeats; ++r) {
         refined = RefineMesh(coarse, views, options);
         times.push_back(refined.seconds);
+        double remesh_s = 0, views_s = 0, update_s = 0;
+        for (const RefineStepLog& s : refined.log) remesh_s += s.remesh_seconds, views_s += s.views_seconds, update_s += s.update_seconds;
+        remesh_times.push_back(remesh_s);
+        views_times.push_back(views_s);
+        update_times.push_back(update_s);
       }
       const geometry::GeometryMetrics mc = geometry::CompareMeshes(coarse, gt, metric_options);
       const geometry::GeometryMetrics mr = geometry::CompareMeshes(refined.mesh, gt, metric_options);
       const double sec = Median(times);
-      std::printf("%-26s %9.5f %9.5f %7.4f %7.4f %7.4f %7.4f %7.4f %7.4f %8zu %7.2f\n", obj.name.c_str(), mc.chamfer,
-                  mr.chamfer, mc.fscore, mr.fscore, mc.volume_iou, mr.volume_iou, mc.normal_consistency,
-                  mr.normal_consistency, refined.mesh.NumFaces(), sec);
+      std::printf("%-26s %9.5f %9.5f %7.4f %7.4f %7.4f %7.4f %7.4f %7.4f %8zu %7.2f %7.2f %7.2f %7.2f\n", obj.name.c_str(),
+                  mc.chamfer, mr.chamfer, mc.fscore, mr.fscore, mc.volume_iou, mr.volume_iou, mc.normal_consistency,
+                  mr.normal_consistency, refined.mesh.NumFaces(), sec, Median(remesh_times), Median(views_times),
+                  Median(update_times));
       std::fflush(stdout);
       cd_c.push_back(mc.chamfer);
       cd_r.push_back(mr.chamfer);
@@ -202,12 +212,17 @@ int main(int argc, char** argv) {
       iou_c.push_back(mc.volume_iou);
       iou_r.push_back(mr.volume_iou);
       secs.push_back(sec);
+      remesh_secs.push_back(Median(remesh_times));
+      views_secs.push_back(Median(views_times));
+      update_secs.push_back(Median(update_times));
       nlohmann::json steps = nlohmann::json::array();
       for (const auto& s : refined.log)
         steps.push_back({{"normal", s.loss_normal}, {"mask", s.loss_mask}, {"lap", s.loss_lap}, {"faces", s.faces}});
       results.push_back({{"object", obj.name}, {"kind", obj.category}, {"condition", condition},
                          {"coarse", MetricsJson(mc)}, {"refined", MetricsJson(mr)}, {"coarse_faces", coarse.NumFaces()},
-                         {"refined_faces", refined.mesh.NumFaces()}, {"seconds", times}, {"steps", steps}});
+                         {"refined_faces", refined.mesh.NumFaces()}, {"seconds", times},
+                         {"seconds_remesh", remesh_times}, {"seconds_views", views_times}, {"seconds_update", update_times},
+                         {"steps", steps}});
       html += "<tr><td>" + obj.name + "<br>" + condition + "<br>CD " + std::to_string(mc.chamfer) + " &rarr; " +
               std::to_string(mr.chamfer) + "</td><td><img src='" + DataUri(Thumbnail(gt, rig)) + "'></td><td><img src='" +
               DataUri(Thumbnail(coarse, rig)) + "'></td><td><img src='" + DataUri(Thumbnail(refined.mesh, rig)) +
@@ -218,8 +233,9 @@ int main(int argc, char** argv) {
       for (double x : v) s += x;
       return v.empty() ? 0.0 : s / v.size();
     };
-    std::printf("%-26s %9.5f %9.5f %7.4f %7.4f %7.4f %7.4f %15s %8s %7.2f\n", "MEAN", mean(cd_c), mean(cd_r), mean(f_c),
-                mean(f_r), mean(iou_c), mean(iou_r), "", "", Median(secs));
+    std::printf("%-26s %9.5f %9.5f %7.4f %7.4f %7.4f %7.4f %15s %8s %7.2f %7.2f %7.2f %7.2f\n", "MEAN", mean(cd_c),
+                mean(cd_r), mean(f_c), mean(f_r), mean(iou_c), mean(iou_r), "", "", Median(secs), Median(remesh_secs),
+                Median(views_secs), Median(update_secs));
     int better = 0;
     for (size_t i = 0; i < cd_c.size(); ++i) better += cd_r[i] < cd_c[i];
     std::printf("refined CD better than coarse on %d/%zu objects; mean CD reduced by %.1f%%; median %.2f s per object\n\n",

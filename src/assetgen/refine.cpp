@@ -22,6 +22,10 @@
 namespace sd {
 namespace {
 
+double Seconds(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
 template <typename T>
 std::span<const float> Floats(const std::vector<T>& v) {
   return {reinterpret_cast<const float*>(v.data()), v.size() * sizeof(T) / sizeof(float)};
@@ -178,23 +182,21 @@ void ViewLossAndGradient(const std::vector<Eigen::Vector3f>& positions, const st
 Losses LossAndGradient(const std::vector<Eigen::Vector3f>& positions, const std::vector<Eigen::Vector3i>& faces,
                        const TopologyCache& cache, const MultiViewSet& views, std::vector<ViewState>& state,
                        const RefineOptions& o, float lap_scale, raster::NormalMaskLoss* gpu,
-                       const std::vector<Eigen::Vector3f>& points, float radius, std::vector<Eigen::Vector3f>* grad) {
+                       const std::vector<Eigen::Vector3f>& points, float radius, std::vector<Eigen::Vector3f>* grad,
+                       double* views_seconds) {
   const size_t nv = positions.size();
   const std::vector<Eigen::Vector3f> vertex_normals = geometry::VertexNormals(positions, faces);
   const std::span<const int32_t> tris(reinterpret_cast<const int32_t*>(faces.data()), 3 * faces.size());
   const float view_weight = 1.0f / static_cast<float>(views.size());
+  const auto views_start = std::chrono::steady_clock::now();
+  Losses losses;
+  grad->assign(nv, Eigen::Vector3f::Zero());
+  std::vector<Eigen::Vector3f> grad_vn(nv, Eigen::Vector3f::Zero());
   if (gpu != nullptr) {
-    std::vector<float> grad_positions(3 * nv * views.size()), grad_normals(grad_positions.size());
+    // The views' gradients come summed (in view order, as below).
     const std::vector<raster::NormalMaskLoss::Terms> terms =
-        gpu->Evaluate(Floats(positions), Floats(vertex_normals), tris, cache.edges, grad_positions, grad_normals);
-    for (size_t vi = 0; vi < views.size(); ++vi) {
-      ViewState& s = state[vi];
-      s.losses = Losses{terms[vi].normal, terms[vi].mask, 0};
-      s.grad_positions.resize(nv);
-      s.grad_normals.resize(nv);
-      std::copy_n(&grad_positions[3 * nv * vi], 3 * nv, MutableFloats(s.grad_positions).data());
-      std::copy_n(&grad_normals[3 * nv * vi], 3 * nv, MutableFloats(s.grad_normals).data());
-    }
+        gpu->Evaluate(Floats(positions), Floats(vertex_normals), tris, cache.edges, MutableFloats(*grad), MutableFloats(grad_vn));
+    for (const raster::NormalMaskLoss::Terms& t : terms) losses.normal += t.normal, losses.mask += t.mask;
   } else {
     std::vector<std::exception_ptr> errors(views.size());
     ParallelFor(0, views.size(), [&](size_t vi) {
@@ -206,16 +208,13 @@ Losses LossAndGradient(const std::vector<Eigen::Vector3f>& positions, const std:
     });
     for (const std::exception_ptr& e : errors)
       if (e) std::rethrow_exception(e);
+    for (const ViewState& s : state) {
+      losses.normal += s.losses.normal;
+      losses.mask += s.losses.mask;
+      for (size_t v = 0; v < nv; ++v) (*grad)[v] += s.grad_positions[v], grad_vn[v] += s.grad_normals[v];
+    }
   }
-
-  Losses losses;
-  grad->assign(nv, Eigen::Vector3f::Zero());
-  std::vector<Eigen::Vector3f> grad_vn(nv, Eigen::Vector3f::Zero());
-  for (const ViewState& s : state) {
-    losses.normal += s.losses.normal;
-    losses.mask += s.losses.mask;
-    for (size_t v = 0; v < nv; ++v) (*grad)[v] += s.grad_positions[v], grad_vn[v] += s.grad_normals[v];
-  }
+  *views_seconds += Seconds(views_start);
   geometry::VertexNormalsBackward(positions, faces, grad_vn, grad);
   if (o.lambda_lap > 0) {
     losses.lap = geometry::LaplacianLoss(cache.laplacian, positions, o.lambda_lap * lap_scale, grad) / (o.lambda_lap * lap_scale);
@@ -359,15 +358,18 @@ RefineResult RefineMesh(const TriangleMesh& coarse_in, const MultiViewSet& views
     cache.edges = raster::BuildEdgeTopology({reinterpret_cast<const int32_t*>(faces.data()), 3 * faces.size()},
                                             static_cast<int>(remesher.positions().size()));
     if (options.lambda_lap > 0) cache.laplacian = geometry::UniformLaplacian(static_cast<int>(remesher.positions().size()), faces);
+    RefineStepLog log;
+    log.remesh_seconds = Seconds(ts);
+    const auto iterations_start = std::chrono::steady_clock::now();
     Losses last;
     for (int it = 0; it < options.iterations_per_step; ++it) {
       // The smoothness weight is per squared edge length so that it means the same at every resolution.
       const float edge = std::max(remesher.MeanTargetEdgeLength(), 1e-6f);
       last = LossAndGradient(remesher.positions(), remesher.faces(), cache, views, state, options, 1.0f / (edge * edge),
-                             gpu_loss.get(), points, radius, &grad);
+                             gpu_loss.get(), points, radius, &grad, &log.views_seconds);
       remesher.Step(grad);
     }
-    RefineStepLog log;
+    log.update_seconds = Seconds(iterations_start) - log.views_seconds;
     log.step = step;
     log.loss_normal = last.normal;
     log.loss_mask = last.mask;
@@ -376,7 +378,7 @@ RefineResult RefineMesh(const TriangleMesh& coarse_in, const MultiViewSet& views
     log.vertices = remesher.positions().size();
     log.faces = remesher.faces().size();
     log.mean_target_edge = remesher.MeanTargetEdgeLength();
-    log.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - ts).count();
+    log.seconds = Seconds(ts);
     SD_LOG(Debug, "refine step " << step << ": normal " << log.loss_normal << " mask " << log.loss_mask << " lap "
                                  << log.loss_lap << ", " << log.faces << " faces, edge " << log.mean_target_edge);
     result.log.push_back(log);

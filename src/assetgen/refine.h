@@ -54,6 +54,10 @@ struct RefineStepLog {
   size_t vertices = 0, faces = 0;
   double mean_target_edge = 0;  // world units
   double seconds = 0;           // wall time of the step
+  // Where the step's time went: the remeshing pass and its connectivity caches; the views' loss terms and
+  // their gradients (the GPU's share on CUDA); the rest of each iteration on the CPU (vertex normals and their
+  // backward, the views' gradients summed, smoothness and point terms, the optimiser step).
+  double remesh_seconds = 0, views_seconds = 0, update_seconds = 0;
 };
 
 struct RefineResult {

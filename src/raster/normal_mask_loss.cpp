@@ -44,8 +44,7 @@ std::vector<NormalMaskLoss::Terms> NormalMaskLoss::Evaluate(std::span<const floa
   const size_t nv = positions.size() / 3;
   SD_CHECK(positions.size() == 3 * nv && vertex_normals.size() == 3 * nv, << "positions / normals sizes");
   SD_CHECK(tris.size() % 3 == 0 && topology.neighbour.size() == tris.size(), << "topology built for another mesh");
-  SD_CHECK(grad_positions.size() == 3 * nv * num_views_ && grad_normals.size() == 3 * nv * num_views_,
-           << "gradient buffers hold 3 floats per vertex per view");
+  SD_CHECK(grad_positions.size() == 3 * nv && grad_normals.size() == 3 * nv, << "gradient buffers hold 3 floats per vertex");
   std::vector<Terms> terms(num_views_);
 #if SYNTHDRIVE_WITH_CUDA
   std::vector<double> losses(2 * num_views_);

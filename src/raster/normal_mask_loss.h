@@ -41,8 +41,10 @@ class NormalMaskLoss {
   struct Terms {
     double normal = 0, mask = 0;
   };
-  // Per view: the terms, and the gradients with respect to the positions and the vertex normals (3 floats per
-  // vertex each, view-major: view v's vertex k at 3 * (v * num_vertices + k)), overwritten.
+  // Per view: the terms. The gradients with respect to the positions and the vertex normals (3 floats per
+  // vertex each, overwritten) are the views' shares summed in view order, each rounded to float first, as
+  // refine.cpp sums them on the CPU. The connectivity (tris, topology) is uploaded only when it differs from
+  // the last evaluation's: refinement changes it once per remeshing pass.
   std::vector<Terms> Evaluate(std::span<const float> positions, std::span<const float> vertex_normals,
                               std::span<const int32_t> tris, const EdgeTopology& topology,
                               std::span<float> grad_positions, std::span<float> grad_normals);

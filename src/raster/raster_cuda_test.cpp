@@ -305,29 +305,48 @@ TEST(CudaAgreement, DeviceResidentRefinementLossMatchesTheOps) {
         if (static_cast<int>(p % kSize) < kSize / 3) v.mask[p] = -1.0f;
     views.push_back(std::move(v));
   }
-  std::vector<std::vector<float>> cpu_gp, cpu_gn;
-  std::vector<NormalMaskLoss::Terms> cpu_terms;
-  for (const NormalMaskView& v : views) {
-    std::vector<float> gp, gn;
-    cpu_terms.push_back(CpuNormalMaskLoss(v, mesh.positions, normals, mesh.tris, topology, &gp, &gn));
-    cpu_gp.push_back(gp), cpu_gn.push_back(gn);
-  }
   SetDevice(Device::kCuda);
   NormalMaskLoss loss(views);
-  const size_t nv = mesh.positions.size() / 3;
-  std::vector<float> gp(3 * nv * views.size()), gn(gp.size());
-  const std::vector<NormalMaskLoss::Terms> terms = loss.Evaluate(mesh.positions, normals, mesh.tris, topology, gp, gn);
-  ASSERT_EQ(terms.size(), views.size());
-  for (size_t v = 0; v < views.size(); ++v) {
-    SCOPED_TRACE(::testing::Message() << "view " << v);
-    EXPECT_GT(cpu_terms[v].normal, 0);
-    EXPECT_GT(cpu_terms[v].mask, 0);
-    EXPECT_NEAR(terms[v].normal, cpu_terms[v].normal, 1e-5 * cpu_terms[v].normal);
-    EXPECT_NEAR(terms[v].mask, cpu_terms[v].mask, 1e-5 * cpu_terms[v].mask);
-    const std::vector<float> view_gp(gp.begin() + 3 * nv * v, gp.begin() + 3 * nv * (v + 1));
-    const std::vector<float> view_gn(gn.begin() + 3 * nv * v, gn.begin() + 3 * nv * (v + 1));
-    EXPECT_LE(RelativeError(cpu_gp[v], view_gp), 1e-5);
-    EXPECT_LE(RelativeError(cpu_gn[v], view_gn), 1e-5);
+  // One evaluation against the CPU: per view its terms, and the gradients summed over the views in view order.
+  auto check = [&](const testing::Mesh& m, const EdgeTopology& m_topology) {
+    const std::vector<float> m_normals = normals_of(m);
+    const size_t nv = m.positions.size() / 3;
+    std::vector<float> cpu_gp(3 * nv, 0.0f), cpu_gn(3 * nv, 0.0f);
+    std::vector<NormalMaskLoss::Terms> cpu_terms;
+    SetDevice(Device::kCpu);
+    for (const NormalMaskView& v : views) {
+      std::vector<float> gp, gn;
+      cpu_terms.push_back(CpuNormalMaskLoss(v, m.positions, m_normals, m.tris, m_topology, &gp, &gn));
+      for (size_t i = 0; i < 3 * nv; ++i) cpu_gp[i] += gp[i], cpu_gn[i] += gn[i];
+    }
+    SetDevice(Device::kCuda);
+    std::vector<float> gp(3 * nv), gn(3 * nv);
+    const std::vector<NormalMaskLoss::Terms> terms = loss.Evaluate(m.positions, m_normals, m.tris, m_topology, gp, gn);
+    ASSERT_EQ(terms.size(), views.size());
+    for (size_t v = 0; v < views.size(); ++v) {
+      SCOPED_TRACE(::testing::Message() << "view " << v);
+      EXPECT_GT(cpu_terms[v].normal, 0);
+      EXPECT_GT(cpu_terms[v].mask, 0);
+      EXPECT_NEAR(terms[v].normal, cpu_terms[v].normal, 1e-5 * cpu_terms[v].normal);
+      EXPECT_NEAR(terms[v].mask, cpu_terms[v].mask, 1e-5 * cpu_terms[v].mask);
+    }
+    EXPECT_LE(RelativeError(cpu_gp, gp), 1e-5);
+    EXPECT_LE(RelativeError(cpu_gn, gn), 1e-5);
+  };
+  {
+    SCOPED_TRACE("smooth sphere");
+    check(mesh, topology);
+  }
+  // Another connectivity, as after a remeshing pass: the loss must not evaluate the first mesh's triangles
+  // (it uploads the connectivity only when it changes).
+  const testing::Mesh finer = testing::Sphere(36, 72, 0.95f, 0.02f, 5);
+  {
+    SCOPED_TRACE("finer sphere");
+    check(finer, BuildEdgeTopology(finer.tris, finer.NumVertices()));
+  }
+  {
+    SCOPED_TRACE("smooth sphere again");
+    check(mesh, topology);
   }
 }
 

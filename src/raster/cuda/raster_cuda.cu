@@ -22,6 +22,18 @@ void Check(cudaError_t status, const char* what) {
 constexpr int kThreads = 256;
 inline unsigned Blocks(size_t n) { return static_cast<unsigned>((n + kThreads - 1) / kThreads); }
 
+// The cover pass's fixed grid: enough resident blocks to fill the device (its threads stride over the work).
+unsigned CoverBlocks() {
+  static const unsigned blocks = [] {
+    int device = 0, sms = 0, per_sm = 0;
+    SD_CUDA(cudaGetDevice(&device));
+    SD_CUDA(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, device));
+    SD_CUDA(cudaDeviceGetAttribute(&per_sm, cudaDevAttrMaxThreadsPerMultiProcessor, device));
+    return static_cast<unsigned>(std::max(1, sms * (per_sm / kThreads)));
+  }();
+  return blocks;
+}
+
 // Device memory that grows and is never given back while its owner lives: the ops run many times on images
 // and meshes of similar size, and cudaMalloc per call would cost more than the kernels.
 template <typename T>
@@ -96,9 +108,11 @@ __device__ __forceinline__ unsigned OrderedBits(float f) {
   return (bits & 0x80000000u) ? ~bits : (bits | 0x80000000u);
 }
 
+// `inclusive_area[num_tris - 1]` is the number of (triangle, pixel) pairs: read here on the device, so the
+// host need not wait for the prefix sum to size the grid (a fixed grid strides over however many there are).
 __global__ void CoverKernel(const shared::TriangleSetup* setup, const unsigned long long* inclusive_area,
-                            size_t num_tris, unsigned long long total, int width, int height,
-                            unsigned long long* key) {
+                            size_t num_tris, int width, int height, unsigned long long* key) {
+  const unsigned long long total = inclusive_area[num_tris - 1];
   for (unsigned long long idx = blockIdx.x * static_cast<unsigned long long>(blockDim.x) + threadIdx.x; idx < total;
        idx += static_cast<unsigned long long>(gridDim.x) * blockDim.x) {
     // The triangle whose range of the prefix sum holds idx: the first with inclusive_area > idx.
@@ -159,8 +173,9 @@ DeviceRaster Resident(const RasterView& rast) {
 }
 
 // Rasterizes clip-space vertices already on the device into the workspace's raster buffers: the set-up, the
-// prefix sum of the bounding boxes (whose total, read back, sizes the cover grid: the one host sync), the
-// depth test by atomicMin, and the winners' barycentrics.
+// prefix sum of the bounding boxes, the depth test by atomicMin over a fixed grid that strides over the
+// summed box areas (no host sync: refinement's loss queues a whole evaluation, every view, before it waits),
+// and the winners' barycentrics.
 DeviceRaster RasterizeOnDevice(const float* d_clip, const int32_t* d_tris, size_t num_tris, int width, int height) {
   Workspace& ws = workspace;
   const size_t np = static_cast<size_t>(width) * height;
@@ -175,13 +190,8 @@ DeviceRaster RasterizeOnDevice(const float* d_clip, const int32_t* d_tris, size_
     SD_CUDA(cub::DeviceScan::InclusiveSum(nullptr, temp_bytes, area, area + num_tris, static_cast<int64_t>(num_tris)));
     SD_CUDA(cub::DeviceScan::InclusiveSum(ws.scan_temp.Get(temp_bytes), temp_bytes, area, area + num_tris,
                                           static_cast<int64_t>(num_tris), cudaStreamPerThread));
-    unsigned long long total = 0;
-    Download(&total, area + 2 * num_tris - 1, 1);
-    if (total > 0) {
-      const unsigned blocks = static_cast<unsigned>(std::min<unsigned long long>((total + kThreads - 1) / kThreads, 1u << 20));
-      CoverKernel<<<blocks, kThreads>>>(setup, area + num_tris, num_tris, total, width, height, key);
-      SD_CUDA(cudaGetLastError());
-    }
+    CoverKernel<<<CoverBlocks(), kThreads>>>(setup, area + num_tris, num_tris, width, height, key);
+    SD_CUDA(cudaGetLastError());
   }
   float* bary = ws.r_bary.Get(2 * np);
   float* depth = ws.r_depth.Get(np);
@@ -471,14 +481,15 @@ __global__ void ToClipKernel(const float* positions, size_t num_vertices, const 
   for (int r = 0; r < 4; ++r) clip[4 * v + r] = M[4 * r] * x + M[4 * r + 1] * y + M[4 * r + 2] * z + M[4 * r + 3];
 }
 
-// grad_positions = M^T grad_clip (the first three columns), per vertex.
+// grad_positions += M^T grad_clip (the first three columns), per vertex, rounded to float before the sum:
+// the views' shares are added in view order (one stream), as the CPU sums them.
 __global__ void ToClipBackwardKernel(const double* grad_clip, size_t num_vertices, const float* M, float* grad_positions) {
   const size_t v = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
   if (v >= num_vertices) return;
   for (int k = 0; k < 3; ++k) {
     double g = 0;
     for (int r = 0; r < 4; ++r) g += static_cast<double>(M[4 * r + k]) * grad_clip[4 * v + r];
-    grad_positions[3 * v + k] = static_cast<float>(g);
+    grad_positions[3 * v + k] += static_cast<float>(g);
   }
 }
 
@@ -556,9 +567,9 @@ __global__ void AntialiasBackwardKernel(const int32_t* found, const shared::Pair
   }
 }
 
-__global__ void ToFloatKernel(const double* in, size_t n, float* out) {
+__global__ void AddAsFloatKernel(const double* in, size_t n, float* out) {
   const size_t i = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
-  if (i < n) out[i] = static_cast<float>(in[i]);
+  if (i < n) out[i] += static_cast<float>(in[i]);
 }
 
 }  // namespace
@@ -572,6 +583,9 @@ class LossTargets {
     float* mask = nullptr;
   };
   std::vector<View> views;
+  // The connectivity last uploaded: refinement changes it once per remeshing pass, not per evaluation.
+  std::vector<int32_t> tris, neighbour;
+  Scratch<int32_t> d_tris, d_neighbour;
   ~LossTargets() {
     for (View& v : views) cudaFree(v.M), cudaFree(v.normals), cudaFree(v.mask);
   }
@@ -604,14 +618,23 @@ void EvaluateLoss(LossTargets& targets, const float* positions, const float* nor
   const size_t nv = num_vertices, nt = num_tris, num_views = targets.views.size();
   const float* d_positions = ws.attr.Upload(positions, 3 * nv);
   const float* d_normals = ws.color.Upload(normals, 3 * nv);
-  const int32_t* d_tris = ws.tris.Upload(tris, 3 * nt);
-  const int32_t* d_neighbour = ws.neighbour.Upload(neighbour, 3 * nt);
+  if (!std::equal(tris, tris + 3 * nt, targets.tris.begin(), targets.tris.end()) ||
+      !std::equal(neighbour, neighbour + 3 * nt, targets.neighbour.begin(), targets.neighbour.end())) {
+    targets.tris.assign(tris, tris + 3 * nt);
+    targets.neighbour.assign(neighbour, neighbour + 3 * nt);
+    targets.d_tris.Upload(tris, 3 * nt);
+    targets.d_neighbour.Upload(neighbour, 3 * nt);
+  }
+  const int32_t* d_tris = targets.d_tris.Get(3 * nt);
+  const int32_t* d_neighbour = targets.d_neighbour.Get(3 * nt);
   static thread_local Scratch<double> loss_sums, grad_clip, grad_normals_sum;
   static thread_local Scratch<float> normal_img, grad_img, grad_bary, coverage, aa, grad_aa, out_positions, out_normals;
   double* d_losses = loss_sums.Get(2 * num_views);
-  SD_CUDA(cudaMemset(d_losses, 0, 2 * num_views * sizeof(double)));
-  float* d_out_positions = out_positions.Get(3 * nv * num_views);
-  float* d_out_normals = out_normals.Get(3 * nv * num_views);
+  SD_CUDA(cudaMemsetAsync(d_losses, 0, 2 * num_views * sizeof(double), cudaStreamPerThread));
+  float* d_out_positions = out_positions.Get(3 * nv);
+  float* d_out_normals = out_normals.Get(3 * nv);
+  SD_CUDA(cudaMemsetAsync(d_out_positions, 0, 3 * nv * sizeof(float), cudaStreamPerThread));
+  SD_CUDA(cudaMemsetAsync(d_out_normals, 0, 3 * nv * sizeof(float), cudaStreamPerThread));
   float* d_clip = ws.clip.Get(4 * nv);
   for (size_t vi = 0; vi < num_views; ++vi) {
     const LossTargets::View& view = targets.views[vi];
@@ -655,8 +678,8 @@ void EvaluateLoss(LossTargets& targets, const float* positions, const float* nor
       MaskLossKernel<<<Blocks(np), kThreads>>>(d_aa, view.mask, np, view.host.mask_grad_scale, gaa, &d_losses[2 * vi + 1]);
       AntialiasBackwardKernel<<<Blocks(slots), kThreads>>>(found, geometry, slots, cov, gaa, width, d_grad_clip);
     }
-    ToClipBackwardKernel<<<Blocks(nv), kThreads>>>(d_grad_clip, nv, view.M, d_out_positions + 3 * nv * vi);
-    ToFloatKernel<<<Blocks(3 * nv), kThreads>>>(d_grad_normals, 3 * nv, d_out_normals + 3 * nv * vi);
+    ToClipBackwardKernel<<<Blocks(nv), kThreads>>>(d_grad_clip, nv, view.M, d_out_positions);
+    AddAsFloatKernel<<<Blocks(3 * nv), kThreads>>>(d_grad_normals, 3 * nv, d_out_normals);
     SD_CUDA(cudaGetLastError());
   }
   Download(losses, d_losses, 2 * num_views);
@@ -664,8 +687,8 @@ void EvaluateLoss(LossTargets& targets, const float* positions, const float* nor
     losses[2 * vi] *= targets.views[vi].host.normal_loss_scale;
     losses[2 * vi + 1] *= targets.views[vi].host.mask_loss_scale;
   }
-  Download(grad_positions, d_out_positions, 3 * nv * num_views);
-  Download(grad_normals, d_out_normals, 3 * nv * num_views);
+  Download(grad_positions, d_out_positions, 3 * nv);
+  Download(grad_normals, d_out_normals, 3 * nv);
 }
 
 }  // namespace sd::raster::cuda

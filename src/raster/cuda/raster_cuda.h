@@ -88,7 +88,9 @@ struct LossViewHost {
 class LossTargets;
 LossTargets* UploadLossTargets(const LossViewHost* views, size_t num_views);
 void FreeLossTargets(LossTargets* targets);
-// losses: 2 per view (normal, mask); grad_positions / grad_normals: 3 per vertex per view, view-major, overwritten.
+// losses: 2 per view (normal, mask); grad_positions / grad_normals: 3 per vertex, the views' shares summed in
+// view order, overwritten. The whole evaluation is queued on the calling thread's stream before the one wait
+// for its results.
 void EvaluateLoss(LossTargets& targets, const float* positions, const float* normals, size_t num_vertices,
                   const int32_t* tris, size_t num_tris, const int32_t* neighbour, double* losses,
                   float* grad_positions, float* grad_normals);

@@ -24,6 +24,7 @@ Runner AddSynthCommand(CLI::App& app) {
   auto light = std::make_shared<std::string>("environment");
   auto occlusion = std::make_shared<std::string>("dense");
   auto camera_look = std::make_shared<std::string>("blur,noise,jpeg,colour");
+  auto detect_objects = std::make_shared<std::string>("unannotated");
   app.add_option("--log", req->log, "Driving log: a dataset root (nuScenes tables, KITTI, a PandaSet sequence) or an info file (mmdet3d .pkl or .json)")
       ->required();
   app.add_option("--asset", req->assets,
@@ -70,8 +71,14 @@ Runner AddSynthCommand(CLI::App& app) {
                  "What of each camera's own look the inserted pixels get, estimated from its image (docs/camera_look.md): "
                  "a comma list of blur (its edge rise), noise (its signal-dependent noise), jpeg (its JPEG quality), "
                  "colour (no more saturated than its real objects of the category), or none");
+  app.add_option("--detect-objects", *detect_objects,
+                 "Keep-out tracks detected and tracked from the LiDAR (docs/detection.md), which placement and sequence "
+                 "planning avoid like annotated tracks and which are never written as labels: unannotated (frames "
+                 "whose log carries no boxes), always (every frame, added to the annotations) or off")
+      ->check(CLI::IsMember({"off", "unannotated", "always"}));
   return [=]() {
     SynthRequest r = *req;
+    r.detect_objects = DetectObjectsModeFromString(*detect_objects);
     r.options.lidar_realism = !*no_lidar_realism;
     r.options.light = *light == "road" ? SynthOptions::Light::kRoad : SynthOptions::Light::kEnvironment;
     r.options.dense_occlusion = *occlusion == "dense";

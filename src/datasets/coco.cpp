@@ -78,6 +78,7 @@ void WriteCoco2D(const Log& log, const std::vector<FrameEdit>& edits, const fs::
       };
       if (options.real_boxes) {
         for (const Annotation& ann : frame.annotations) {
+          if (ann.detected) continue;  // keep-out only (synth/detected_tracks.h): never a label
           auto it = ann.box2d_by_camera.find(cam.channel);
           const int64_t category_id = CategoryId(ann.category);
           if (it == ann.box2d_by_camera.end() || !category_id) continue;

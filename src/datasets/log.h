@@ -80,6 +80,10 @@ struct Annotation {
   int visibility = -1;            // dataset-specific level, -1 unknown (nuScenes 1..4; KITTI occluded 0..3)
   double truncation = -1;         // KITTI truncated 0..1, -1 unknown
   std::map<std::string, Box2> box2d_by_camera;  // the dataset's own 2D box per camera channel, where it annotates one (KITTI label bbox for image_2; mmdet3d v1 cam_instances)
+  // A box SynthDrive's LiDAR detector made where the log has no labels (synth/detected_tracks.h), not the
+  // dataset's: keep-out for placement and sequence planning only, never written as a label and never a real
+  // object's reference (realism, colour cap, LiDAR intensity). Its category is "detected.<class>".
+  bool detected = false;
 };
 
 struct Frame {

@@ -77,9 +77,18 @@ bool HoldsNoPart(const fs::path& parts) {
   return true;
 }
 
+// What --detect-objects put into the log: keep-out tracks the plan and placement avoided (never labels).
+json DetectedJson(const SynthInputs& in, const SynthRequest& request) {
+  const DetectTracksReport& d = in.detected;
+  return {{"mode", ToString(request.detect_objects)}, {"frames", d.frames}, {"frames_without_sweep", d.frames_without_sweep},
+          {"sequences", d.sequences}, {"tracks", d.tracks}, {"boxes", d.boxes},
+          {"tracks_by_class", {{"vehicle", d.by_class[0]}, {"pedestrian", d.by_class[1]}, {"small_object", d.by_class[2]}, {"other", d.by_class[3]}}}};
+}
+
 json PlanFileJson(const SynthInputs& in, const SynthRequest& request) {
   json j = {{"tool", "synthdrive synth"}, {"log", fs::absolute(request.log).string()}, {"scenario", ReadJsonFile(request.scenario)}};
   j.update(SynthPlanToJson(in.plan));
+  j["detected"] = DetectedJson(in, request);
   return j;
 }
 
@@ -102,6 +111,7 @@ SynthSummary WriteSynthOutput(const SynthInputs& in, const SynthRequest& request
   j["log"] = fs::absolute(request.log).string();
   j["format"] = ToString(log.format);
   j["scenario"] = ReadJsonFile(request.scenario);
+  j["detected"] = DetectedJson(in, request);
   j["frames"] = nlohmann::json::array();
   SynthSummary summary;
   for (const auto& o : outcomes) {
@@ -236,6 +246,7 @@ DryRunSummary RunSynthDryRun(const SynthRequest& request) {
   WritePlanReport(in.log, in.plan, staging.path() / "plan.html");
   staging.Commit();
   summary.out = staging.final_path();
+  if (in.detected.frames > 0 || in.detected.frames_without_sweep > 0) summary.lines.push_back(in.detected.Summary());
   for (const auto& s : in.plan.sequences) {
     const SequencePlan& p = s.plan;
     summary.objects += p.objects.size();

@@ -482,7 +482,7 @@ EnvironmentMap BuildEnvironmentMap(const Frame& frame, const std::vector<ImageU8
   const Eigen::Vector3f E_sky = map.SkyIrradianceUp();
   const double sin_el = std::max(0.1, map.sun_direction.z());
   double contrast = 0;
-  if (!frame.annotations.empty()) {
+  if (std::any_of(frame.annotations.begin(), frame.annotations.end(), [](const Annotation& a) { return !a.detected; })) {
     const ShadowCheck check = CheckSunAgainstShadows(frame, LinearImages(images, gains), map.sun_direction);
     map.shadow_objects = static_cast<int>(check.boxes.size());
     map.shadow_agreement = check.agreement;

@@ -51,8 +51,8 @@ FrameInputs ReadFrameInputs(const Log& log, size_t frame_index, const Scenario& 
   in.sweep = &out->sweep_before;
   in.points_ego = PointsInEgo(frame, out->sweep_before);
   for (const auto& a : frame.annotations) {
-    in.real_boxes.push_back(a.box);
-    in.annotated.push_back({a.category, a.box});
+    in.real_boxes.push_back(a.box);  // detected boxes too: placement keeps clear of them
+    if (!a.detected) in.annotated.push_back({a.category, a.box});  // a guessed class says nothing of intensity
   }
   out->ground = EstimateFrameGround(frame, out->sweep_before, in.points_ego, scenario);
   in.ground = &out->ground;
@@ -266,7 +266,7 @@ std::optional<LidarModel> FitFrameLidarModel(const Frame& frame, const PointClou
   LidarFitOptions fit;
   const Rigid3d T_lidar_ego = frame.lidar->T_ego_lidar.Inverse();
   for (const auto& a : frame.annotations)
-    if (!a.category.empty()) fit.annotated.push_back({a.category, a.box.Transformed(T_lidar_ego)});
+    if (!a.category.empty() && !a.detected) fit.annotated.push_back({a.category, a.box.Transformed(T_lidar_ego)});
   // The record order, where the reader knows it (KITTI: azimuth order, clockwise, starting behind).
   fit.spin_direction = frame.lidar->spin_direction;
   if (std::isfinite(frame.lidar->start_azimuth)) fit.start_azimuth = frame.lidar->start_azimuth;

@@ -385,7 +385,11 @@ std::optional<CameraOutcome> SynthesizeCamera(const CameraStageInput& st, size_t
   ScopedStage look_stage(st.times, "camera look");
   CameraLook look;
   if (any_look) {
-    const ImageF real_objects = ObjectOutlinesMask(cam, st.in->real_boxes, kMinRealObjectPixels);
+    // The dataset's own objects only: a detected box (synth/detected_tracks.h) is often a tile of a wall.
+    std::vector<Box3> labelled;
+    for (const Annotation& a : st.in->frame->annotations)
+      if (!a.detected) labelled.push_back(a.box);
+    const ImageF real_objects = ObjectOutlinesMask(cam, labelled, kMinRealObjectPixels);
     look = EstimateCameraLook(original, st.in->JpegQuality(cam_index), &real_objects);
   }
   const double render_rise = look_options.blur ? RenderEdgeRise(r, rect) : 0;

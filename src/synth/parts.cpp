@@ -139,6 +139,17 @@ json RequestFingerprint(const SynthRequest& request, const SynthInputs& in) {
   // Every shard plans from the whole selection; a part made under another plan (other frames selected, other
   // sweeps) is of another request.
   if (in.world_fixed) j["plan_fnv1a64"] = Fnv1a64Hex(SynthPlanToJson(in.plan).dump());
+  // Detected keep-out boxes move per-frame placements: a part made against other detections is of another request.
+  j["detect_objects"] = ToString(request.detect_objects);
+  if (in.detected.boxes > 0) {
+    std::string boxes;
+    for (const Frame& f : in.log.frames)
+      for (const Annotation& a : f.annotations)
+        if (a.detected)
+          boxes += a.token + " " + a.instance_token + " " + Fixed(a.box.center().x(), 4) + " " + Fixed(a.box.center().y(), 4) + " " +
+                   Fixed(a.box.Yaw(), 4) + " " + Fixed(a.box.size.x(), 4) + " " + Fixed(a.box.size.y(), 4) + "\n";
+    j["detected_fnv1a64"] = Fnv1a64Hex(boxes);
+  }
   return j;
 }
 

@@ -86,6 +86,9 @@ std::vector<GroundPatch> SampleGroundPatches(const Frame& frame, const LinearIma
   // those of testing every box: the others are farther than their bounding circle).
   std::vector<std::optional<GroundPatch>> slots(frame.annotations.size());
   ParallelFor(0, frame.annotations.size(), [&](size_t ai) {
+    // Patches beside the dataset's own objects only: a detected box (synth/detected_tracks.h) may be a tile of
+    // a wall or a hedge, whose shadow says little about the sun. It still blocks sight lines below.
+    if (frame.annotations[ai].detected) return;
     const Box3& box = frame.annotations[ai].box;
     if (box.size.z() < opt.min_height_m || box.center().head<2>().norm() > opt.max_distance_m) return;
     // The camera that sees the box centre nearest its image centre.

@@ -158,6 +158,7 @@ std::map<std::string, SaturationReference> RealSaturation(const Log& log, const 
       std::optional<ImageU8> read;
       const ImageU8* photo = nullptr;
       for (const Annotation& a : frame.annotations) {
+        if (a.detected) continue;  // a guessed class is no colour reference
         const auto it = out.find(CanonicalCategory(a.category));
         if (it == out.end() || OutlinePixels(cam, a.box) < kMinRealPixels) continue;
         if (!photo) photo = image ? &image(fi, ci) : &read.emplace(ReadImage(cam.image_path, 3));

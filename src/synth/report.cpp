@@ -23,6 +23,7 @@ namespace fs = std::filesystem;
 namespace {
 
 struct Rgb { uint8_t r, g, b; };
+constexpr Rgb kRealColour{80, 140, 255}, kDetectedColour{255, 170, 40};  // annotations; detected keep-out boxes
 
 void Plot(ImageU8& img, int x, int y, Rgb c) {
   if (x < 0 || y < 0 || x >= img.width() || y >= img.height()) return;
@@ -130,7 +131,7 @@ ImageU8 BirdsEye(const Frame& frame, const FrameOutcome& o) {
     const auto m = to_px(b.center());
     Line(img, m.x(), m.y(), f.x(), f.y(), c, 1);  // heading tick
   };
-  for (const auto& a : frame.annotations) draw_box(a.box, {80, 140, 255});
+  for (const auto& a : frame.annotations) draw_box(a.box, a.detected ? kDetectedColour : kRealColour);
   for (const auto& ob : o.objects) draw_box(ob.placement.box, {255, 60, 60});
   // Ego marker.
   Rect(img, Box2{size / 2.0 - 4, size / 2.0 - 8, size / 2.0 + 4, size / 2.0 + 8}, {60, 220, 60}, 1);
@@ -179,6 +180,7 @@ std::string RealismTable(const Frame& frame, const FrameOutcome& o, const Camera
   const CameraLook look = EstimateCameraLook(co.before, std::nullopt);
   std::vector<ObjectLook> real;
   for (const Annotation& a : frame.annotations) {
+    if (a.detected) continue;  // a LiDAR detection's box is no real object's outline
     ObjectLook l = MeasureObjectLook(co.after, cam, a.box, look);
     l.category = CanonicalCategory(a.category);
     if (l.pixels >= 24 * 12) real.push_back(l);
@@ -236,7 +238,8 @@ void WriteSynthReport(const Log& log, const std::vector<FrameOutcome>& frames, c
           "img.crop{max-width:none;image-rendering:pixelated}"
           "figcaption{font-size:12px;color:#aaa}a{color:#8ab4f8}</style></head><body>";
   html << "<h1>SynthDrive synthesis report</h1><p>Log: " << EscapeHtml(log.source.string()) << " (" << ToString(log.format)
-       << "). Green: visible 2D box of an inserted object; yellow: its 3D box; blue: real annotations.</p>";
+       << "). Green: visible 2D box of an inserted object; yellow: its 3D box; blue: real annotations; orange: "
+          "keep-out boxes detected from the LiDAR where the log has none (docs/detection.md; never written as labels).</p>";
   // World-fixed runs write the sequence plan beside this report.
   if (fs::exists(html_path.parent_path() / "plan.html"))
     html << "<p>Placement plan of the sequence(s): <a href='plan.html'>plan.html</a></p>";
@@ -279,7 +282,7 @@ void WriteSynthReport(const Log& log, const std::vector<FrameOutcome>& frames, c
     for (const auto& co : o.cameras) {
       const CameraSensor* cam = frame.FindCamera(co.channel);
       ImageU8 before = co.before, after = co.after;
-      for (const auto& a : frame.annotations) ProjectedBox(before, a.box, *cam, {80, 140, 255}, 1);
+      for (const auto& a : frame.annotations) ProjectedBox(before, a.box, *cam, a.detected ? kDetectedColour : kRealColour, 1);
       for (int k : co.objects) {
         const auto& ob = o.objects[k];
         ProjectedBox(after, ob.placement.box, *cam, {255, 220, 0}, 2);

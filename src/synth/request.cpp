@@ -85,6 +85,15 @@ SynthInputs LoadSynthInputs(const SynthRequest& request, bool dry_run) {
     if (!ids.insert(info.id).second) throw InputError(path, "duplicate asset id '" + info.id + "'");
   }
   in.selected = SelectFrames(log, request.options.frames, request.log);
+  if (request.detect_objects != DetectObjectsMode::kOff) {
+    // Before planning and placement, so both keep clear of the detected tracks exactly as of annotated ones.
+    DetectTracksOptions detect;
+    detect.mode = request.detect_objects;
+    detect.first = *std::min_element(in.selected.begin(), in.selected.end());
+    detect.last = *std::max_element(in.selected.begin(), in.selected.end()) + 1;
+    in.detected = AddDetectedTracks(&in.log, detect);
+    if (in.detected.frames > 0 || in.detected.frames_without_sweep > 0) SD_LOG(Info, in.detected.Summary());
+  }
   if (!dry_run && request.options.harmonizer != "none") {
     in.harmonizer = std::make_shared<const models::Harmonizer>(ResolveSynthHarmonizer(request.options.harmonizer));
     SD_LOG(Info, "harmoniser: " << in.harmonizer->Describe());

@@ -11,6 +11,7 @@
 
 #include "assetgen/asset.h"
 #include "datasets/readers.h"
+#include "synth/detected_tracks.h"
 #include "synth/frame.h"
 #include "synth/scenario.h"
 #include "synth/synth_plan.h"
@@ -24,6 +25,9 @@ struct SynthRequest {
   std::filesystem::path scenario;
   std::filesystem::path out;
   SynthOptions options;
+  // Frames without boxes get keep-out tracks detected from their own LiDAR (synth/detected_tracks.h,
+  // docs/detection.md); `--detect-objects`.
+  DetectObjectsMode detect_objects = DetectObjectsMode::kUnannotated;
 };
 
 struct SynthInputs {
@@ -35,12 +39,14 @@ struct SynthInputs {
   std::shared_ptr<const models::Harmonizer> harmonizer;  // resolved once; null for "none" and dry runs
   bool world_fixed = false;      // the scenario is planned once per sequence (PlanSynthesis)
   SynthPlan plan;                // when world_fixed (or a dry run)
+  DetectTracksReport detected;   // what AddDetectedTracks put into `log` (keep-out only, never labels)
   // The plan of a frame of the selection for a world-fixed scenario; nullptr otherwise.
   const SequencePlan* PlanFor(size_t frame_index) const;
 };
 
-// Reads the log, the scenario and the assets (with the scenario's bank queries), resolves the frame selection
-// and the harmoniser, and plans world-fixed scenarios. `dry_run`: assets are optional, the log may be of a
+// Reads the log, the scenario and the assets (with the scenario's bank queries), resolves the frame selection,
+// fills the selection's span of frames without boxes with tracks detected from LiDAR (request.detect_objects),
+// resolves the harmoniser and plans world-fixed scenarios. `dry_run`: assets are optional, the log may be of a
 // read-only format, nothing is resolved that only rendering needs.
 SynthInputs LoadSynthInputs(const SynthRequest& request, bool dry_run = false);
 

@@ -6,6 +6,8 @@
 #include <array>
 #include <cmath>
 #include <cstdlib>
+#include <map>
+#include <mutex>
 #include <new>
 
 #include "core/parallel.h"
@@ -21,11 +23,49 @@ float LinearToSrgb(float v) {
   return v <= 0.0031308f ? v * 12.92f : 1.055f * std::pow(v, 1.0f / 2.4f) - 0.055f;
 }
 
+namespace {
+
+constexpr size_t kLargePage = size_t{2} << 20;
+// Blocks this large come from AllocateLarge and may go back to the cache; smaller ones are plain malloc.
+bool IsLarge(size_t bytes) { return bytes >= 2 * kLargePage; }
+size_t RoundedToLargePages(size_t bytes) { return (bytes + kLargePage - 1) / kLargePage * kLargePage; }
+
+// Freed large blocks by their rounded size. Never destroyed: images may be freed during static destruction.
+struct LargeBlockCache {
+  std::mutex mutex;
+  std::multimap<size_t, void*> blocks;
+  size_t bytes = 0;
+};
+LargeBlockCache& Cache() {
+  static LargeBlockCache* cache = new LargeBlockCache;
+  return *cache;
+}
+
+}  // namespace
+
+size_t ImageMemoryCacheLimit() { return size_t{512} << 20; }
+
+size_t ImageMemoryCached() {
+  LargeBlockCache& c = Cache();
+  std::lock_guard<std::mutex> lock(c.mutex);
+  return c.bytes;
+}
+
 void* AllocateImageMemory(size_t bytes) {
-  constexpr size_t kLargePage = size_t{2} << 20;
   void* p = nullptr;
-  if (bytes >= 2 * kLargePage) {
-    const size_t rounded = (bytes + kLargePage - 1) / kLargePage * kLargePage;
+  if (IsLarge(bytes)) {
+    const size_t rounded = RoundedToLargePages(bytes);
+    {
+      LargeBlockCache& c = Cache();
+      std::lock_guard<std::mutex> lock(c.mutex);
+      const auto it = c.blocks.find(rounded);
+      if (it != c.blocks.end()) {
+        p = it->second;
+        c.blocks.erase(it);
+        c.bytes -= rounded;
+        return p;
+      }
+    }
     p = std::aligned_alloc(kLargePage, rounded);
 #ifdef MADV_HUGEPAGE
     if (p) madvise(p, rounded, MADV_HUGEPAGE);  // advice only: without large pages the block works the same
@@ -37,7 +77,20 @@ void* AllocateImageMemory(size_t bytes) {
   return p;
 }
 
-void FreeImageMemory(void* p) { std::free(p); }
+void FreeImageMemory(void* p, size_t bytes) {
+  if (p == nullptr) return;
+  if (IsLarge(bytes)) {
+    const size_t rounded = RoundedToLargePages(bytes);
+    LargeBlockCache& c = Cache();
+    std::lock_guard<std::mutex> lock(c.mutex);
+    if (c.bytes + rounded <= ImageMemoryCacheLimit()) {
+      c.blocks.emplace(rounded, p);
+      c.bytes += rounded;
+      return;
+    }
+  }
+  std::free(p);
+}
 
 namespace {
 const std::array<float, 256>& SrgbTable() {

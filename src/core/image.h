@@ -14,8 +14,14 @@ namespace sd {
 // Large blocks (a camera image as floats is 6-17 MB) asked of the kernel in 2 MB pages where it allows (madvise):
 // a frame allocates dozens of camera-sized images, and with 4 KB pages every first touch of each was a page
 // fault, a quarter of a one-frame synth process on a virtual machine (2.5 s -> 1.9 s with large pages).
+// Freed large blocks are kept for reuse (up to ImageMemoryCacheLimit() bytes in all), because the kernel
+// zeroes every page it hands out again: each frame's camera-sized images otherwise fault in and clear their
+// pages anew, frame after frame.
 void* AllocateImageMemory(size_t bytes);
-void FreeImageMemory(void* p);
+void FreeImageMemory(void* p, size_t bytes);
+size_t ImageMemoryCacheLimit();
+// Bytes held for reuse now (for tests and diagnostics).
+size_t ImageMemoryCached();
 
 template <typename T>
 struct ImageAllocator {
@@ -24,7 +30,7 @@ struct ImageAllocator {
   template <typename U>
   ImageAllocator(const ImageAllocator<U>&) {}  // NOLINT: allocators convert implicitly
   T* allocate(size_t n) { return static_cast<T*>(AllocateImageMemory(n * sizeof(T))); }
-  void deallocate(T* p, size_t) { FreeImageMemory(p); }
+  void deallocate(T* p, size_t n) { FreeImageMemory(p, n * sizeof(T)); }
   template <typename U>
   bool operator==(const ImageAllocator<U>&) const { return true; }
 };

@@ -116,5 +116,39 @@ TEST(ImageConversion, Srgb8RegionKeepsTheRestAndRoundTrips) {
   EXPECT_EQ(out.at(39, 29, 0), whole.at(39, 29, 0));
 }
 
+// A camera-sized image freed is kept and handed to the next image of its size, which still gets its fill
+// value everywhere; what the cache holds stays within its limit.
+TEST(ImageMemory, LargeBlocksAreReusedWithinTheLimit) {
+  const size_t before = ImageMemoryCached();
+  const float* first = nullptr;
+  {
+    ImageF a(1600, 900, 1, 7.0f);
+    first = a.data();
+    a.at(5, 5) = 3.0f;
+  }
+  const size_t block = size_t{6} << 20;  // 5.76 MB rounded up to 2 MB pages
+  const size_t held = ImageMemoryCached();
+  EXPECT_EQ(held, before + block) << "the freed block is kept";
+  {
+    ImageF b(1600, 900, 1, 0.5f);  // the same rounded size: a kept block, filled anew
+    EXPECT_EQ(ImageMemoryCached(), before);
+    if (before == 0) {
+      EXPECT_EQ(b.data(), first);
+    }
+    for (float v : b.vector()) ASSERT_EQ(v, 0.5f);
+  }
+  // Small images never enter the cache.
+  { ImageF small(64, 64, 3, 1.0f); }
+  EXPECT_EQ(ImageMemoryCached(), held);
+  // More freed at once than the limit: the cache stops at it and frees the rest.
+  {
+    std::vector<ImageF> many;
+    const size_t block = size_t{64} << 20;
+    for (size_t total = 0; total <= ImageMemoryCacheLimit() + block; total += block)
+      many.emplace_back(4096, 4096, 1, 0.0f);  // 64 MB each
+  }
+  EXPECT_LE(ImageMemoryCached(), ImageMemoryCacheLimit());
+}
+
 }  // namespace
 }  // namespace sd

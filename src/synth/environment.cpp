@@ -631,29 +631,46 @@ float ReceiverShadowRatio(const RayScene& scene, const Eigen::Vector3d& p, const
   const Eigen::Vector3d n = normal.normalized();
   const Eigen::Vector3f origin = Offset(p, n, o.ray_offset);
   // Sky: cosine-weighted directions, each weighted by the map's luminance there (the same directions for
-  // numerator and denominator so that their noise cancels).
-  double sky_all = 0;
+  // numerator and denominator so that their noise cancels). The rays are traced first: most road pixels under
+  // a shadow's rectangle see the whole sky, and there the open share is exactly 1 whatever the weights, so the
+  // map is read (a lat-long lookup and a bilinear sample per ray) only where something blocks a ray.
   const int ns = std::max(1, o.sky_rays);
   const CosineLobe lobe(n);
-  OcclusionFan fan(scene, origin, o.skip_mesh);
+  // Per thread, reused: this runs once per road pixel.
+  thread_local std::vector<Eigen::Vector3d> dirs_d;
+  thread_local std::vector<Eigen::Vector3f> dirs;
+  thread_local std::vector<char> blocked;
+  dirs_d.clear(), dirs.clear();
   for (int k = 0; k < ns; ++k) {
     const Eigen::Vector3d d = lobe.Ray(k, ns, o.seed);
-    if (d.z() <= 0) continue;
-    double L = 1.0;
-    if (light.radiance && !light.radiance->empty()) {
-      const Eigen::Vector2d uv = LatLongPixel(d, light.radiance->width(), light.radiance->height());
-      float rgb[3];
-      SampleBilinear(*light.radiance, uv.x(), uv.y(), rgb);
-      L = Luma(rgb);
-    }
-    sky_all += L;
-    fan.Add(d.cast<float>(), L);
+    if (d.z() > 0) dirs_d.push_back(d), dirs.push_back(d.cast<float>());
   }
-  const double sky_open = fan.OpenWeight();
+  blocked.assign(dirs.size(), 0);
+  bool any_blocked = false;
+  for (size_t begin = 0; begin < dirs.size(); begin += RayScene::kMaxFanRays) {
+    const int count = static_cast<int>(std::min<size_t>(RayScene::kMaxFanRays, dirs.size() - begin));
+    const uint32_t occluded = scene.OccludedFan(origin, &dirs[begin], count, 0.0f, std::numeric_limits<float>::infinity(), o.skip_mesh);
+    for (int i = 0; i < count; ++i) blocked[begin + static_cast<size_t>(i)] = static_cast<char>(occluded >> i & 1u);
+    any_blocked = any_blocked || occluded != 0;
+  }
+  double sky_all = 0, sky_open = 0;
+  if (any_blocked) {
+    for (size_t k = 0; k < dirs.size(); ++k) {
+      double L = 1.0;
+      if (light.radiance && !light.radiance->empty()) {
+        const Eigen::Vector2d uv = LatLongPixel(dirs_d[k], light.radiance->width(), light.radiance->height());
+        float rgb[3];
+        SampleBilinear(*light.radiance, uv.x(), uv.y(), rgb);
+        L = Luma(rgb);
+      }
+      sky_all += L;
+      if (!blocked[k]) sky_open += L;
+    }
+  }
   // Monte Carlo estimate of the sky irradiance: pi * mean(L) over cosine-weighted directions; the SH value
   // is the better-converged unoccluded total, scaled by the sampled open share.
   const double E_sky = Luma(light.sh.Irradiance(n));
-  const double open_share = sky_all > 0 ? sky_open / sky_all : 1.0;
+  const double open_share = any_blocked && sky_all > 0 ? sky_open / sky_all : 1.0;
   const double cos_sun = n.dot(light.sun_direction.normalized());
   const double E_sun = cos_sun > 0 ? Luma(light.sun_irradiance) * cos_sun : 0.0;
   const double without = E_sky + E_sun;

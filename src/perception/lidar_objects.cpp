@@ -6,32 +6,11 @@
 #include <numeric>
 
 #include "core/error.h"
+#include "core/stats.h"
+#include "core/union_find.h"
 
 namespace sd::perception {
 namespace {
-
-// Union-find with path halving; the smaller root wins, so a component's root is its lowest cell index.
-struct UnionFind {
-  std::vector<int> parent;
-  explicit UnionFind(size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), 0); }
-  int Find(int a) {
-    while (parent[a] != a) a = parent[a] = parent[parent[a]];
-    return a;
-  }
-  void Join(int a, int b) {
-    a = Find(a), b = Find(b);
-    if (a == b) return;
-    if (a < b) std::swap(a, b);
-    parent[a] = b;
-  }
-};
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  const size_t mid = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + mid, v.end());
-  return v[mid];
-}
 
 // A vehicle seen from one side or one end: the LiDAR saw the faces nearest the sensor, the rest of the car lies
 // behind them. The box grows to at least `min_vehicle_size` away from the sensor, the seen faces staying where
@@ -137,7 +116,7 @@ std::vector<std::vector<int>> ClusterBev(const std::vector<Eigen::Vector3d>& poi
       const int x = ix + dx, y = iy + dy;
       if (x < 0 || x >= nx || y >= ny) continue;
       const int other = occupied[static_cast<size_t>(y) * nx + x];
-      if (other >= 0) uf.Join(rank[c], rank[other]);
+      if (other >= 0) uf.Unite(rank[c], rank[other]);
     }
   }
   // Components numbered by their root (= their lowest-ranked cell), points in input order.

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <optional>
 #include <sstream>
 
 #include "core/error.h"
@@ -156,11 +157,17 @@ DetectTracksReport AddDetectedTracks(Log* log, const DetectTracksOptions& option
     if (cut) sequences.emplace_back();
     sequences.back().push_back(k);
   }
+  // A long selection reads and clusters a sweep per frame (0.2 s each on 2 cores): show it.
+  size_t total = 0;
+  for (const std::vector<size_t>& seq : sequences) total += seq.size();
+  std::optional<Progress> progress;
+  if (total > 1) progress.emplace("detect objects", total);
   for (size_t s = 0; s < sequences.size(); ++s) {
     std::vector<perception::TrackFrameInput> inputs;
     for (size_t k : sequences[s]) {
       const Frame& f = log->frames[k];
       inputs.push_back({f.timestamp, f.T_world_ego, DetectFrameObjects(f, *log, options.detect)});
+      if (progress) progress->Advance();
     }
     perception::TrackStats st;
     const auto tracked = perception::TrackObjects(inputs, options.track, &st);

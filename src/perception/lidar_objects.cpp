@@ -196,19 +196,28 @@ std::vector<DetectedObject> DetectObjects(const std::vector<Eigen::Vector3d>& po
   std::vector<Eigen::Vector3d> pts;
   pts.reserve(obstacle.size());
   for (int i : obstacle) pts.push_back(points_ego[i]);
+  // A set of returns (a cluster or a piece of one): its footprint, its highest z and the road's z under each.
+  struct Returns {
+    std::vector<Eigen::Vector2d> xy;
+    double top = -1e300;
+    std::vector<double> ground;
+  };
+  const auto gather = [&](const std::vector<int>& members) {
+    Returns r;
+    r.xy.reserve(members.size());
+    r.ground.reserve(members.size());
+    for (int k : members) {
+      r.xy.push_back(pts[k].head<2>());
+      r.top = std::max(r.top, pts[k].z());
+      r.ground.push_back(pts[k].z() - height_above_ground[obstacle[k]]);
+    }
+    return r;
+  };
   std::vector<DetectedObject> out;
   for (const std::vector<int>& cluster : ClusterBev(pts, o.cell, o.cluster_distance)) {
     if (static_cast<int>(cluster.size()) < o.min_points) continue;
-    std::vector<Eigen::Vector2d> xy;
-    xy.reserve(cluster.size());
-    double top = -1e300;
-    std::vector<double> ground;
-    for (int k : cluster) {
-      xy.push_back(pts[k].head<2>());
-      top = std::max(top, pts[k].z());
-      ground.push_back(pts[k].z() - height_above_ground[obstacle[k]]);
-    }
-    const Rectangle r = FitLShape(xy, o.heading_step_deg, o.closeness_d0, o.max_fit_points);
+    const Returns whole = gather(cluster);
+    const Rectangle r = FitLShape(whole.xy, o.heading_step_deg, o.closeness_d0, o.max_fit_points);
     std::vector<std::vector<int>> pieces = {cluster};
     bool structure = false;
     if (r.length > o.max_extent) {
@@ -227,7 +236,7 @@ std::vector<DetectedObject> DetectObjects(const std::vector<Eigen::Vector3d>& po
     // A long, thin, low run (a line of barriers, a fence, a low wall) is cut along its length into pieces of
     // about `run_piece` metres, each boxed alone: one rectangle over a curved or angled run would cover road
     // the run does not, and barriers standing end to end cannot be told apart by distance.
-    const double run_height = top - Median(ground);
+    const double run_height = whole.top - Median(whole.ground);
     if (!structure && r.length > o.run_min_length && r.width < o.run_max_width && run_height < o.run_max_height) {
       const int k = std::max(2, static_cast<int>(std::lround(r.length / o.run_piece)));
       const Eigen::Vector2d axis(std::cos(r.heading), std::sin(r.heading));
@@ -239,20 +248,13 @@ std::vector<DetectedObject> DetectObjects(const std::vector<Eigen::Vector3d>& po
     }
     for (const std::vector<int>& piece : pieces) {
       if (static_cast<int>(piece.size()) < o.min_points) continue;
-      std::vector<Eigen::Vector2d> pxy;
-      double ptop = -1e300;
-      std::vector<double> pground;
-      for (int k : piece) {
-        pxy.push_back(pts[k].head<2>());
-        ptop = std::max(ptop, pts[k].z());
-        pground.push_back(pts[k].z() - height_above_ground[obstacle[k]]);
-      }
-      const Rectangle pr = pieces.size() == 1 && !structure ? r : FitLShape(pxy, o.heading_step_deg, o.closeness_d0, o.max_fit_points);
+      const Returns part = gather(piece);
+      const Rectangle pr = pieces.size() == 1 && !structure ? r : FitLShape(part.xy, o.heading_step_deg, o.closeness_d0, o.max_fit_points);
       DetectedObject d;
-      d.ground_z = Median(pground);
+      d.ground_z = Median(part.ground);
       // A single ring on a thin object is a line: give the box a few centimetres so it has a footprint.
       const double length = std::max(pr.length, 0.1), width = std::max(pr.width, 0.1);
-      const double height = std::max(ptop - d.ground_z, o.min_height);
+      const double height = std::max(part.top - d.ground_z, o.min_height);
       d.box.T_frame_box = Rigid3d::FromYaw(pr.heading, Eigen::Vector3d(pr.center.x(), pr.center.y(), d.ground_z + 0.5 * height));
       d.box.size = Eigen::Vector3d(length, width, height);
       d.object_class = structure ? ObjectClass::kOther : ClassifyBySize(length, width, height);

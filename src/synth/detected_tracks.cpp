@@ -10,6 +10,7 @@
 #include "core/error.h"
 #include "core/log.h"
 #include "datasets/readers.h"
+#include "synth/frame.h"
 #include "synth/ground.h"
 
 namespace sd {
@@ -114,8 +115,7 @@ std::vector<perception::DetectedObject> DetectFrameObjects(const Frame& frame, c
                                                            const perception::DetectOptions& options) {
   if (!frame.lidar) throw InputError(log.source, "frame " + frame.token + " has no LiDAR sweep to detect objects in");
   const PointCloud sweep = ReadLidar(*frame.lidar);
-  std::vector<Eigen::Vector3d> points_ego(sweep.size());
-  for (size_t i = 0; i < sweep.size(); ++i) points_ego[i] = frame.lidar->T_ego_lidar * sweep.xyz(i).cast<double>();
+  const std::vector<Eigen::Vector3d> points_ego = PointsInEgo(frame, sweep);
   perception::DetectOptions o = options;
   SetEgoBody(log, frame, &o);
   if (points_ego.empty()) return {};
@@ -128,13 +128,7 @@ std::vector<perception::DetectedObject> DetectFrameObjects(const Frame& frame, c
   g.max_range = std::max(g.max_range, o.max_range);
   g.ego_body_min = o.ego_body_min;
   g.ego_body_max = o.ego_body_max;
-  std::vector<uint8_t> other_sensor;
-  const int sensor = frame.lidar->sensor_feature.empty() ? -1 : sweep.FeatureIndex(frame.lidar->sensor_feature);
-  if (sensor >= 0) {
-    other_sensor.resize(sweep.size());
-    for (size_t i = 0; i < sweep.size(); ++i) other_sensor[i] = std::lround(sweep.feature(i, sensor)) != 0;
-  }
-  const GroundModel ground = GroundModel::Estimate(points_ego, annotated, g, other_sensor);
+  const GroundModel ground = GroundModel::Estimate(points_ego, annotated, g, SecondSensorReturns(frame, sweep));
   return perception::DetectObjects(points_ego, HeightsAboveLowestGround(ground, points_ego, o.max_range), o);
 }
 

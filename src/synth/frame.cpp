@@ -438,6 +438,16 @@ std::vector<Eigen::Vector3d> PointsInEgo(const Frame& frame, const PointCloud& s
   return points_ego;
 }
 
+std::vector<uint8_t> SecondSensorReturns(const Frame& frame, const PointCloud& sweep) {
+  std::vector<uint8_t> other_sensor;
+  const int sensor = frame.lidar->sensor_feature.empty() ? -1 : sweep.FeatureIndex(frame.lidar->sensor_feature);
+  if (sensor >= 0) {
+    other_sensor.resize(sweep.size());
+    for (size_t i = 0; i < sweep.size(); ++i) other_sensor[i] = std::lround(sweep.feature(i, sensor)) != 0;
+  }
+  return other_sensor;
+}
+
 GroundModel EstimateFrameGround(const Frame& frame, const PointCloud& sweep, const std::vector<Eigen::Vector3d>& points_ego,
                                 const Scenario& scenario) {
   std::vector<Box3> real_boxes;
@@ -445,13 +455,7 @@ GroundModel EstimateFrameGround(const Frame& frame, const PointCloud& sweep, con
   GroundOptions gopt;
   gopt.seed = scenario.seed;
   gopt.sensor_xy = frame.lidar->T_ego_lidar.translation.head<2>();
-  std::vector<uint8_t> other_sensor;
-  const int sensor = frame.lidar->sensor_feature.empty() ? -1 : sweep.FeatureIndex(frame.lidar->sensor_feature);
-  if (sensor >= 0) {
-    other_sensor.resize(sweep.size());
-    for (size_t i = 0; i < sweep.size(); ++i) other_sensor[i] = std::lround(sweep.feature(i, sensor)) != 0;
-  }
-  return GroundModel::Estimate(points_ego, real_boxes, gopt, other_sensor);
+  return GroundModel::Estimate(points_ego, real_boxes, gopt, SecondSensorReturns(frame, sweep));
 }
 
 FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vector<Asset>& assets,

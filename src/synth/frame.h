@@ -96,6 +96,9 @@ FrameSeeds FrameSeedsOf(uint32_t scenario_seed, size_t frame_index);
 // The frame's sweep in the ego frame, and the one ground estimate of a frame: synthesis places on it and the
 // merge recomputes it for the report, so it depends on nothing but the frame and the scenario.
 std::vector<Eigen::Vector3d> PointsInEgo(const Frame& frame, const PointCloud& sweep);
+// 1 for each return of a second LiDAR merged into the sweep (LidarSensor::sensor_feature), which the road fit
+// leaves out; empty when the sweep holds one sensor.
+std::vector<uint8_t> SecondSensorReturns(const Frame& frame, const PointCloud& sweep);
 GroundModel EstimateFrameGround(const Frame& frame, const PointCloud& sweep, const std::vector<Eigen::Vector3d>& points_ego,
                                 const Scenario& scenario);
 

@@ -131,6 +131,7 @@ Log ReadKitti(const fs::path& root, const OpenLogOptions& options) {
   log.version = "kitti-object";
   log.sequential = false;            // object frames: no world pose, no time order
   log.ego_origin_on_ground = false;  // ego = the Velodyne frame, 1.73 m above the road
+  log.nominal_road_z = -1.73;
   log.categories = {"Car", "Van", "Truck", "Pedestrian", "Person_sitting", "Cyclist", "Tram", "Misc"};
   std::vector<std::string> ids;
   for (const auto& e : fs::directory_iterator(split / "calib"))

@@ -123,6 +123,9 @@ struct Log {
   // Facts about the frames their reader knows:
   bool sequential = true;            // frames are a time series with world poses (KITTI object frames are not)
   bool ego_origin_on_ground = true;  // the ego origin lies on the road (nuScenes' rear axle); KITTI's Velodyne frame does not
+  // The road's height in the ego frame by the rig's convention: 0 where the ego origin lies on it, PandaSet's pose
+  // reference -0.30 m, KITTI's Velodyne -1.73 m. Where no sweep measures the road, the cameras search around it.
+  double nominal_road_z = 0;
   // What the reader assumed for optional fields the file left out, one line per kind ("ego2global missing in 3 of
   // 81 frames (first: <token>): ..."); OpenLog reports each once, so a run never rests on a silent default.
   std::vector<std::string> assumptions;

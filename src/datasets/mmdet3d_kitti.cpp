@@ -127,6 +127,7 @@ Log KittiInfoLog(const fs::path& file, const OpenLogOptions& options) {
   log.version = "kitti-object";
   log.sequential = false;            // object frames: no world pose, no time order
   log.ego_origin_on_ground = false;  // ego = the Velodyne frame, 1.73 m above the road
+  log.nominal_road_z = -1.73;
   return log;
 }
 

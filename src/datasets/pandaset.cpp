@@ -212,6 +212,7 @@ Log ReadPandaSet(const fs::path& dir, const OpenLogOptions& options) {
   log.name = fs::absolute(dir).lexically_normal().filename().string();
   log.version = "pandaset";
   log.ego_origin_on_ground = false;  // the pose origin is 0.30 m above the road
+  log.nominal_road_z = -0.30;
   const StampedPoses lidar = ReadStampedPoses(dir / "lidar");
   const std::vector<int> numbers = FrameNumbers(dir / "lidar");
   if (numbers.empty()) throw InputError(dir / "lidar", "no LiDAR frames (NN.pkl.gz)");

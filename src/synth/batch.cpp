@@ -125,7 +125,8 @@ SynthSummary WriteSynthOutput(const SynthInputs& in, const SynthRequest& request
     jf["camera_look"] = nlohmann::json::object();  // per camera: the look estimated from its image and applied
     for (const auto& co : o.cameras)
       if (!co.look.is_null()) jf["camera_look"][co.channel] = co.look;
-    jf["lidar_model"] = o.lidar_model;  // LidarModel::Summary() of the frame's sweep, or "off"
+    jf["road"] = o.road;  // the frame's LiDAR sweep, its cameras' stereo, or an assumed plane
+    jf["lidar_model"] = o.lidar_model;  // LidarModel::Summary() of the frame's sweep, "off", or kNoLidar
     jf["lidar_ego_motion"] = o.lidar_ego_motion;
     jf["objects"] = nlohmann::json::array();
     for (const auto& ob : o.objects) {

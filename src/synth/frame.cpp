@@ -10,6 +10,7 @@
 #include <tuple>
 
 #include "core/log.h"
+#include "core/stats.h"
 #include "datasets/categories.h"
 #include "datasets/readers.h"
 #include "io/files.h"
@@ -41,20 +42,28 @@ std::optional<int> FrameInputs::JpegQuality(size_t k) const { return EstimateJpe
 
 FrameInputs ReadFrameInputs(const Log& log, size_t frame_index, const Scenario& scenario, FrameOutcome* out) {
   const Frame& frame = log.frames.at(frame_index);
-  if (!frame.lidar) throw InputError(log.source, "frame " + frame.token + " has no LiDAR sweep; synth needs one");
   FrameInputs in;
   in.log = &log;
   in.frame = &frame;
   in.index = frame_index;
   in.seeds = FrameSeedsOf(scenario.seed, frame_index);
-  out->sweep_before = ReadLidar(*frame.lidar);
-  in.sweep = &out->sweep_before;
-  in.points_ego = PointsInEgo(frame, out->sweep_before);
   for (const auto& a : frame.annotations) {
     in.real_boxes.push_back(a.box);  // detected boxes too: placement keeps clear of them
     if (!a.detected) in.annotated.push_back({a.category, a.box});  // a guessed class says nothing of intensity
   }
-  out->ground = EstimateFrameGround(frame, out->sweep_before, in.points_ego, scenario);
+  if (frame.lidar) {
+    out->sweep_before = ReadLidar(*frame.lidar);
+    in.sweep = &out->sweep_before;
+    in.points_ego = PointsInEgo(frame, out->sweep_before);
+    out->ground = EstimateFrameGround(frame, out->sweep_before, in.points_ego, scenario);
+    out->road = Msg() << "LiDAR sweep (" << out->ground.ground_points().size() << " road returns)";
+  } else {
+    // A camera-only frame: the road from the cameras, no sweep read, none written, none invented.
+    CameraGround camera_ground = EstimateCameraGround(log, frame_index, scenario);
+    out->ground = std::move(camera_ground.ground);
+    out->road = std::move(camera_ground.source);
+    out->lidar_model = kNoLidar;
+  }
   in.ground = &out->ground;
   in.is_ground.assign(in.points_ego.size(), 0);
   for (int i : out->ground.ground_indices()) in.is_ground[i] = 1;
@@ -303,6 +312,7 @@ std::optional<std::pair<Rigid3d, Rigid3d>> NeighbourSweepPoses(const Log& log, s
 // model fitted to the frame's own sweep.
 void SimulateFrameLidar(const FrameInputs& in, const std::vector<PlacedObject>& placed, const SynthOptions& options,
                         FrameOutcome* out) {
+  if (!in.sweep) return;  // a camera-only frame: no sweep to insert into, and none is made up
   const Frame& frame = *in.frame;
   const PointCloud& sweep = *in.sweep;
   std::vector<const PlacedObject*> ptrs;
@@ -456,6 +466,50 @@ GroundModel EstimateFrameGround(const Frame& frame, const PointCloud& sweep, con
   gopt.seed = scenario.seed;
   gopt.sensor_xy = frame.lidar->T_ego_lidar.translation.head<2>();
   return GroundModel::Estimate(points_ego, real_boxes, gopt, SecondSensorReturns(frame, sweep));
+}
+
+double RoadPriorHeight(const Log& log, const Frame& frame) {
+  std::vector<double> bottoms;
+  for (const auto& a : frame.annotations)
+    if (!a.detected) bottoms.push_back(a.box.center().z() - 0.5 * a.box.size.z());
+  return bottoms.empty() ? log.nominal_road_z : Median(bottoms);
+}
+
+CameraGround EstimateCameraGround(const Log& log, size_t frame_index, const Scenario& scenario,
+                                  const CameraRoadOptions& options) {
+  const Frame& frame = log.frames.at(frame_index);
+  const double prior = RoadPriorHeight(log, frame);
+  std::vector<Box3> real_boxes;
+  for (const auto& a : frame.annotations) real_boxes.push_back(a.box);
+  GroundOptions gopt;
+  gopt.seed = scenario.seed;
+  gopt.max_range = std::min(gopt.max_range, options.max_range);
+  CameraGround out;
+  const CameraRoadResult road = EstimateRoadFromCameras(log, frame_index, prior, options);
+  std::string why = road.summary;
+  // Fewer points than this make no surface worth trusting over the plane (a few patches of texture).
+  constexpr size_t kMinStereoPoints = 200;
+  if (!road.points_ego.empty() && road.points_ego.size() < kMinStereoPoints) {
+    why += Msg() << "; too few road points for a surface";
+  } else if (!road.points_ego.empty()) {
+    try {
+      // The stereo points are road by construction; the free-space walk then ends where the cameras last saw road.
+      out.ground = GroundModel::Estimate(road.points_ego, real_boxes, gopt);
+      out.source = Msg() << "cameras: " << road.summary << "; " << out.ground.ground_points().size() << " road points";
+      out.from_stereo = true;
+      return out;
+    } catch (const InputError& e) {
+      why += Msg() << "; " << e.what();
+    }
+  }
+  GroundPlane plane;
+  plane.d = -prior;
+  out.ground = GroundModel::Plane(plane, gopt);
+  out.source = Msg() << "assumed: a level road at z = " << Fixed(prior, 2) << " m in the ego frame ("
+                     << (std::any_of(frame.annotations.begin(), frame.annotations.end(), [](const Annotation& a) { return !a.detected; })
+                             ? "the annotated boxes' bottoms" : "the rig's nominal height")
+                     << "), drivable within " << Fixed(gopt.max_range, 0) << " m, no obstacle known but the boxes (" << why << ")";
+  return out;
 }
 
 FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vector<Asset>& assets,

@@ -16,6 +16,7 @@
 #include "datasets/log.h"
 #include "datasets/writers.h"
 #include "synth/camera_look.h"
+#include "synth/camera_road.h"
 #include "synth/ground.h"
 #include "synth/outcome.h"
 #include "synth/scenario.h"
@@ -74,7 +75,8 @@ struct SynthOptions {
 // LiDAR (options.lidar_realism): the model is fitted from the frame's sweep (KITTI: clockwise, sweep boundary
 // behind); ego motion from the previous and next log frames where they are of the same sequence (nuScenes: the
 // sweep's timestamp is the end of its turn; output de-skewed as nuScenes' own sweeps are), none for KITTI object
-// frames. Every random draw comes from FrameSeedsOf, so the result does not depend on which shard synthesises
+// frames. A frame without a sweep (a camera-only log) gets its road from EstimateCameraGround, its camera images
+// and labels, and no sweep (FrameOutcome::lidar_model says so). Every random draw comes from FrameSeedsOf, so the result does not depend on which shard synthesises
 // the frame.
 FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vector<Asset>& assets,
                              const Scenario& scenario, const SynthOptions& options, const SequencePlan* plan = nullptr);
@@ -101,5 +103,20 @@ std::vector<Eigen::Vector3d> PointsInEgo(const Frame& frame, const PointCloud& s
 std::vector<uint8_t> SecondSensorReturns(const Frame& frame, const PointCloud& sweep);
 GroundModel EstimateFrameGround(const Frame& frame, const PointCloud& sweep, const std::vector<Eigen::Vector3d>& points_ego,
                                 const Scenario& scenario);
+
+// The road of a frame without a LiDAR sweep (docs/camera_only.md). From plane-sweep stereo of its cameras against
+// the same cameras in the neighbouring frames (synth/camera_road.h), searched around RoadPriorHeight; where the
+// stereo finds too little road (one frame, no texture, no neighbour in time), a level plane at that height,
+// drivable everywhere within range. `source` says which, in one line, for synth.json and the report.
+struct CameraGround {
+  GroundModel ground;
+  std::string source;
+  bool from_stereo = false;
+};
+CameraGround EstimateCameraGround(const Log& log, size_t frame_index, const Scenario& scenario,
+                                  const CameraRoadOptions& options = {});
+// The road's height in a frame's ego frame before anything measures it: the median bottom of its annotated boxes
+// (they stand on the road), else the rig's convention (Log::nominal_road_z).
+double RoadPriorHeight(const Log& log, const Frame& frame);
 
 }  // namespace sd

@@ -276,6 +276,19 @@ GroundModel GroundModel::Estimate(const std::vector<Eigen::Vector3d>& points_ego
   return g;
 }
 
+GroundModel GroundModel::Plane(const GroundPlane& plane, const GroundOptions& options) {
+  SD_CHECK(plane.normal.z() > 0 && std::abs(plane.normal.norm() - 1.0) < 1e-6, << "plane normal " << plane.normal.transpose());
+  GroundModel g;
+  g.options_ = options;
+  g.seed_ = plane;
+  g.n_ = 2 * static_cast<int>(std::ceil(options.max_range / options.cell));
+  g.height_.assign(static_cast<size_t>(g.n_) * g.n_, std::numeric_limits<float>::quiet_NaN());
+  g.cell_points_.assign(static_cast<size_t>(g.n_) * g.n_, {});
+  g.free_range_.assign(static_cast<size_t>(options.sectors), static_cast<float>(options.max_range));
+  g.kerb_step_ = options.kerb_step;
+  return g;
+}
+
 GroundModel::Surface GroundModel::SurfaceAt(double x, double y, double radius) const {
   Surface s;
   const double r = radius > 0 ? std::max(radius, options_.local_radius) : options_.local_radius;

@@ -65,6 +65,10 @@ class GroundModel {
   // sensors' calibrations disagree by centimetres on the road (PandaSet: ~10 cm), more than a low kerb.
   static GroundModel Estimate(const std::vector<Eigen::Vector3d>& points_ego, const std::vector<Box3>& objects,
                               const GroundOptions& options = {}, const std::vector<uint8_t>& other_sensor = {});
+  // A road known only as a plane (a frame without LiDAR whose cameras gave no stereo): no cell is observed, every
+  // local query answers the plane, and everything within `max_range` of `sensor_xy` counts as drivable, since
+  // nothing is known of kerbs or obstacles there (the caller reports that the road was assumed).
+  static GroundModel Plane(const GroundPlane& plane, const GroundOptions& options = {});
 
   const GroundPlane& seed_plane() const { return seed_; }
   // Local surface at (x, y): height and unit normal from the nearby ground points (see file comment).

@@ -39,6 +39,9 @@ struct CameraOutcome {
   nlohmann::json look;
 };
 
+// FrameOutcome::lidar_model of a frame that has no LiDAR sweep: nothing was read, simulated or written.
+inline constexpr char kNoLidar[] = "absent: the frame has no LiDAR sweep (none read, none written)";
+
 struct FrameOutcome {
   size_t frame_index = 0;
   FrameEdit edit;
@@ -54,6 +57,9 @@ struct FrameOutcome {
   // Argoverse 2 log, or a sweep the model cannot be fitted from: then the ideal sensor, with a warning).
   // Kept in parts and written per frame to synth.json.
   std::string lidar_model = "off";
+  // Where the frame's road came from, one line: its LiDAR sweep, its cameras' stereo, or an assumed plane
+  // (synth/frame.h EstimateCameraGround). Kept in parts and written per frame to synth.json.
+  std::string road;
   std::optional<LidarModel> lidar_model_fit;  // the fitted model itself; in memory only (not in parts)
   bool lidar_ego_motion = false;              // rolling shutter from the neighbouring frames' ego poses
   // Seconds per stage of SynthesizeFrame ("read", "light", "camera render", ...; camera stages summed over the

@@ -204,6 +204,7 @@ void WritePart(const fs::path& dir, const FrameOutcome& o, const SynthInputs& in
             {"objects", objects},
             {"cameras", cameras},
             {"sweep", sweep},
+            {"road", o.road},
             {"lidar_model", o.lidar_model},
             {"lidar_ego_motion", o.lidar_ego_motion},
             {"lidar_object_points", lidar_object_points}};
@@ -287,6 +288,7 @@ FrameOutcome ReadPart(const fs::path& dir, size_t frame_index, const SynthInputs
       r["sweep"]["points"].Fail(Msg() << "sweep.bin holds " << cloud.size() << " points");
     o.edit.points = std::move(cloud);
   }
+  if (r.Has("road")) o.road = r["road"].String();  // parts written before it was recorded have none
   o.lidar_model = r["lidar_model"].String();
   o.lidar_ego_motion = r["lidar_ego_motion"].Bool();
   for (size_t i = 0; i < r["lidar_object_points"].Size(); ++i) {

@@ -260,6 +260,7 @@ void WriteSynthReport(const Log& log, const std::vector<FrameOutcome>& frames, c
     const FrameOutcome& o = frames[fk];
     const Frame& frame = log.frames[o.frame_index];
     body << "<h2 id='" << FrameAnchor(fk) << "'>Frame " << EscapeHtml(frame.token) << "</h2><p>Sun: " << EscapeHtml(o.sun_source) << "<br>Light: " << EscapeHtml(o.light)
+         << "<br>Road: " << EscapeHtml(o.road)
          << "<br>LiDAR model: " << EscapeHtml(o.lidar_model) << (o.lidar_ego_motion ? " (ego motion during the sweep)" : "")
          << "</p>";
     body << "<table><tr><th>#</th><th>asset</th><th>category</th><th>centre (ego, m)</th><th>size (m)</th>"

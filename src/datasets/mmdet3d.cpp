@@ -90,7 +90,8 @@ Log ReadMmdet3dV1(const json& j, const fs::path& file, const OpenLogOptions& opt
       T_ego_lidar = l.T_ego_lidar;
       f.lidar = l;
     } else {
-      assumed.Note("lidar_points missing: no LiDAR sweep (cameras only)", f.token);
+      assumed.Note("lidar_points missing: no LiDAR sweep (cameras only); boxes taken in the ego frame and cameras "
+                   "placed by cam2ego (a lidar2cam names a LiDAR frame the info does not place)", f.token);
     }
     if (!d.Has("images")) assumed.Note("images missing: no cameras (LiDAR only)", f.token);
     if (d.Has("images")) {
@@ -111,11 +112,12 @@ Log ReadMmdet3dV1(const json& j, const fs::path& file, const OpenLogOptions& opt
         cam.T_egocam_cam = RigidPose(c["cam2ego"], kMaxSensorOffsetM);
         // lidar2cam = inv(cam2ego) inv(E(t_cam)) E(t_lidar) lidar2ego, so lidar2ego inv(lidar2cam) is the
         // camera seen from the LiDAR-time ego pose (log.h's T_ego_cam), ego motion included.
-        if (!c.Has("lidar2cam"))
+        if (!c.Has("lidar2cam") && f.lidar)
           assumed.Note("lidar2cam missing: derived from cam2ego and lidar2ego (the ego's motion between the LiDAR "
                        "and camera times ignored)", f.token);
-        const Rigid3d T_cam_lidar = c.Has("lidar2cam") ? RigidPose(c["lidar2cam"], kMaxSensorOffsetM)
-                                                       : cam.T_egocam_cam.Inverse() * T_ego_lidar;
+        const bool through_lidar = c.Has("lidar2cam") && f.lidar;
+        const Rigid3d T_cam_lidar = through_lidar ? RigidPose(c["lidar2cam"], kMaxSensorOffsetM)
+                                                  : cam.T_egocam_cam.Inverse() * T_ego_lidar;
         cam.T_ego_cam = T_ego_lidar * T_cam_lidar.Inverse();
         cam.T_world_egocam = f.T_world_ego * cam.T_ego_cam * cam.T_egocam_cam.Inverse();
         f.cameras.push_back(std::move(cam));

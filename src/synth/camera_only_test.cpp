@@ -2,6 +2,7 @@
 // images and labels written, the LiDAR reported absent and never made up.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 
@@ -89,8 +90,26 @@ TEST(CameraOnlySynthesis, AKeyframeWithoutItsSweepGetsImagesAndLabelsAndNoSweep)
 // lists no sweep, and synth.json says where the road came from and that the LiDAR was absent.
 TEST(CameraOnlySynthesis, TheCommandWritesCamerasAndLabelsAndSaysTheLidarWasAbsent) {
   testing::TempDir dir;
+  // The keyframe's info as a camera-only rig's would be: no lidar_points, boxes in the ego frame (mmdet3d keeps
+  // them in the LiDAR frame, which such an info cannot place).
   nlohmann::json info = nlohmann::json::parse(ReadFileToString(testing::RepoData(kInfo)));
-  for (auto& d : info["data_list"]) d.erase("lidar_points");
+  for (auto& d : info["data_list"]) {
+    Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
+    for (int r = 0; r < 4; ++r)
+      for (int c = 0; c < 4; ++c) T(r, c) = d["lidar_points"]["lidar2ego"][r][c].get<double>();
+    for (auto& inst : d["instances"]) {
+      auto& b = inst["bbox_3d"];
+      const Eigen::Vector3d p = T.topLeftCorner<3, 3>() * Eigen::Vector3d(b[0], b[1], b[2]) + T.topRightCorner<3, 1>();
+      for (int k = 0; k < 3; ++k) b[k] = p[k];
+      b[6] = b[6].get<double>() + std::atan2(T(1, 0), T(0, 0));
+      if (inst.contains("velocity") && inst["velocity"][0].is_number() && inst["velocity"][1].is_number()) {
+        const Eigen::Vector2d v = T.topLeftCorner<2, 2>() * Eigen::Vector2d(inst["velocity"][0], inst["velocity"][1]);
+        inst["velocity"] = {v.x(), v.y()};
+      }
+    }
+    d.erase("lidar_points");
+    for (auto& [channel, cam] : d["images"].items()) cam.erase("lidar2cam");
+  }
   const fs::path info_file = dir / "cameras_only.json";
   std::ofstream(info_file) << info.dump();
 
@@ -110,6 +129,8 @@ TEST(CameraOnlySynthesis, TheCommandWritesCamerasAndLabelsAndSaysTheLidarWasAbse
   ASSERT_EQ(synth["frames"].size(), 1u);
   EXPECT_EQ(synth["frames"][0]["lidar_model"], kNoLidar);
   EXPECT_EQ(synth["frames"][0]["road"].get<std::string>().rfind("assumed:", 0), 0u) << synth["frames"][0]["road"];
+  // The boxes' bottoms give the road: a few centimetres from the ego origin's height (nuScenes' is on the road).
+  for (const auto& o : synth["frames"][0]["objects"]) EXPECT_NEAR(o["ground_height_m"].get<double>(), 0.0, 0.15) << o;
   size_t sweeps = 0, images = 0;
   for (const auto& e : fs::recursive_directory_iterator(r.out)) {
     const std::string name = e.path().filename().string();
@@ -153,6 +174,25 @@ TEST(CameraOnlySynthesis, PandaSetWithoutLidarStandsTheObjectsOnTheStereoRoad) {
   std::sort(errors.begin(), errors.end());
   EXPECT_LT(errors[errors.size() / 2], 0.05);
   EXPECT_LT(errors[errors.size() * 9 / 10], 0.15);
+
+  // The whole frame without its sweep: the stereo's points stand in for the sweep's in placement and occlusion.
+  testing::TempDir dir;
+  const std::vector<Asset> assets = testing::ImportDemoAssets(dir.path());
+  WriteFileAtomic(dir / "cones.json", R"({"seed": 3, "margin_m": 0.5, "objects": [
+    {"category": "traffic_cone", "count": 2, "distance_m": [5, 15], "lateral_m": [-3, 3], "yaw": "random"}]})");
+  SynthOptions options;
+  options.samples_per_pixel = 1;
+  options.ao_samples = 2;
+  const FrameOutcome o = SynthesizeFrame(log, k, assets, ReadScenario(dir / "cones.json"), options);
+  EXPECT_FALSE(o.edit.points.has_value());
+  EXPECT_EQ(o.road.rfind("cameras:", 0), 0u) << o.road;
+  ASSERT_EQ(o.objects.size(), 2u);
+  for (const ObjectOutcome& ob : o.objects) {
+    const Box3& b = ob.placement.box;
+    EXPECT_NEAR(b.center().z() - 0.5 * b.size.z(), lidar_ground.SurfaceAt(b.center().x(), b.center().y()).height, 0.15)
+        << "the cone stands on the real road";
+    EXPECT_FALSE(ob.label.camera_boxes.empty());
+  }
 }
 
 }  // namespace

@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <limits>
 #include <optional>
+#include <unordered_map>
 
 #include "core/error.h"
 #include "core/parallel.h"
@@ -114,11 +115,15 @@ struct Source {
 // Coarse to fine, for speed (about 5x fewer samples than the full sweep): every second height with every second
 // patch sample in each direction gives the cost curve the acceptance tests read; the full patch is then scored at
 // the heights next to the coarse best, and its best, refined by a parabola, is the answer.
+//
+// Two families of planes: the road's (horizontal, `kRoad`: h is a height, the vertical-plane check applies) and
+// the camera's fronto-parallel planes (`kDepth`: h is an inverse depth, for whatever stands above the road).
+enum class Planes { kRoad, kDepth };
 class Sweeper {
  public:
   Sweeper(const GreyView& ref, const std::vector<Source>& sources, const std::vector<double>& inv_dist,
-          const Eigen::Matrix3d& R_ego_cam, const CameraRoadOptions& o)
-      : ref_(ref), sources_(sources), inv_dist_(inv_dist), R_ego_cam_(R_ego_cam), o_(o) {
+          const Eigen::Matrix3d& R_ego_cam, const CameraRoadOptions& o, Planes planes = Planes::kRoad)
+      : ref_(ref), sources_(sources), inv_dist_(inv_dist), R_ego_cam_(R_ego_cam), o_(o), planes_(planes) {
     K_inv_ = ref.camera.K().inverse();
     const int P = o.patch;
     for (int dy = -P, k = 0; dy <= P; ++dy)
@@ -169,8 +174,11 @@ class Sweeper {
       if (d > span) span = d, par = s;
     }
     if (par < 0) return std::nullopt;
-    // No height resolution: one pixel of parallax covers too many metres of height.
-    if ((2 * o_.search) / span > o_.max_height_per_px) return std::nullopt;
+    // No resolution: one pixel of parallax covers too many metres of height, or too large a share of the depth.
+    if (planes_ == Planes::kRoad && (2 * o_.search) / span > o_.max_height_per_px) return std::nullopt;
+    if (planes_ == Planes::kDepth &&
+        std::abs(inv_dist_.front() - inv_dist_.back()) / span / inv_dist_[best] > o_.max_depth_share_per_px)
+      return std::nullopt;
     const auto cb = Centre(par, best);
     if (!cb) return std::nullopt;
     auto away = [&](int j) {
@@ -194,6 +202,7 @@ class Sweeper {
     }
     if (fine_best < 0 || fine_[fine_best] < o_.min_ncc) return std::nullopt;
     if (fine_best == 0 || fine_best == N - 1) return std::nullopt;  // at the edge of the search range
+    if (planes_ == Planes::kDepth) return Refined(fine_best);
     // Not road: a vertical plane facing the camera through the same point explains the patch at least as well (a
     // car's back, a kerb's face, a wall's foot at road height). Where the two warps hardly differ (far away) this
     // decides nothing and the point stays.
@@ -204,16 +213,20 @@ class Sweeper {
     const Eigen::Vector3d n_wall_c = R_ego_cam_.transpose() * Eigen::Vector3d(ray_e.x(), ray_e.y(), 0).normalized();
     const double wall = ScorePlane(K_inv_.transpose() * n_wall_c / n_wall_c.dot(X_c), u, v);
     if (!std::isnan(wall) && wall >= fine_[fine_best]) return std::nullopt;
+    return Refined(fine_best);
+  }
+
+ private:
+  // The best index refined by a parabola through its score and its neighbours' (sub-step).
+  double Refined(int fine_best) {
     for (int j : {fine_best - 1, fine_best + 1})
       if (std::isnan(fine_[j])) fine_[j] = Score(j, full_, ref_full_, norm_full_);
-    // Parabola through the best score and its neighbours (sub-step height).
     double offset = 0;
     const double l = fine_[fine_best - 1], c = fine_[fine_best], r = fine_[fine_best + 1];
     if (!std::isnan(l) && !std::isnan(r) && l - 2 * c + r < 0) offset = std::clamp(0.5 * (l - r) / (l - 2 * c + r), -0.5, 0.5);
     return fine_best + offset;
   }
 
- private:
   // Zero-mean reference values over `idx` and their norm; false when the patch has too little texture.
   bool Normalise(const std::vector<int>& idx, std::vector<float>* out, double* norm) const {
     double sum = 0, sum2 = 0;
@@ -294,6 +307,7 @@ class Sweeper {
   const std::vector<double>& inv_dist_;
   Eigen::Matrix3d R_ego_cam_, K_inv_;
   const CameraRoadOptions& o_;
+  Planes planes_;
   std::vector<std::pair<int, int>> offsets_;  // patch samples (dx, dy), row-major
   std::vector<int> full_, sparse_;            // indices into offsets_: all, every second in x and y
   int centre_ = 0;
@@ -316,6 +330,48 @@ std::vector<size_t> NeighbourFrames(const Log& log, size_t frame_index, const Ca
       out.push_back(frame_index + k);
   }
   return out;
+}
+
+// A road point whose height departs from the median of its neighbours' (all cameras, within `outlier_radius`) by
+// more than `outlier_tolerance` is a mismatch: the road is smooth at that scale, the stereo's noise is a few
+// centimetres, and the lowest points of a noisy set would otherwise pull the road's seed plane down (its RANSAC
+// takes each cell's lowest point, as a LiDAR's lowest returns are its road). Points with fewer than three
+// neighbours have no verdict and are dropped too: a lone patch of texture is as likely a mismatch.
+void RejectHeightOutliers(const CameraRoadOptions& o, CameraRoadResult* r) {
+  const double cell = o.outlier_radius;
+  std::unordered_map<int64_t, std::vector<int>> grid;
+  const auto key = [&](int64_t ix, int64_t iy) { return (ix << 32) ^ (iy & 0xffffffff); };
+  for (size_t i = 0; i < r->points_ego.size(); ++i) {
+    const Eigen::Vector3d& p = r->points_ego[i];
+    grid[key(static_cast<int64_t>(std::floor(p.x() / cell)), static_cast<int64_t>(std::floor(p.y() / cell)))].push_back(static_cast<int>(i));
+  }
+  std::vector<uint8_t> keep(r->points_ego.size(), 0);
+  ParallelFor(0, r->points_ego.size(), [&](size_t i) {
+    const Eigen::Vector3d& p = r->points_ego[i];
+    const int64_t ix = static_cast<int64_t>(std::floor(p.x() / cell)), iy = static_cast<int64_t>(std::floor(p.y() / cell));
+    std::vector<double> z;
+    for (int64_t dy = -1; dy <= 1; ++dy)
+      for (int64_t dx = -1; dx <= 1; ++dx) {
+        const auto it = grid.find(key(ix + dx, iy + dy));
+        if (it == grid.end()) continue;
+        for (int j : it->second)
+          if (static_cast<size_t>(j) != i && (r->points_ego[j] - p).head<2>().squaredNorm() <= cell * cell)
+            z.push_back(r->points_ego[j].z());
+      }
+    if (z.size() < 3) return;
+    std::nth_element(z.begin(), z.begin() + static_cast<long>(z.size() / 2), z.end());
+    keep[i] = std::abs(p.z() - z[z.size() / 2]) <= o.outlier_tolerance;
+  });
+  size_t n = 0;
+  for (size_t i = 0; i < keep.size(); ++i)
+    if (keep[i]) {
+      r->points_ego[n] = r->points_ego[i];
+      r->camera_of[n] = r->camera_of[i];
+      ++n;
+    }
+  r->outliers = static_cast<int>(r->points_ego.size() - n);
+  r->points_ego.resize(n);
+  r->camera_of.resize(n);
 }
 
 }  // namespace
@@ -376,7 +432,7 @@ CameraRoadResult EstimateRoadFromCameras(const Log& log, size_t frame_index, dou
     const Eigen::Matrix3d R_ego_cam = cam.T_ego_cam.Rotation();
     const Eigen::Vector3d n_c = R_ego_cam.transpose() * Eigen::Vector3d::UnitZ();
     const Eigen::Matrix3d K_r_inv = ref->camera.K().inverse();
-    std::vector<Source> sources;
+    std::vector<Source> sources, depth_sources;
     for (const GreyView& sv : source_views) {
       const Rigid3d T_src_ref = sv.T_world_cam.Inverse() * ref->T_world_cam;
       Source s;
@@ -385,7 +441,12 @@ CameraRoadResult EstimateRoadFromCameras(const Log& log, size_t frame_index, dou
       s.B = sv.camera.K() * T_src_ref.translation * n_c.transpose() * K_r_inv;
       s.Kt = sv.camera.K() * T_src_ref.translation;
       sources.push_back(s);
+      s.B = s.Kt * Eigen::Vector3d::UnitZ().transpose() * K_r_inv;  // fronto-parallel: n = optical axis, d = depth
+      depth_sources.push_back(s);
     }
+    std::vector<double> inv_depth(std::max(3, o.depth_steps));
+    for (size_t j = 0; j < inv_depth.size(); ++j)
+      inv_depth[j] = 1.0 / o.min_depth + (1.0 / o.max_depth - 1.0 / o.min_depth) * j / (inv_depth.size() - 1.0);
     // n_c^T X_c = z - z_cam for a point at ego height z (the reference camera's origin sits at ego height z_cam).
     const double z_cam = cam.T_ego_cam.translation.z();
     std::vector<double> inv_dist(N);
@@ -407,24 +468,34 @@ CameraRoadResult EstimateRoadFromCameras(const Log& log, size_t frame_index, dou
     const int cols = (ref->width - 2 * P - 3) / o.stride + 1;
     const int rows = (ref->height - 2 * P - 3) / o.stride + 1;
     if (cols <= 0 || rows <= 0) continue;
-    std::vector<std::vector<Eigen::Vector3d>> row_points(rows);
+    std::vector<std::vector<Eigen::Vector3d>> row_points(rows), row_scene(rows);
     std::vector<int> row_tried(rows, 0);
     ParallelFor(0, static_cast<size_t>(rows), [&](size_t r) {
       Sweeper sweeper(*ref, sources, inv_dist, R_ego_cam, o);
+      Sweeper depth_sweeper(*ref, depth_sources, inv_depth, R_ego_cam, o, Planes::kDepth);
       const double v = y_begin + static_cast<double>(r) * o.stride + 0.5;
+      const Eigen::Vector3d& origin = cam.T_ego_cam.translation;
       for (int c = 0; c < cols; ++c) {
         const double u = x_begin + static_cast<double>(c) * o.stride + 0.5;
-        const Eigen::Vector3d ray_ego = R_ego_cam * (K_r_inv * Eigen::Vector3d(u, v, 1.0));
-        // Below the prior plane's horizon, hitting it within range (at the prior height).
-        if (ray_ego.z() >= -1e-6) continue;
-        const Eigen::Vector3d& origin = cam.T_ego_cam.translation;
-        const Eigen::Vector3d hit = origin + ray_ego * ((prior_ground_z - origin.z()) / ray_ego.z());
-        if (hit.head<2>().norm() > o.max_range) continue;
-        ++row_tried[r];
-        const std::optional<double> j = sweeper.Run(u, v);
-        if (!j) continue;
-        const double z = prior_ground_z - o.search + *j * step;
-        row_points[r].push_back(origin + ray_ego * ((z - origin.z()) / ray_ego.z()));
+        const Eigen::Vector3d ray_c = K_r_inv * Eigen::Vector3d(u, v, 1.0);
+        const Eigen::Vector3d ray_ego = R_ego_cam * ray_c;
+        // The road: below the prior plane's horizon, hitting it within range (at the prior height).
+        bool road = false;
+        if (ray_ego.z() < -1e-6 &&
+            (origin + ray_ego * ((prior_ground_z - origin.z()) / ray_ego.z())).head<2>().norm() <= o.max_range) {
+          ++row_tried[r];
+          if (const std::optional<double> j = sweeper.Run(u, v)) {
+            const double z = prior_ground_z - o.search + *j * step;
+            row_points[r].push_back(origin + ray_ego * ((z - origin.z()) / ray_ego.z()));
+            road = true;
+          }
+        }
+        if (road || !o.scene_points) continue;
+        if (const std::optional<double> j = depth_sweeper.Run(u, v)) {
+          const double inv = inv_depth.front() + (inv_depth.back() - inv_depth.front()) * *j / (inv_depth.size() - 1.0);
+          const Eigen::Vector3d p = cam.T_ego_cam * (ray_c * (1.0 / inv / ray_c.z()));
+          if (p.head<2>().norm() <= o.max_range) row_scene[r].push_back(p);
+        }
       }
     });
     for (int r = 0; r < rows; ++r) {
@@ -433,14 +504,18 @@ CameraRoadResult EstimateRoadFromCameras(const Log& log, size_t frame_index, dou
         result.points_ego.push_back(p);
         result.camera_of.push_back(static_cast<int>(ci));
       }
+      result.scene_points_ego.insert(result.scene_points_ego.end(), row_scene[r].begin(), row_scene[r].end());
     }
   }
+  RejectHeightOutliers(o, &result);
   result.pixels_accepted = static_cast<int>(result.points_ego.size());
   if (result.cameras_used == 0)
     result.summary = Msg() << "no camera with a usable neighbouring view: none";
   else
     result.summary = Msg() << "stereo over " << result.source_views << " source views of " << result.cameras_used
-                           << " cameras: " << result.pixels_accepted << " of " << result.pixels_tried << " pixels accepted";
+                           << " cameras: " << result.pixels_accepted << " of " << result.pixels_tried << " pixels accepted ("
+                           << result.outliers << " more dropped, off their neighbours' height)";
+  if (o.scene_points && result.cameras_used > 0) result.summary += Msg() << ", " << result.scene_points_ego.size() << " scene points";
   if (!result.skipped.empty()) result.summary += Msg() << " (" << result.skipped.size() << " views left out)";
   return result;
 }

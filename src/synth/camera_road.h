@@ -58,13 +58,27 @@ struct CameraRoadOptions {
   int neighbours = 1;
   double max_gap = 0.6;            // seconds between the reference and a source frame, at most
   double min_baseline = 0.1;       // metres the camera must have moved for a source to be used
+  // A road point more than `outlier_tolerance` off the median height of its neighbours within `outlier_radius`
+  // (metres, all cameras; fewer than 3 neighbours: no verdict) is dropped as a mismatch.
+  double outlier_radius = 1.0, outlier_tolerance = 0.06;
+  // Scene points: where a grid pixel is not road, the camera's fronto-parallel planes are swept too (inverse depths
+  // evenly between 1 / min_depth and 1 / max_depth), with the same acceptance, for what stands on the road (the
+  // depth occlusion and placement need where there is no sweep).
+  bool scene_points = false;
+  double min_depth = 1.5, max_depth = 40;  // metres along the optical axis
+  int depth_steps = 96;
+  double max_depth_share_per_px = 0.05;    // acceptance: one working pixel of parallax spans at most this share of the depth
 };
 
 struct CameraRoadResult {
   std::vector<Eigen::Vector3d> points_ego;  // accepted road points, ego frame of the reference frame, metres
   std::vector<int> camera_of;               // index into frame.cameras of the camera each point came from
+  // CameraRoadOptions::scene_points: points of the surfaces that are not road (cars, poles, walls, kerbs' faces),
+  // ego frame; empty otherwise.
+  std::vector<Eigen::Vector3d> scene_points_ego;
   int pixels_tried = 0;                     // grid pixels below the horizon and within range, with a source
-  int pixels_accepted = 0;
+  int pixels_accepted = 0;                  // road points kept
+  int outliers = 0;                         // road points dropped as off their neighbours' height
   int source_views = 0;                     // (camera, neighbouring frame) pairs used as sources
   int cameras_used = 0;                     // reference cameras with at least one source
   std::vector<std::string> skipped;         // one line per view left out (missing image, no source, ...)

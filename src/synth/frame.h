@@ -108,13 +108,19 @@ GroundModel EstimateFrameGround(const Frame& frame, const PointCloud& sweep, con
 // the same cameras in the neighbouring frames (synth/camera_road.h), searched around RoadPriorHeight; where the
 // stereo finds too little road (one frame, no texture, no neighbour in time), a level plane at that height,
 // drivable everywhere within range. `source` says which, in one line, for synth.json and the report.
+// `points_ego`: what the stereo measured, the road points first (GroundModel::ground_indices index them), then the
+// scene points: the frame's stand-in for a sweep's points in placement and occlusion, never written. Empty for
+// the plane.
 struct CameraGround {
   GroundModel ground;
   std::string source;
   bool from_stereo = false;
+  std::vector<Eigen::Vector3d> points_ego;
 };
+// The stereo synthesis runs: CameraRoadOptions' defaults with the scene points on.
+CameraRoadOptions SynthCameraRoadOptions();
 CameraGround EstimateCameraGround(const Log& log, size_t frame_index, const Scenario& scenario,
-                                  const CameraRoadOptions& options = {});
+                                  const CameraRoadOptions& options = SynthCameraRoadOptions());
 // The road's height in a frame's ego frame before anything measures it: the median bottom of its annotated boxes
 // (they stand on the road), else the rig's convention (Log::nominal_road_z).
 double RoadPriorHeight(const Log& log, const Frame& frame);

@@ -79,19 +79,21 @@ double PredictRoadHeight(const std::vector<SectorReturn>& accepted, double range
 // the previous return alone, is what catches a kerb seen across a ring gap, which return by return reads as a
 // gentle slope; the bend allowance is what lets a street tip over a crest. A return departing on its own (noise,
 // a pothole edge) is passed over without joining the profile.
+// `open_ended` (optional): set when the walk ran out of returns rather than meeting a kerb or an obstacle.
 float WalkSector(const std::vector<SectorReturn>& v, const GroundOptions& o, double kerb_step,
-                 std::vector<float>* accepted_departures) {
+                 std::vector<float>* accepted_departures, bool* open_ended = nullptr) {
+  if (open_ended) *open_ended = false;
   constexpr size_t kMaxLookahead = 9;
   std::vector<SectorReturn> accepted;
   std::vector<double> departures, distances;
   float free = 0;
   for (size_t i = 0; i < v.size(); ++i) {
     const SectorReturn& smp = v[i];
-    if (!smp.ground) break;
+    if (!smp.ground) return free;
     if (accepted.empty()) {
       // The first return after the ego body: the road the ego stands on, near the seed plane (which a cambered
       // road leaves by a few per cent).
-      if (std::abs(smp.height) > o.max_step + o.max_grade * smp.range) break;
+      if (std::abs(smp.height) > o.max_step + o.max_grade * smp.range) return free;
       accepted.push_back(smp);
       free = smp.range;
       continue;
@@ -111,7 +113,7 @@ float WalkSector(const std::vector<SectorReturn>& v, const GroundOptions& o, dou
     const size_t mid = departures.size() / 2;
     std::nth_element(departures.begin(), departures.begin() + mid, departures.end());
     std::nth_element(distances.begin(), distances.begin() + mid, distances.end());
-    if (std::abs(departures[mid]) > tolerance(distances[mid])) break;
+    if (std::abs(departures[mid]) > tolerance(distances[mid])) return free;
     const double own = departure(smp);
     if (std::abs(own) <= tolerance(smp.range - last)) {
       if (accepted_departures && accepted.size() >= 3) accepted_departures->push_back(static_cast<float>(std::abs(own)));
@@ -119,6 +121,7 @@ float WalkSector(const std::vector<SectorReturn>& v, const GroundOptions& o, dou
       free = smp.range;
     }
   }
+  if (open_ended) *open_ended = true;
   return free;
 }
 
@@ -267,7 +270,39 @@ GroundModel GroundModel::Estimate(const std::vector<Eigen::Vector3d>& points_ego
     }
     g.kerb_step_ = std::max(options.kerb_step, 4.0 * g.road_roughness_);
     g.free_range_.assign(options.sectors, 0.0f);
-    for (int s = 0; s < options.sectors; ++s) g.free_range_[s] = WalkSector(sectors[s], options, g.kerb_step_, nullptr);
+    for (int s = 0; s < options.sectors; ++s) {
+      bool open_ended = false;
+      g.free_range_[s] = WalkSector(sectors[s], options, g.kerb_step_, nullptr, &open_ended);
+      // Beyond a camera's last road return the road goes on until something stands on it: its stereo stops for
+      // want of parallax, not because the road does.
+      if (options.open_sectors_reach_obstacles && open_ended && !sectors[s].empty()) {
+        float reach = static_cast<float>(options.max_range);
+        for (const SectorReturn& r : sectors[s])
+          if (!r.ground && r.range > g.free_range_[s]) {
+            reach = r.range;
+            break;
+          }
+        g.free_range_[s] = reach;
+      }
+    }
+    // A sector without a single return says nothing; between two that reach out, it takes the nearer reach
+    // (a camera's stereo has no parallax towards its direction of travel, the ego's own lane ahead).
+    if (options.bridge_empty_sectors > 0) {
+      const std::vector<float> walked = g.free_range_;
+      const int n = options.sectors, k = options.bridge_empty_sectors;
+      const auto reach = [&](int s, int step) -> std::optional<float> {
+        for (int i = 1; i <= k; ++i) {
+          const int t = ((s + step * i) % n + n) % n;
+          if (!sectors[t].empty()) return walked[t];
+        }
+        return std::nullopt;
+      };
+      for (int s = 0; s < n; ++s) {
+        if (!sectors[s].empty()) continue;
+        const auto left = reach(s, -1), right = reach(s, +1);
+        if (left && right) g.free_range_[s] = std::min(*left, *right);
+      }
+    }
   }
 
   SD_LOG(Debug, "ground: seed plane n=" << g.seed_.normal.transpose() << " d=" << g.seed_.d << ", "

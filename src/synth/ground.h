@@ -42,6 +42,10 @@ struct GroundOptions {
   double profile_window = 3.0;   // metres of accepted returns the road profile is fitted to
   double kerb_lookahead = 1.0;   // a kerb: the median of the returns this far ahead departs from the profile
   int sectors = 720;             // azimuth sectors of the free-space walk
+  int bridge_empty_sectors = 0;  // a sector without returns takes the nearer reach of the non-empty ones within this many
+  // A sector whose walk ran out of returns (no kerb, no obstacle met) reaches on to its first obstacle return, or to
+  // max_range: for a camera's stereo, whose road points stop where the parallax does, not where the road does.
+  bool open_sectors_reach_obstacles = false;
   Eigen::Vector2d sensor_xy = Eigen::Vector2d::Zero();  // LiDAR position in the ego xy plane
   // Ego body footprint (ego frame, metres; nuScenes' Renault Zoe around its rear-axle origin): points on
   // the car itself never block the free-space walk.

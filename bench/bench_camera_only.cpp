@@ -699,7 +699,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "error: no repo root (set SYNTHDRIVE_SOURCE_DIR)\n");
     return 1;
   }
-  const fs::path shared = *root / ".." / "shared" / "data" / "driving";
+  const fs::path shared = sd::bench::SharedDriving(*root);
   const fs::path tmp = fs::temp_directory_path() / ("bench_camera_only_" + std::to_string(::getpid()));
   const auto start = std::chrono::steady_clock::now();
   std::vector<LogResult> results;

@@ -24,9 +24,11 @@
 #include <ctime>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "bench_paths.h"
 #include "core/error.h"
 #include "datasets/readers.h"
 #include "io/image_io.h"
@@ -202,12 +204,13 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  // The repo root: $SYNTHDRIVE_SOURCE_DIR, else build/bin/../../.
-  fs::path root;
-  if (const char* env = std::getenv("SYNTHDRIVE_SOURCE_DIR"); env && *env) root = env;
-  else root = fs::canonical("/proc/self/exe").parent_path() / ".." / "..";
-  root = fs::weakly_canonical(root);
-  const fs::path shared = root / ".." / "shared" / "data" / "driving";
+  const std::optional<fs::path> found_root = sd::bench::FindRepoRoot();
+  if (!found_root) {
+    std::fprintf(stderr, "error: no repo root with data/ (set SYNTHDRIVE_SOURCE_DIR)\n");
+    return 1;
+  }
+  const fs::path root = *found_root;
+  const fs::path shared = sd::bench::SharedDriving(root);
 
   std::printf("# Camera road heights (plane-sweep stereo) against the LiDAR road surface\n\n");
   std::printf("options: downsample %d, stride %d, patch %d, step %.3f m, search +-%.2f m, min NCC %.2f, margin %.2f, "

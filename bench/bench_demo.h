@@ -1,5 +1,5 @@
 #pragma once
-// What the synthesis benchmarks share: finding the repo's data/, and the demo's three meshes with the axes and
+// What the synthesis benchmarks share: the repo's data/ (bench_paths.h), and the demo's three meshes with the axes and
 // scales the demo imports them with (src/cli/cmd_demo.cpp, data/README.md): y-up; the cone scaled to 0.7 m,
 // the barrier and the car in metres, the barrier's front along the file's z.
 #include <cstdlib>
@@ -15,21 +15,9 @@
 #include "assetgen/canonical.h"
 #include "datasets/categories.h"
 #include "io/mesh_io.h"
+#include "bench_paths.h"
 
 namespace sd::bench {
-
-// $SYNTHDRIVE_SOURCE_DIR, else the executable's build/bin/../../, whichever holds data/driving and data/assets.
-inline std::optional<std::filesystem::path> FindRepoRoot() {
-  namespace fs = std::filesystem;
-  std::vector<fs::path> candidates;
-  if (const char* env = std::getenv("SYNTHDRIVE_SOURCE_DIR"); env && *env) candidates.emplace_back(env);
-  std::error_code ec;
-  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-  if (!ec) candidates.push_back(exe.parent_path() / ".." / "..");
-  for (const auto& c : candidates)
-    if (fs::is_directory(c / "data" / "driving") && fs::is_directory(c / "data" / "assets")) return fs::canonical(c);
-  return std::nullopt;
-}
 
 struct DemoMesh {
   const char* mesh;  // relative to data/

@@ -33,6 +33,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_paths.h"
 #include "core/box3.h"
 #include "core/error.h"
 #include "datasets/categories.h"
@@ -319,12 +320,13 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  // The repo root: $SYNTHDRIVE_SOURCE_DIR, else build/bin/../../.
-  fs::path root;
-  if (const char* env = std::getenv("SYNTHDRIVE_SOURCE_DIR"); env && *env) root = env;
-  else root = fs::canonical("/proc/self/exe").parent_path() / ".." / "..";
-  root = fs::weakly_canonical(root);
-  const fs::path shared = root / ".." / "shared" / "data" / "driving";
+  const std::optional<fs::path> found_root = sd::bench::FindRepoRoot();
+  if (!found_root) {
+    std::fprintf(stderr, "error: no repo root with data/ (set SYNTHDRIVE_SOURCE_DIR)\n");
+    return 1;
+  }
+  const fs::path root = *found_root;
+  const fs::path shared = sd::bench::SharedDriving(root);
   struct Source { std::string name; fs::path path; };
   std::vector<Source> sources = {
       {"PandaSet 002 f44-55", shared / "pandaset-002-f44-55"},

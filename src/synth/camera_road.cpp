@@ -251,43 +251,31 @@ class Sweeper {
   // Mean full-patch NCC under the plane whose homographies are A + Kt m^T (m = K_r^-T n / d); NaN when unseen.
   double ScorePlane(const Eigen::Vector3d& m, double u, double v) const {
     const size_t n = offsets_.size();
-    double total = 0;
-    int seen = 0;
-    for (const Source& src : sources_) {
-      const Eigen::Vector3d* a = &a_[static_cast<size_t>(&src - sources_.data()) * n];
-      double s1 = 0, s2 = 0, sr = 0;
-      bool inside = true;
-      for (size_t q = 0; q < n && inside; ++q) {
-        const Eigen::Vector3d x(u + offsets_[q].first, v + offsets_[q].second, 1.0);
-        const Eigen::Vector3d p = a[q] + src.Kt * m.dot(x);
-        float val = 0;
-        inside = p.z() > 1e-6 && src.view->Sample(p.x() / p.z(), p.y() / p.z(), &val);
-        s1 += val;
-        s2 += double(val) * val;
-        sr += double(val) * ref_full_[q];
-      }
-      if (!inside) continue;
-      const double src_var = s2 - s1 * s1 / static_cast<double>(n);
-      total += src_var > 1e-6 ? sr / (norm_full_ * std::sqrt(src_var)) : 0.0;
-      ++seen;
-    }
-    return seen > 0 ? total / seen : std::numeric_limits<double>::quiet_NaN();
+    return MeanNcc(full_, ref_full_, norm_full_, [&](int s, int k) {
+      const Eigen::Vector3d x(u + offsets_[k].first, v + offsets_[k].second, 1.0);
+      return Eigen::Vector3d(a_[s * n + k] + sources_[s].Kt * m.dot(x));
+    });
   }
 
-  // Mean NCC over the sources that see the whole warped patch (samples `idx`); NaN when none does.
+  // Mean NCC over the sources that see the whole warped patch (samples `idx`) under sweep plane `j`; NaN when none does.
   double Score(int j, const std::vector<int>& idx, const std::vector<float>& ref, double ref_norm) const {
-    const int S = static_cast<int>(sources_.size());
     const size_t n = offsets_.size();
-    const double w = inv_dist_[j], m = static_cast<double>(idx.size());
+    const double w = inv_dist_[j];
+    return MeanNcc(idx, ref, ref_norm, [&](int s, int k) { return Eigen::Vector3d(a_[s * n + k] + b_[s * n + k] * w); });
+  }
+
+  // The NCC of the reference samples `idx` (zero-mean values `ref`, norm `ref_norm`) against each source where
+  // `point(s, k)` (homogeneous source pixel of patch sample k) lands, averaged over the sources that see them all.
+  template <typename PointOf>
+  double MeanNcc(const std::vector<int>& idx, const std::vector<float>& ref, double ref_norm, const PointOf& point) const {
+    const double m = static_cast<double>(idx.size());
     double total = 0;
     int seen = 0;
-    for (int s = 0; s < S; ++s) {
-      const Eigen::Vector3d* a = &a_[s * n];
-      const Eigen::Vector3d* b = &b_[s * n];
+    for (int s = 0; s < static_cast<int>(sources_.size()); ++s) {
       double s1 = 0, s2 = 0, sr = 0;
       bool inside = true;
       for (size_t q = 0; q < idx.size() && inside; ++q) {
-        const Eigen::Vector3d p = a[idx[q]] + b[idx[q]] * w;
+        const Eigen::Vector3d p = point(s, idx[q]);
         float val = 0;
         inside = p.z() > 1e-6 && sources_[s].view->Sample(p.x() / p.z(), p.y() / p.z(), &val);
         s1 += val;

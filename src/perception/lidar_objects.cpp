@@ -133,6 +133,145 @@ std::vector<std::vector<int>> ClusterBev(const std::vector<Eigen::Vector3d>& poi
   return clusters;
 }
 
+std::vector<std::vector<int>> SplitCompactObjects(const std::vector<Eigen::Vector3d>& points,
+                                                  const std::vector<float>& height_above_ground,
+                                                  const std::vector<int>& cluster, const DetectOptions& o) {
+  SD_CHECK(points.size() == height_above_ground.size(), << points.size() << " points but " << height_above_ground.size() << " heights");
+  if (o.split_max_extent <= 0 || cluster.empty()) return {cluster};
+  // The cluster's cells on a grid anchored at the ego origin, sorted: the cells, their tops and every scan below
+  // are the same whatever the order of the returns.
+  using Cell = std::pair<int, int>;
+  const auto cell_of = [&](const Eigen::Vector3d& p) {
+    return Cell(static_cast<int>(std::floor(p.x() / o.cell)), static_cast<int>(std::floor(p.y() / o.cell)));
+  };
+  std::vector<std::pair<Cell, int>> keyed;  // (cell, position in cluster), sorted
+  keyed.reserve(cluster.size());
+  for (size_t k = 0; k < cluster.size(); ++k) keyed.emplace_back(cell_of(points[cluster[k]]), static_cast<int>(k));
+  std::sort(keyed.begin(), keyed.end());
+  std::vector<Cell> cells;
+  std::vector<size_t> first;  // cell c holds keyed[first[c], first[c + 1])
+  std::vector<double> top, bottom;
+  for (size_t k = 0; k < keyed.size(); ++k) {
+    if (cells.empty() || cells.back() != keyed[k].first) {
+      cells.push_back(keyed[k].first), first.push_back(k), top.push_back(-1e300), bottom.push_back(1e300);
+    }
+    const double h = height_above_ground[cluster[keyed[k].second]];
+    top.back() = std::max(top.back(), h), bottom.back() = std::min(bottom.back(), h);
+  }
+  first.push_back(keyed.size());
+  const size_t n = cells.size();
+  // A dense index over the cells' bounding box (a cluster is at most max_extent long): constant-time lookups.
+  int x0 = cells[0].first, x1 = x0, y0 = cells[0].second, y1 = y0;
+  for (const Cell& c : cells) x0 = std::min(x0, c.first), x1 = std::max(x1, c.first), y0 = std::min(y0, c.second), y1 = std::max(y1, c.second);
+  const int nx = x1 - x0 + 1, ny = y1 - y0 + 1;
+  SD_CHECK(static_cast<double>(nx) * ny < 4e8, << "split grid " << nx << " x " << ny << " (cluster spread too far)");
+  std::vector<int> index(static_cast<size_t>(nx) * ny, -1);
+  for (size_t c = 0; c < n; ++c) index[static_cast<size_t>(cells[c].second - y0) * nx + (cells[c].first - x0)] = static_cast<int>(c);
+  const auto find = [&](const Cell& c) {
+    const int x = c.first - x0, y = c.second - y0;
+    return x < 0 || y < 0 || x >= nx || y >= ny ? -1 : index[static_cast<size_t>(y) * nx + x];
+  };
+  std::vector<char> taller(n);
+  for (size_t c = 0; c < n; ++c) taller[c] = top[c] > o.split_max_top;
+  if (std::find(taller.begin(), taller.end(), 1) == taller.end()) return {cluster};  // nothing to stand against
+  // Offsets to the cells whose centres lie within `dist` metres.
+  const auto disc = [&](double dist) {
+    std::vector<std::pair<int, int>> offsets;
+    const int span = static_cast<int>(std::floor(dist / o.cell + 1e-9));
+    for (int dx = -span; dx <= span; ++dx)
+      for (int dy = -span; dy <= span; ++dy)
+        if ((dx != 0 || dy != 0) && std::hypot(dx, dy) * o.cell <= dist + 1e-9) offsets.emplace_back(dx, dy);
+    return offsets;
+  };
+  // Each low cell's distance to the nearest taller cell (centre to centre; capped just beyond the clearance
+  // asked for). A cell touching a taller one (side or corner) stays with it: the taller object's own low edge
+  // (a roller's step, the trunk lid under a rear window) as often as the side of a cone that touches it.
+  const double reach = o.split_min_clearance + o.cell;
+  const auto around = disc(reach);
+  std::vector<double> clearance(n, 0);
+  std::vector<char> candidate(n);
+  for (size_t c = 0; c < n; ++c) {
+    if (taller[c]) continue;
+    clearance[c] = reach;
+    for (const auto& [dx, dy] : around) {
+      const int m = find(Cell(cells[c].first + dx, cells[c].second + dy));
+      if (m >= 0 && taller[m]) clearance[c] = std::min(clearance[c], std::hypot(dx, dy) * o.cell);
+    }
+    candidate[c] = clearance[c] > 1.5 * o.cell;
+  }
+  // Components of candidate cells touching by side or corner, numbered by their lowest cell. Not the cluster
+  // distance: it would join a cone to the hood of a car parked beside it.
+  UnionFind uf(n);
+  for (size_t c = 0; c < n; ++c) {
+    if (!candidate[c]) continue;
+    for (const auto& [dx, dy] : {std::pair{0, 1}, std::pair{1, -1}, std::pair{1, 0}, std::pair{1, 1}}) {
+      const int m = find(Cell(cells[c].first + dx, cells[c].second + dy));
+      if (m >= 0 && candidate[m]) uf.Unite(static_cast<int>(c), m);
+    }
+  }
+  std::vector<int> label(n, -1);
+  std::vector<std::vector<int>> components;
+  for (size_t c = 0; c < n; ++c) {
+    if (!candidate[c]) continue;
+    const int root = uf.Find(static_cast<int>(c));
+    if (label[root] < 0) label[root] = static_cast<int>(components.size()), components.emplace_back();
+    components[label[root]].push_back(static_cast<int>(c));
+  }
+  Eigen::Vector2d lo = points[cluster[0]].head<2>(), hi = lo;  // the cluster's extent
+  for (int i : cluster) lo = lo.cwiseMin(points[i].head<2>()), hi = hi.cwiseMax(points[i].head<2>());
+  std::vector<int> object_of_cell(n, 0);
+  int objects = 0;
+  for (const std::vector<int>& comp : components) {
+    int returns = 0;
+    double comp_top = -1e300, comp_bottom = 1e300, farthest = 0;
+    std::vector<Eigen::Vector2d> xy;
+    for (int c : comp) {
+      returns += static_cast<int>(first[c + 1] - first[c]);
+      comp_top = std::max(comp_top, top[c]), comp_bottom = std::min(comp_bottom, bottom[c]);
+      farthest = std::max(farthest, clearance[c]);
+      for (size_t k = first[c]; k < first[c + 1]; ++k) xy.push_back(points[cluster[keyed[k].second]].head<2>());
+    }
+    if (returns < o.split_min_points || comp_top < o.split_min_top || comp_top - comp_bottom < o.split_min_span ||
+        farthest < o.split_min_clearance - 1e-9)
+      continue;
+    const Rectangle r = FitLShape(xy, o.heading_step_deg, o.closeness_d0, o.max_fit_points);
+    if (r.length > o.split_max_extent) continue;
+    std::vector<int> against;  // the taller cells it stands against
+    for (int c : comp)
+      for (const auto& [dx, dy] : around) {
+        const int m = find(Cell(cells[c].first + dx, cells[c].second + dy));
+        if (m >= 0 && taller[m]) against.push_back(m);
+      }
+    std::sort(against.begin(), against.end());
+    against.erase(std::unique(against.begin(), against.end()), against.end());
+    std::vector<double> against_top;
+    for (int m : against) against_top.push_back(top[m]);
+    if (against_top.empty() || Median(against_top) < comp_top + o.split_min_rise) continue;
+    // The line of sight from it to the sensor, in quarter cells until it leaves the cluster: a taller cell on
+    // it means these returns were seen over or through the taller part (a pickup's bed, seats through a car's
+    // windows), inside it rather than beside it.
+    const Eigen::Vector2d to_sensor = o.sensor_xy - r.center;
+    const double range = to_sensor.norm();
+    bool behind_taller = false;
+    for (double t = 0; t < range && !behind_taller; t += 0.25 * o.cell) {
+      const Eigen::Vector2d p = r.center + to_sensor * (t / range);
+      if ((p.array() < lo.array() - o.cell).any() || (p.array() > hi.array() + o.cell).any()) break;
+      const int m = find(cell_of(Eigen::Vector3d(p.x(), p.y(), 0)));
+      behind_taller = m >= 0 && taller[m];
+    }
+    if (behind_taller) continue;
+    ++objects;
+    for (int c : comp) object_of_cell[c] = objects;
+  }
+  if (objects == 0) return {cluster};
+  std::vector<int> piece_at(cluster.size());
+  for (size_t c = 0; c < n; ++c)
+    for (size_t k = first[c]; k < first[c + 1]; ++k) piece_at[keyed[k].second] = object_of_cell[c];
+  std::vector<std::vector<int>> out(objects + 1);
+  for (size_t k = 0; k < cluster.size(); ++k) out[piece_at[k]].push_back(cluster[k]);
+  return out;
+}
+
 Rectangle FitLShape(const std::vector<Eigen::Vector2d>& xy_all, double heading_step_deg, double d0, int max_points) {
   SD_CHECK(!xy_all.empty() && heading_step_deg > 0 && heading_step_deg <= 90, << xy_all.size() << " points, step " << heading_step_deg);
   // An even subsample for the score; the rectangle still spans every point.
@@ -194,8 +333,10 @@ std::vector<DetectedObject> DetectObjects(const std::vector<Eigen::Vector3d>& po
                                           const std::vector<float>& height_above_ground, const DetectOptions& o) {
   const std::vector<int> obstacle = ObstaclePoints(points_ego, height_above_ground, o);
   std::vector<Eigen::Vector3d> pts;
+  std::vector<float> heights;
   pts.reserve(obstacle.size());
-  for (int i : obstacle) pts.push_back(points_ego[i]);
+  heights.reserve(obstacle.size());
+  for (int i : obstacle) pts.push_back(points_ego[i]), heights.push_back(height_above_ground[i]);
   // A set of returns (a cluster or a piece of one): its footprint, its highest z and the road's z under each.
   struct Returns {
     std::vector<Eigen::Vector2d> xy;
@@ -209,22 +350,20 @@ std::vector<DetectedObject> DetectObjects(const std::vector<Eigen::Vector3d>& po
     for (int k : members) {
       r.xy.push_back(pts[k].head<2>());
       r.top = std::max(r.top, pts[k].z());
-      r.ground.push_back(pts[k].z() - height_above_ground[obstacle[k]]);
+      r.ground.push_back(pts[k].z() - heights[k]);
     }
     return r;
   };
   std::vector<DetectedObject> out;
-  for (const std::vector<int>& cluster : ClusterBev(pts, o.cell, o.cluster_distance)) {
-    if (static_cast<int>(cluster.size()) < o.min_points) continue;
-    const Returns whole = gather(cluster);
-    const Rectangle r = FitLShape(whole.xy, o.heading_step_deg, o.closeness_d0, o.max_fit_points);
+  // Steps 3-4 for one cluster, given its returns and its rectangle.
+  const auto box_cluster = [&](const std::vector<int>& cluster, const Returns& whole, const Rectangle& r) {
     std::vector<std::vector<int>> pieces = {cluster};
     bool structure = false;
     if (r.length > o.max_extent) {
       // Structure (walls, hedges, buildings, and whatever touches them): no object box, but its returns binned on
       // a grid of `structure_tile` metres (axis-aligned in ego xy) and each bin boxed, as keep-out, so an object
       // parked against a wall is still kept clear of; or nothing when structure_tile is 0.
-      if (o.structure_tile <= 0) continue;
+      if (o.structure_tile <= 0) return;
       structure = true;
       std::map<std::pair<int, int>, std::vector<int>> tiles;  // ordered: deterministic
       for (int idx : cluster)
@@ -263,6 +402,33 @@ std::vector<DetectedObject> DetectObjects(const std::vector<Eigen::Vector3d>& po
       d.seen_center = d.box.center();
       if (d.object_class == ObjectClass::kVehicle) CompleteVehicle(o, &d.box);
       out.push_back(d);
+    }
+  };
+  const auto fit = [&](const Returns& returns) { return FitLShape(returns.xy, o.heading_step_deg, o.closeness_d0, o.max_fit_points); };
+  for (const std::vector<int>& cluster : ClusterBev(pts, o.cell, o.cluster_distance)) {
+    if (static_cast<int>(cluster.size()) < o.min_points) continue;
+    const Returns whole = gather(cluster);
+    const Rectangle r = fit(whole);
+    // Step 2b, on objects only: structure is tiled whatever stands against it.
+    const std::vector<std::vector<int>> parts = r.length > o.max_extent ? std::vector<std::vector<int>>{cluster}
+                                                                          : SplitCompactObjects(pts, heights, cluster, o);
+    if (parts.size() == 1) {
+      box_cluster(cluster, whole, r);
+      continue;
+    }
+    // What is left is clustered again: a cone standing between two vehicles had joined them.
+    std::vector<Eigen::Vector3d> rest_pts;
+    for (int k : parts[0]) rest_pts.push_back(pts[k]);
+    std::vector<std::vector<int>> objects;
+    for (const std::vector<int>& sub : ClusterBev(rest_pts, o.cell, o.cluster_distance)) {
+      objects.emplace_back();
+      for (int k : sub) objects.back().push_back(parts[0][k]);
+    }
+    objects.insert(objects.end(), parts.begin() + 1, parts.end());
+    for (const std::vector<int>& object : objects) {
+      if (static_cast<int>(object.size()) < o.min_points) continue;
+      const Returns returns = gather(object);
+      box_cluster(object, returns, fit(returns));
     }
   }
   std::sort(out.begin(), out.end(), [&](const DetectedObject& a, const DetectedObject& b) {

@@ -19,6 +19,12 @@
 //     returns (spurious returns, rain) are dropped. A cluster with a footprint longer than `max_extent` is
 //     structure (walls, hedges, buildings, and whatever stands against them): it gets no object box but keep-out
 //     tiles of `structure_tile` metres, so a car parked against a wall is still avoided.
+//  2b. Compact low objects: a cone, bollard or drum standing against a taller object (a roller, a truck, a
+//     wall, a person) is one cluster with it. Low cells (highest return at most `split_max_top` above the road)
+//     that do not touch a taller cell, form a component no more than `split_max_extent` across, reach
+//     `split_min_clearance` out from the taller part and stand `split_min_rise` below it, are cut out as an
+//     object of their own; a bumper, a hood or a sill is a strip along a whole side, or juts out too little, or
+//     is barely lower than the part it belongs to. The rest is clustered again. Not on structure.
 //  3. Box: L-shape fitting by heading search (Zhang et al., "Efficient L-Shape Fitting for Vehicle Detection
 //     Using Laser Scanners", IV 2017, the closeness criterion): for headings in [0, 90) degrees in
 //     `heading_step` steps, the points' rectangle along that heading; each point scores 1 / max(d, d0) with d its
@@ -76,6 +82,31 @@ struct DetectOptions {
   // Runs (step 3b): a cluster longer than run_min_length, narrower than run_max_width and lower than
   // run_max_height is cut into pieces of about run_piece metres (a nuScenes barrier is 2.0-2.5 m long).
   double run_min_length = 3.0, run_max_width = 1.0, run_max_height = 1.5, run_piece = 2.0;
+  // Compact low objects (step 2b): a cone, bollard or drum standing against a roller, a truck, a wall or a
+  // person is one BEV cluster with it. Inside a cluster, a 0.1 m cell (`cell`) whose highest return is at most
+  // split_max_top above the road is low, any other taller. Low cells that touch no taller cell (side or corner:
+  // those are the taller object's own low edges as often as the side of the cone touching it) form components
+  // (cells touching by side or corner); one becomes an object of its own when all of these hold:
+  //  - its top is split_min_top..split_max_top: cones are 0.3-0.9 m, bollards and drums up to 1 m; a car's
+  //    shoulder line (0.9-1.1 m) and anything taller count as the taller part;
+  //  - its returns span at least split_min_span in height: a cone's face is hit by several rings from the road
+  //    up, where one ring across a bush top, a lawn or a hood is flat;
+  //  - it is at most split_max_extent across (FitLShape length): above min_height a cone's body is 0.1-0.3 m
+  //    across, a drum's 0.6 m; a car's bumper or hood strip runs along a whole side;
+  //  - some cell of it is at least split_min_clearance (centre to centre) from every taller cell: a cone
+  //    touching a roller reaches 0.3-0.4 m out from it, a car's bumper 0.1-0.25 m beyond its hood or trunk lid;
+  //  - the taller cells it stands against (within split_min_clearance + `cell`) rise, by their median top, at
+  //    least split_min_rise above its top: a roller, truck, wall or person stands 0.7-1.6 m over a cone, where a
+  //    car's bumper tip is 0.1-0.2 m below the hood it juts out from (a median: the odd tall cell of a
+  //    neighbour does not lift a bumper into a cone);
+  //  - at least split_min_points returns;
+  //  - the line of sight from it to the sensor (sensor_xy) crosses no taller cell of the cluster: returns seen
+  //    over or through a taller part are inside it (a pickup's bed, seats through a car's windows), not beside it.
+  // The rest of the cluster is clustered again (a cone between two vehicles joined them). Measured in
+  // docs/detection.md; split_max_extent 0: off.
+  double split_min_top = 0.3, split_max_top = 1.0, split_min_span = 0.2, split_max_extent = 0.6;
+  double split_min_clearance = 0.3, split_min_rise = 0.5;
+  int split_min_points = 5;
 };
 
 struct DetectedObject {
@@ -103,6 +134,15 @@ std::vector<int> ObstaclePoints(const std::vector<Eigen::Vector3d>& points_ego,
 // Step 2: clusters of `points` (only xy used), each a list of indices into `points`, in a deterministic order
 // (by the lowest grid cell they cover). No size filtering.
 std::vector<std::vector<int>> ClusterBev(const std::vector<Eigen::Vector3d>& points, double cell, double cluster_distance);
+
+// Step 2b: one cluster (indices into `points`) cut into its compact low objects and the rest. `points` and
+// `height_above_ground` are parallel (metres above the road). Returns the rest first (possibly empty when every
+// return was split off; the whole cluster when nothing was), then one list per object split off, ordered by
+// their lowest grid cell; indices in the order of `cluster`. Does not depend on the order of `cluster`. Reads
+// `options.cell`, `sensor_xy` and the split_* fields.
+std::vector<std::vector<int>> SplitCompactObjects(const std::vector<Eigen::Vector3d>& points,
+                                                  const std::vector<float>& height_above_ground,
+                                                  const std::vector<int>& cluster, const DetectOptions& options);
 
 // Step 3 on the footprint only: the rectangle (centre xy, length >= width, heading in [0, pi)) of `xy` by the
 // closeness criterion. At least one point (one point: a zero-size rectangle at it).

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <random>
 #include <set>
+#include <tuple>
 
 #include <gtest/gtest.h>
 
@@ -248,6 +249,83 @@ TEST(DetectObjects, ARunOfBarriersIsCutIntoPieces) {
   for (const auto& d : found) {
     EXPECT_EQ(d.object_class, ObjectClass::kSmallObject);
     EXPECT_LT(AxisError(d.box.Yaw(), yaw), 3 * M_PI / 180);
+  }
+}
+
+// A 0.8 m cone standing against the flank of a road roller (2.7 x 1.5 x 2.8 m), on the side facing the sensor:
+// one BEV cluster, as on PandaSet 002.
+struct ConeAgainstRoller {
+  std::vector<Eigen::Vector3d> points;
+  Box3 roller = MakeBox(12, -4, 0.0, 2.7, 1.5, 2.8);
+  Box3 cone = MakeBox(11.6, -3.05, 0.0, 0.4, 0.4, 0.8);  // its far side 0.4 m out from the roller's flank
+  ConeAgainstRoller() {
+    AddBoxReturns(roller, Eigen::Vector3d(0, 0, 1.8), 0.05, &points);
+    AddBoxReturns(cone, Eigen::Vector3d(0, 0, 1.8), 0.04, &points);
+  }
+};
+
+TEST(DetectObjects, AConeAgainstATallerObjectGetsItsOwnBox) {
+  const ConeAgainstRoller s;
+  DetectOptions whole;
+  whole.split_max_extent = 0;  // off: the cone is part of the roller's box, as before the split
+  ASSERT_EQ(DetectObjects(s.points, Heights(s.points), whole).size(), 1u);
+  const auto found = DetectObjects(s.points, Heights(s.points));
+  ASSERT_EQ(found.size(), 2u);
+  const DetectedObject& cone = found[0].box.size.z() < 1.0 ? found[0] : found[1];
+  const DetectedObject& roller = found[0].box.size.z() < 1.0 ? found[1] : found[0];
+  EXPECT_EQ(cone.object_class, ObjectClass::kSmallObject);
+  // The cone's cells touching the roller stay with the roller: its box is the cone less one 0.1 m cell row.
+  EXPECT_LT((cone.box.center().head<2>() - s.cone.center().head<2>()).norm(), 0.12);
+  EXPECT_NEAR(cone.box.size.z(), 0.8, 0.01);
+  EXPECT_LE(cone.box.size.x(), 0.45);
+  EXPECT_EQ(roller.object_class, ObjectClass::kVehicle);
+  EXPECT_LT((roller.seen_center.head<2>() - s.roller.center().head<2>()).norm(), 0.12);
+  EXPECT_NEAR(roller.box.size.z(), 2.8, 0.01);
+}
+
+TEST(SplitCompactObjects, DoesNotDependOnPointOrder) {
+  const ConeAgainstRoller s;
+  std::vector<Eigen::Vector3d> shuffled = s.points;
+  std::shuffle(shuffled.begin(), shuffled.end(), std::mt19937(5));
+  DetectOptions o;
+  o.sensor_xy = Eigen::Vector2d::Zero();
+  const auto as_sets = [&](const std::vector<Eigen::Vector3d>& p) {
+    std::vector<int> all(p.size());
+    for (size_t i = 0; i < p.size(); ++i) all[i] = static_cast<int>(i);
+    std::set<std::set<std::tuple<double, double, double>>> out;
+    for (const std::vector<int>& piece : SplitCompactObjects(p, Heights(p), all, o)) {
+      std::set<std::tuple<double, double, double>> members;
+      for (int i : piece) members.insert({p[i].x(), p[i].y(), p[i].z()});
+      out.insert(members);
+    }
+    return out;
+  };
+  const auto a = as_sets(s.points);
+  EXPECT_EQ(a.size(), 2u);
+  EXPECT_EQ(a, as_sets(shuffled));
+}
+
+TEST(DetectObjects, ACarsHoodAndBumperStayWithIt) {
+  // A car built of a 1.5 m tall cabin, a 0.9 m hood in front of it and a 0.5 m bumper jutting 0.2 m beyond the
+  // hood, seen from ahead, from the side and from a front corner: the low parts are strips along a whole end,
+  // not compact, so the car stays one box. The same strip read as compact (split_max_extent 2 m) comes off:
+  // this is what keeps it on.
+  for (const double yaw : {M_PI, M_PI / 2, 3 * M_PI / 4}) {
+    SCOPED_TRACE(yaw);
+    const Eigen::Vector2d centre(12, 3), ahead(std::cos(yaw), std::sin(yaw));
+    const auto part = [&](double along, double length, double height) {
+      const Eigen::Vector2d c = centre + along * ahead;
+      return MakeBox(c.x(), c.y(), yaw, length, 1.8, height);
+    };
+    std::vector<Eigen::Vector3d> pts;
+    for (const Box3& b : {part(-0.5, 3.0, 1.5), part(1.5, 1.0, 0.9), part(2.1, 0.2, 0.5)})
+      AddBoxReturns(b, Eigen::Vector3d(0, 0, 1.8), 0.05, &pts);
+    std::vector<DetectedObject> found = DetectObjects(pts, Heights(pts));
+    ASSERT_EQ(found.size(), 1u);
+    EXPECT_EQ(found[0].object_class, ObjectClass::kVehicle);
+    DetectOptions loose;
+    loose.split_max_extent = 2.0;
+    EXPECT_GT(DetectObjects(pts, Heights(pts), loose).size(), 1u);
   }
 }
 

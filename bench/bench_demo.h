@@ -15,6 +15,7 @@
 #include "assetgen/canonical.h"
 #include "datasets/categories.h"
 #include "io/mesh_io.h"
+#include "synth/scenario.h"
 #include "bench_paths.h"
 
 namespace sd::bench {
@@ -67,6 +68,30 @@ inline Asset ImportDemoAsset(const std::filesystem::path& data_dir, const DemoMe
                                           {"scale_to_metres", c.scale}}});
   SaveAsset(a, out, /*overwrite=*/false);
   return LoadAsset(out);
+}
+
+// A scenario with the demo's settings and `cones` traffic cones (random yaw), `barriers` barriers and `cars` cars
+// (aligned with the lane), all requested between dmin and dmax ahead and within +-lat.
+inline Scenario ScenarioWithObjects(const Scenario& demo, int cones, int barriers, int cars, double dmin, double dmax,
+                                    double lat) {
+  Scenario s = demo;
+  s.objects.clear();
+  auto add = [&](const char* category, int count, ObjectRequest::Yaw yaw) {
+    if (count <= 0) return;
+    ObjectRequest r;
+    r.category = category;
+    r.count = count;
+    r.distance_min = dmin;
+    r.distance_max = dmax;
+    r.lateral_min = -lat;
+    r.lateral_max = lat;
+    r.yaw_mode = yaw;
+    s.objects.push_back(r);
+  };
+  add("traffic_cone", cones, ObjectRequest::Yaw::kRandom);
+  add("barrier", barriers, ObjectRequest::Yaw::kAligned);
+  add("car", cars, ObjectRequest::Yaw::kAligned);
+  return s;
 }
 
 }  // namespace sd::bench

@@ -134,31 +134,11 @@ void BM_SynthesizeKeyframeCameraLookOff(benchmark::State& state) {
 }
 BENCHMARK(BM_SynthesizeKeyframeCameraLookOff)->Unit(benchmark::kMillisecond)->UseRealTime()->MeasureProcessCPUTime();
 
-// Scenarios with 1, 5 and 20 inserted objects, built in code from the demo's requests (issue 8): 1 = the demo's
-// car alone; 5 = data/scenarios/demo.json as is; 20 = 12 cones + 4 barriers + 4 cars over a wider area (5..45 m
-// ahead, +-12 m lateral) so that 20 fit. Where placement cannot fit all of them, the cone count is lowered
-// until it does (setup, not timed) and the "objects" counter says how many were placed.
-sd::Scenario ScenarioWithObjects(const sd::Scenario& demo, int cones, int barriers, int cars, double dmin,
-                                 double dmax, double lat) {
-  sd::Scenario s = demo;
-  s.objects.clear();
-  auto add = [&](const char* category, int count, sd::ObjectRequest::Yaw yaw) {
-    if (count <= 0) return;
-    sd::ObjectRequest r;
-    r.category = category;
-    r.count = count;
-    r.distance_min = dmin;
-    r.distance_max = dmax;
-    r.lateral_min = -lat;
-    r.lateral_max = lat;
-    r.yaw_mode = yaw;
-    s.objects.push_back(r);
-  };
-  add("traffic_cone", cones, sd::ObjectRequest::Yaw::kRandom);
-  add("barrier", barriers, sd::ObjectRequest::Yaw::kAligned);
-  add("car", cars, sd::ObjectRequest::Yaw::kAligned);
-  return s;
-}
+// Scenarios with 1, 5 and 20 inserted objects (bench_demo.h ScenarioWithObjects): 1 = the demo's car alone; 5 =
+// data/scenarios/demo.json as is; 20 = 12 cones + 4 barriers + 4 cars over a wider area (5..45 m ahead, +-12 m
+// lateral) so that 20 fit. Where placement cannot fit all of them, the cone count is lowered until it does (setup,
+// not timed) and the "objects" counter says how many were placed.
+using sd::bench::ScenarioWithObjects;
 
 // What ground estimation and placement read of frame 0, prepared as SynthesizeFrame prepares it: the ground
 // options for `seed`, and the placement input (the sweep in the ego frame, the annotated boxes, the cameras; no

@@ -36,6 +36,16 @@ struct CameraRenderOptions {
   // Hemisphere rays for sky visibility per shaded sub-sample. (Sharing one set of 16 among a pixel's 4 sub-samples
   // was tried: twice the grain, visible as speckle in the concave parts of a car at full resolution.)
   int ao_samples = 16;
+  // > 0: the sky is estimated once per surface a pixel shows (one mesh, normals alike), not once per sub-sample,
+  // and denoised. Every sub-sample still traces its own `ao_samples` sky rays (from its own hit point) and its own
+  // sun ray, all of a pixel's rays in packets; each surface's open-sky share is then averaged over the same
+  // surface in the pixels within this radius (a joint bilateral filter guided by the hit points, the shading
+  // normals and the pixel footprint), and multiplies the surface's albedo-weighted sky. With a quarter of the rays, less error than
+  // the rays alone over a surface and a little more within 2 pixels of an edge: DenoisedSkyAgainstAConvergedRender
+  // in camera_render_test.cpp, bench_sky_filter in bench/RESULTS.md.
+  // 0: every sub-sample is shaded by its own rays alone (the reference path). The receiver's shadow (when
+  // receiver_shadow) is shaded the same way in both.
+  int sky_filter_radius = 0;
   int receiver_mesh = -1;      // mesh id of the road receiver (shadows only, never drawn); -1 = none
   bool receiver_shadow = true; // false: the receiver only blocks rays (shadow stays 1): for callers that shade it themselves
   // Per-mesh light (indexed by mesh id; empty: `lighting` for every mesh): objects standing in the sun and in a

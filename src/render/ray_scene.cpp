@@ -245,10 +245,13 @@ bool RayScene::Occluded(const Eigen::Vector3f& origin, const Eigen::Vector3f& di
   return ray.tfar < 0.0f;
 }
 
-uint32_t RayScene::OccludedFan(const Eigen::Vector3f& origin, const Eigen::Vector3f* dirs, int count, float t_near,
-                               float t_far, int skip_mesh) const {
-  SD_CHECK(impl_->committed, << "query before Commit");
-  SD_CHECK(count >= 0 && count <= kMaxFanRays, << count << " rays in one fan (at most " << kMaxFanRays << ")");
+namespace {
+// One packet of up to 16 occlusion rays; origin_of(i) gives ray i's origin.
+template <typename OriginOf>
+uint32_t TracePacket(RTCScene scene, const OriginOf& origin_of, const Eigen::Vector3f* dirs, int count, float t_near,
+                     float t_far, int skip_mesh) {
+  SD_CHECK(count >= 0 && count <= RayScene::kMaxFanRays,
+           << count << " rays in one packet (at most " << RayScene::kMaxFanRays << ")");
   SkipContext ctx;
   InitSkipContext(&ctx, skip_mesh);
   alignas(64) int valid[16];
@@ -256,12 +259,13 @@ uint32_t RayScene::OccludedFan(const Eigen::Vector3f& origin, const Eigen::Vecto
   bool any = false;
   for (int i = 0; i < 16; ++i) {
     // Lanes past `count` and rays outside the contract still get finite values: Embree may read them.
-    const bool ok = i < count && RayWithinEmbreeContract(origin, dirs[i], t_near, t_far);
+    const bool ok = i < count && RayWithinEmbreeContract(origin_of(i), dirs[i], t_near, t_far);
+    const Eigen::Vector3f o = ok ? origin_of(i) : Eigen::Vector3f::Zero();
     valid[i] = ok ? -1 : 0;
     any = any || ok;
-    rays.org_x[i] = ok ? origin.x() : 0.0f;
-    rays.org_y[i] = ok ? origin.y() : 0.0f;
-    rays.org_z[i] = ok ? origin.z() : 0.0f;
+    rays.org_x[i] = o.x();
+    rays.org_y[i] = o.y();
+    rays.org_z[i] = o.z();
     rays.dir_x[i] = ok ? dirs[i].x() : 0.0f;
     rays.dir_y[i] = ok ? dirs[i].y() : 0.0f;
     rays.dir_z[i] = ok ? dirs[i].z() : 1.0f;
@@ -273,11 +277,84 @@ uint32_t RayScene::OccludedFan(const Eigen::Vector3f& origin, const Eigen::Vecto
     rays.flags[i] = 0;
   }
   if (!any) return 0;
-  rtcOccluded16(valid, impl_->scene, &ctx.context, &rays);
+  rtcOccluded16(valid, scene, &ctx.context, &rays);
   uint32_t occluded = 0;
   for (int i = 0; i < count; ++i)
     if (valid[i] && rays.tfar[i] < 0.0f) occluded |= 1u << i;  // Embree sets tfar to -inf when occluded
   return occluded;
+}
+}  // namespace
+
+uint32_t RayScene::OccludedFan(const Eigen::Vector3f& origin, const Eigen::Vector3f* dirs, int count, float t_near,
+                               float t_far, int skip_mesh) const {
+  SD_CHECK(impl_->committed, << "query before Commit");
+  return TracePacket(impl_->scene, [&](int) -> const Eigen::Vector3f& { return origin; }, dirs, count, t_near, t_far,
+                     skip_mesh);
+}
+
+namespace {
+// One Embree packet of W (4, 8 or 16) primary rays leaving `origin`.
+template <int W, typename RTCRayHitW, typename IntersectW>
+void IntersectPacketOf(RTCScene scene, const IntersectW& intersect, const Eigen::Vector3f& origin,
+                       const Eigen::Vector3f* dirs, int count, float t_near, float t_far, int skip_mesh, RayHit* hits) {
+  SkipContext ctx;
+  InitSkipContext(&ctx, skip_mesh);
+  alignas(64) int valid[W];
+  RTCRayHitW rh;
+  bool any = false;
+  for (int i = 0; i < W; ++i) {
+    // Lanes past `count` and rays outside the contract still get finite values: Embree may read them.
+    const bool ok = i < count && RayWithinEmbreeContract(origin, dirs[i], t_near, t_far);
+    valid[i] = ok ? -1 : 0;
+    any = any || ok;
+    rh.ray.org_x[i] = ok ? origin.x() : 0.0f;
+    rh.ray.org_y[i] = ok ? origin.y() : 0.0f;
+    rh.ray.org_z[i] = ok ? origin.z() : 0.0f;
+    rh.ray.dir_x[i] = ok ? dirs[i].x() : 0.0f;
+    rh.ray.dir_y[i] = ok ? dirs[i].y() : 0.0f;
+    rh.ray.dir_z[i] = ok ? dirs[i].z() : 1.0f;
+    rh.ray.tnear[i] = ok ? t_near : 0.0f;
+    rh.ray.tfar[i] = ok ? t_far : 0.0f;
+    rh.ray.time[i] = 0.0f;
+    rh.ray.mask[i] = 0xFFFFFFFFu;
+    rh.ray.id[i] = static_cast<unsigned>(i);
+    rh.ray.flags[i] = 0;
+    rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.primID[i] = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
+  }
+  for (int i = 0; i < count; ++i) hits[i] = RayHit{};
+  if (!any) return;
+  intersect(valid, scene, &ctx.context, &rh);
+  for (int i = 0; i < count; ++i) {
+    if (!valid[i] || rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) continue;
+    hits[i].t = rh.ray.tfar[i];
+    hits[i].mesh = static_cast<int>(rh.hit.geomID[i]);
+    hits[i].face = static_cast<int>(rh.hit.primID[i]);
+    hits[i].u = rh.hit.u[i];
+    hits[i].v = rh.hit.v[i];
+  }
+}
+}  // namespace
+
+void RayScene::IntersectFan(const Eigen::Vector3f& origin, const Eigen::Vector3f* dirs, int count, float t_near,
+                            float t_far, int skip_mesh, RayHit* hits) const {
+  SD_CHECK(impl_->committed, << "query before Commit");
+  SD_CHECK(count >= 0 && count <= kMaxFanRays, << count << " rays in one packet (at most " << kMaxFanRays << ")");
+  // The narrowest packet that holds them: a wide packet's empty lanes still cost their share of every traversal step.
+  if (count <= 4)
+    IntersectPacketOf<4, RTCRayHit4>(impl_->scene, rtcIntersect4, origin, dirs, count, t_near, t_far, skip_mesh, hits);
+  else if (count <= 8)
+    IntersectPacketOf<8, RTCRayHit8>(impl_->scene, rtcIntersect8, origin, dirs, count, t_near, t_far, skip_mesh, hits);
+  else
+    IntersectPacketOf<16, RTCRayHit16>(impl_->scene, rtcIntersect16, origin, dirs, count, t_near, t_far, skip_mesh, hits);
+}
+
+uint32_t RayScene::OccludedPacket(const Eigen::Vector3f* origins, const Eigen::Vector3f* dirs, int count, float t_near,
+                                  float t_far, int skip_mesh) const {
+  SD_CHECK(impl_->committed, << "query before Commit");
+  return TracePacket(impl_->scene, [&](int i) -> const Eigen::Vector3f& { return origins[i]; }, dirs, count, t_near,
+                     t_far, skip_mesh);
 }
 
 void OcclusionFan::Add(const Eigen::Vector3f& dir, double weight) {

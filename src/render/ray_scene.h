@@ -53,6 +53,14 @@ class RayScene {
   static constexpr int kMaxFanRays = 16;
   uint32_t OccludedFan(const Eigen::Vector3f& origin, const Eigen::Vector3f* dirs, int count, float t_near, float t_far,
                        int skip_mesh = -1) const;
+  // Intersect for up to kMaxFanRays rays leaving one point (a pixel's sub-samples), traced as one packet: hits[i]
+  // answers as Intersect(origin, dirs[i], t_near, t_far, skip_mesh) does.
+  void IntersectFan(const Eigen::Vector3f& origin, const Eigen::Vector3f* dirs, int count, float t_near, float t_far,
+                    int skip_mesh, RayHit* hits) const;
+  // The same for up to kMaxFanRays rays that each leave their own point (the sun and sky rays of a pixel's
+  // sub-samples, traced together).
+  uint32_t OccludedPacket(const Eigen::Vector3f* origins, const Eigen::Vector3f* dirs, int count, float t_near,
+                          float t_far, int skip_mesh = -1) const;
   // Batch form of Intersect for many rays (LiDAR); parallel. origins/dirs same size.
   std::vector<RayHit> IntersectMany(const std::vector<Eigen::Vector3f>& origins,
                                     const std::vector<Eigen::Vector3f>& dirs, float t_near = 0.0f) const;

@@ -154,6 +154,81 @@ TEST(RayScene, OccludedFanAnswersAsOccludedDoes) {
   EXPECT_GT(open, 500);
 }
 
+// A fan of primary rays traced as one packet hits what each ray traced alone hits, at the same distance.
+TEST(RayScene, IntersectFanAnswersAsIntersectDoes) {
+  RayScene scene;
+  const int ground = scene.AddMesh(Quad({0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 20, 20));
+  scene.AddMesh(Box({-1, -1, 0}, {1, 1, 2}));
+  scene.AddMesh(Box({2, -0.5f, 0}, {3, 0.5f, 3}));
+  scene.Commit();
+  uint32_t state = 4242;
+  const auto uniform = [&] {  // [-1, 1)
+    state = state * 1664525u + 1013904223u;
+    return static_cast<float>(state >> 8) / 8388608.0f - 1.0f;
+  };
+  const float inf = std::numeric_limits<float>::infinity();
+  int hits = 0, misses = 0;
+  for (int trial = 0; trial < 300; ++trial) {
+    const Eigen::Vector3f origin(4 * uniform(), 4 * uniform(), 2.0f + 2.0f * uniform());
+    const int count = trial % (RayScene::kMaxFanRays + 1);
+    std::vector<Eigen::Vector3f> dirs(static_cast<size_t>(count));
+    for (auto& d : dirs) d = Eigen::Vector3f(uniform(), uniform(), uniform()).normalized();
+    if (count > 2) dirs[1] = Eigen::Vector3f::Zero();  // outside the contract: a miss
+    const int skip = trial % 3 == 0 ? ground : -1;
+    std::vector<RayHit> fan(static_cast<size_t>(count));
+    scene.IntersectFan(origin, dirs.data(), count, 0.0f, inf, skip, fan.data());
+    for (int i = 0; i < count; ++i) {
+      const RayHit one = scene.Intersect(origin, dirs[static_cast<size_t>(i)], 0.0f, inf, skip);
+      const RayHit& f = fan[static_cast<size_t>(i)];
+      ASSERT_EQ(f.mesh, one.mesh) << "trial " << trial << " ray " << i;
+      ASSERT_EQ(f.face, one.face) << "trial " << trial << " ray " << i;
+      if (one.Hit()) {
+        EXPECT_NEAR(f.t, one.t, 1e-5f * (1 + one.t));
+        ++hits;
+      } else {
+        ++misses;
+      }
+    }
+  }
+  EXPECT_GT(hits, 300);
+  EXPECT_GT(misses, 300);
+}
+
+// A packet whose rays leave different points answers as its rays traced one by one.
+TEST(RayScene, OccludedPacketAnswersAsOccludedDoes) {
+  RayScene scene;
+  const int ground = scene.AddMesh(Quad({0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 20, 20));
+  scene.AddMesh(Box({-1, -1, 0}, {1, 1, 2}));
+  scene.AddMesh(Box({2, -0.5f, 0}, {3, 0.5f, 3}));
+  scene.Commit();
+  uint32_t state = 777;
+  const auto uniform = [&] {  // [-1, 1)
+    state = state * 1664525u + 1013904223u;
+    return static_cast<float>(state >> 8) / 8388608.0f - 1.0f;
+  };
+  const float inf = std::numeric_limits<float>::infinity();
+  int occluded = 0, open = 0;
+  for (int trial = 0; trial < 300; ++trial) {
+    const int count = trial % (RayScene::kMaxFanRays + 1);
+    std::vector<Eigen::Vector3f> origins(static_cast<size_t>(count)), dirs(static_cast<size_t>(count));
+    for (int i = 0; i < count; ++i) {
+      origins[static_cast<size_t>(i)] = Eigen::Vector3f(3 * uniform(), 3 * uniform(), 1.5f + 1.5f * uniform());
+      dirs[static_cast<size_t>(i)] = Eigen::Vector3f(uniform(), uniform(), uniform()).normalized();
+    }
+    if (count > 2) dirs[1] = Eigen::Vector3f::Zero();  // outside the contract: not occluded
+    const int skip = trial % 3 == 0 ? ground : -1;
+    const uint32_t packet = scene.OccludedPacket(origins.data(), dirs.data(), count, 0.0f, inf, skip);
+    for (int i = 0; i < count; ++i) {
+      const bool one = scene.Occluded(origins[static_cast<size_t>(i)], dirs[static_cast<size_t>(i)], 0.0f, inf, skip);
+      ASSERT_EQ((packet >> i & 1u) != 0, one) << "trial " << trial << " ray " << i;
+      (one ? occluded : open)++;
+    }
+    EXPECT_EQ(packet >> count, 0u);
+  }
+  EXPECT_GT(occluded, 300);
+  EXPECT_GT(open, 300);
+}
+
 // The gatherer sums the weights of the open rays over several packets, as ray-by-ray tracing does.
 TEST(RayScene, OcclusionFanSumsTheOpenRaysWeightsAcrossPackets) {
   RayScene scene;

@@ -87,6 +87,9 @@ ObjectRender RenderObjects(const CameraStageInput& st, const CameraSensor& cam, 
   CameraRenderOptions ropt;
   ropt.samples_per_pixel = st.options->samples_per_pixel;
   ropt.ao_samples = st.options->ao_samples;
+  ropt.sky_filter_radius = st.options->sky_filter_radius;
+  // Filtered, the sky rays are a pixel's, shared by its sub-samples: at least one per sub-sample.
+  if (ropt.sky_filter_radius > 0) ropt.ao_samples = std::max(1, st.options->ao_samples / std::max(1, ropt.samples_per_pixel));
   ropt.receiver_mesh = s.receiver_id;
   ropt.receiver_shadow = !cl.object_light;  // the map's light shades the road below (ReceiverShadowImage)
   for (const ObjectLight& l : cl.of_object) ropt.mesh_lighting.push_back(l.lighting);  // mesh k = object k

@@ -127,6 +127,7 @@ json RequestFingerprint(const SynthRequest& request, const SynthInputs& in) {
   }
   j["samples_per_pixel"] = request.options.samples_per_pixel;
   j["ao_samples"] = request.options.ao_samples;
+  j["sky_filter_radius"] = request.options.sky_filter_radius;
   j["lidar_realism"] = request.options.lidar_realism;
   j["light"] = request.options.light == SynthOptions::Light::kEnvironment ? "environment" : "road";
   j["dense_occlusion"] = request.options.dense_occlusion;

@@ -4,13 +4,13 @@
 //
 // Quality, at 1 sub-sample per pixel, where the primary rays do not depend on the sky's ray count (a pixel's
 // jitter is drawn before its sky rays), so the difference is the sky's alone: the error of
-//   plain:    64 sky rays per pixel, unfiltered (what the default traced per pixel: 4 sub-samples x 16),
+//   plain:    64 sky rays per pixel, unfiltered (what the old default traced per pixel: 4 sub-samples x 16),
 //   filtered: 16 sky rays per pixel, radius 3 (what the new default traces per pixel),
 // against 1024 unfiltered rays, over pixels fully covered in both, and over those within 2 pixels of another
 // mesh (edges, creases, contact), where a filter that blurs would show. Error in luminance, relative to the mean.
 // Time, at the default 4 sub-samples: RenderCamera with 16 rays per sub-sample unfiltered against 4 per
 // sub-sample filtered (median of 5, interleaved). Crops: bench/results/sky_filter/<scene>_<camera>_<object>.png,
-// each a strip of the converged (4 sub-samples x 256 rays), plain and filtered renders at 3x.
+// each a strip of the converged (4 sub-samples x 256 rays), plain and filtered renders, enlarged up to 4x.
 //
 // Usage: bench_sky_filter [--no-crops]. Repo root: $SYNTHDRIVE_SOURCE_DIR, else build/bin/../../.
 #include <unistd.h>

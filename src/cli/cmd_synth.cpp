@@ -40,7 +40,7 @@ Runner AddSynthCommand(CLI::App& app) {
       ->check(CLI::IsMember(LogFormatOptions()));
   app.add_option("--data-root", *data_root, "Directory the log's relative sensor paths resolve against (default: probe)");
   app.add_option("--spp", req->options.samples_per_pixel, "Camera samples per pixel (anti-aliasing)")->check(CLI::Range(1, 64));
-  app.add_option("--ao-samples", req->options.ao_samples, "Sky-visibility rays per pixel of the objects (per sub-sample with --sky-filter-radius 0) and per pixel of their shadows on the road")->check(CLI::Range(1, 256));
+  app.add_option("--ao-samples", req->options.ao_samples, "Sky-visibility rays per pixel of the objects (per sub-sample with --sky-filter-radius 0 or --light road) and per pixel of their shadows on the road")->check(CLI::Range(1, 256));
   app.add_option("--sky-filter-radius", req->options.sky_filter_radius, "Radius in pixels of the filter that denoises the objects' sky, shared by a pixel's sub-samples; 0: each sub-sample traces its own --ao-samples rays, unfiltered (slower, the reference)")->check(CLI::Range(0, 8));
   app.add_option("--jpeg-quality", req->options.write.jpeg_quality, "Quality of re-encoded JPEG images")->check(CLI::Range(1, 100));
   app.add_flag("--symlink-unchanged", *symlink, "Symlink unchanged sensor files instead of copying them");

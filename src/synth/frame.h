@@ -31,8 +31,9 @@ struct SynthOptions {
   int samples_per_pixel = 4;
   int ao_samples = 16;
   // The objects' sky (render/camera_render.h CameraRenderOptions::sky_filter_radius): > 0, a pixel's sky is shared
-  // by its sub-samples and denoised over this radius, and the objects' render traces ao_samples sky rays per
-  // pixel (spread over its sub-samples) instead of per sub-sample. 0: every sub-sample's own ao_samples rays.
+  // by its sub-samples and denoised over this radius, and under the environment map's light the objects' render
+  // traces ao_samples sky rays per pixel (spread over its sub-samples) instead of per sub-sample (under the road's
+  // light, whose render also shades the road, still per sub-sample). 0: every sub-sample's own ao_samples rays.
   int sky_filter_radius = 3;
   std::vector<std::string> frames;  // frame tokens or indices to synthesise; empty = all frames
   WriteOptions write;

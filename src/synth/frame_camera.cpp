@@ -88,10 +88,13 @@ ObjectRender RenderObjects(const CameraStageInput& st, const CameraSensor& cam, 
   ropt.samples_per_pixel = st.options->samples_per_pixel;
   ropt.ao_samples = st.options->ao_samples;
   ropt.sky_filter_radius = st.options->sky_filter_radius;
-  // Filtered, the sky rays are a pixel's, shared by its sub-samples: at least one per sub-sample.
-  if (ropt.sky_filter_radius > 0) ropt.ao_samples = std::max(1, st.options->ao_samples / std::max(1, ropt.samples_per_pixel));
   ropt.receiver_mesh = s.receiver_id;
   ropt.receiver_shadow = !cl.object_light;  // the map's light shades the road below (ReceiverShadowImage)
+  // Filtered, the objects' sky rays are a pixel's, spread over its sub-samples (at least one each). Not under the
+  // road's light: there the renderer also shades the road below with each sub-sample's rays, unfiltered, and
+  // fewer would be grain in the shadows.
+  if (ropt.sky_filter_radius > 0 && !ropt.receiver_shadow)
+    ropt.ao_samples = std::max(1, st.options->ao_samples / std::max(1, ropt.samples_per_pixel));
   for (const ObjectLight& l : cl.of_object) ropt.mesh_lighting.push_back(l.lighting);  // mesh k = object k
   // Under the map's light the renderer draws only the objects; under the road's it shades their road too.
   ropt.rects = ropt.receiver_shadow ? rects.with_shadows : rects.boxes;

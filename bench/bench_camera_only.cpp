@@ -694,11 +694,8 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  const auto root = sd::bench::FindRepoRoot();
-  if (!root) {
-    std::fprintf(stderr, "error: no repo root (set SYNTHDRIVE_SOURCE_DIR)\n");
-    return 1;
-  }
+  const auto root = sd::bench::RepoRootOrSay();
+  if (!root) return 1;
   const fs::path shared = sd::bench::SharedDriving(*root);
   const fs::path tmp = fs::temp_directory_path() / ("bench_camera_only_" + std::to_string(::getpid()));
   const auto start = std::chrono::steady_clock::now();

@@ -320,11 +320,8 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  const std::optional<fs::path> found_root = sd::bench::FindRepoRoot();
-  if (!found_root) {
-    std::fprintf(stderr, "error: no repo root with data/ (set SYNTHDRIVE_SOURCE_DIR)\n");
-    return 1;
-  }
+  const std::optional<fs::path> found_root = sd::bench::RepoRootOrSay();
+  if (!found_root) return 1;
   const fs::path root = *found_root;
   const fs::path shared = sd::bench::SharedDriving(root);
   struct Source { std::string name; fs::path path; };

@@ -1,5 +1,6 @@
 #pragma once
 // Where a benchmark finds the repo's data/ and ../shared/data. Header-only, benchmarks only.
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <optional>
@@ -18,6 +19,13 @@ inline std::optional<std::filesystem::path> FindRepoRoot() {
   for (const auto& c : candidates)
     if (fs::is_directory(c / "data" / "driving") && fs::is_directory(c / "data" / "assets")) return fs::canonical(c);
   return std::nullopt;
+}
+
+// FindRepoRoot, or nullopt after the one-line error a benchmark stops with (exit status 1).
+inline std::optional<std::filesystem::path> RepoRootOrSay() {
+  std::optional<std::filesystem::path> root = FindRepoRoot();
+  if (!root) std::fprintf(stderr, "error: no repo root with data/ (set SYNTHDRIVE_SOURCE_DIR)\n");
+  return root;
 }
 
 // ../shared/data/driving beside the repo (it may not exist: the benchmarks say what they skip).

@@ -115,11 +115,8 @@ double Seconds(const std::function<void()>& f) {
 
 int main(int argc, char** argv) {
   const bool crops = !(argc > 1 && std::strcmp(argv[1], "--no-crops") == 0);
-  const std::optional<fs::path> found = sd::bench::FindRepoRoot();
-  if (!found) {
-    std::fprintf(stderr, "bench_sky_filter: no repo root (set SYNTHDRIVE_SOURCE_DIR)\n");
-    return 1;
-  }
+  const std::optional<fs::path> found = sd::bench::RepoRootOrSay();
+  if (!found) return 1;
   const fs::path root = *found;
   const fs::path data = root / "data";
   const fs::path tmp = fs::temp_directory_path() / ("synthdrive-sky-filter-" + std::to_string(::getpid()));

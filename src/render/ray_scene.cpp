@@ -246,6 +246,26 @@ bool RayScene::Occluded(const Eigen::Vector3f& origin, const Eigen::Vector3f& di
 }
 
 namespace {
+// Lane i of an Embree ray packet (RTCRay4/8/16): the ray from `origin` along `dir`, or, both null, an unused lane
+// (past the rays given, or outside the contract), which still gets finite values: Embree may read it.
+template <typename RayPacket>
+void SetLane(RayPacket* rays, int i, const Eigen::Vector3f* origin, const Eigen::Vector3f* dir, float t_near,
+             float t_far) {
+  const bool ok = origin && dir;
+  rays->org_x[i] = ok ? origin->x() : 0.0f;
+  rays->org_y[i] = ok ? origin->y() : 0.0f;
+  rays->org_z[i] = ok ? origin->z() : 0.0f;
+  rays->dir_x[i] = ok ? dir->x() : 0.0f;
+  rays->dir_y[i] = ok ? dir->y() : 0.0f;
+  rays->dir_z[i] = ok ? dir->z() : 1.0f;
+  rays->tnear[i] = ok ? t_near : 0.0f;
+  rays->tfar[i] = ok ? t_far : 0.0f;
+  rays->time[i] = 0.0f;
+  rays->mask[i] = 0xFFFFFFFFu;
+  rays->id[i] = static_cast<unsigned>(i);
+  rays->flags[i] = 0;
+}
+
 // One packet of up to 16 occlusion rays; origin_of(i) gives ray i's origin.
 template <typename OriginOf>
 uint32_t TracePacket(RTCScene scene, const OriginOf& origin_of, const Eigen::Vector3f* dirs, int count, float t_near,
@@ -258,23 +278,10 @@ uint32_t TracePacket(RTCScene scene, const OriginOf& origin_of, const Eigen::Vec
   RTCRay16 rays;
   bool any = false;
   for (int i = 0; i < 16; ++i) {
-    // Lanes past `count` and rays outside the contract still get finite values: Embree may read them.
     const bool ok = i < count && RayWithinEmbreeContract(origin_of(i), dirs[i], t_near, t_far);
-    const Eigen::Vector3f o = ok ? origin_of(i) : Eigen::Vector3f::Zero();
     valid[i] = ok ? -1 : 0;
     any = any || ok;
-    rays.org_x[i] = o.x();
-    rays.org_y[i] = o.y();
-    rays.org_z[i] = o.z();
-    rays.dir_x[i] = ok ? dirs[i].x() : 0.0f;
-    rays.dir_y[i] = ok ? dirs[i].y() : 0.0f;
-    rays.dir_z[i] = ok ? dirs[i].z() : 1.0f;
-    rays.tnear[i] = ok ? t_near : 0.0f;
-    rays.tfar[i] = ok ? t_far : 0.0f;
-    rays.time[i] = 0.0f;
-    rays.mask[i] = 0xFFFFFFFFu;
-    rays.id[i] = static_cast<unsigned>(i);
-    rays.flags[i] = 0;
+    SetLane(&rays, i, ok ? &origin_of(i) : nullptr, ok ? &dirs[i] : nullptr, t_near, t_far);
   }
   if (!any) return 0;
   rtcOccluded16(valid, scene, &ctx.context, &rays);
@@ -303,22 +310,10 @@ void IntersectPacketOf(RTCScene scene, const IntersectW& intersect, const Eigen:
   RTCRayHitW rh;
   bool any = false;
   for (int i = 0; i < W; ++i) {
-    // Lanes past `count` and rays outside the contract still get finite values: Embree may read them.
     const bool ok = i < count && RayWithinEmbreeContract(origin, dirs[i], t_near, t_far);
     valid[i] = ok ? -1 : 0;
     any = any || ok;
-    rh.ray.org_x[i] = ok ? origin.x() : 0.0f;
-    rh.ray.org_y[i] = ok ? origin.y() : 0.0f;
-    rh.ray.org_z[i] = ok ? origin.z() : 0.0f;
-    rh.ray.dir_x[i] = ok ? dirs[i].x() : 0.0f;
-    rh.ray.dir_y[i] = ok ? dirs[i].y() : 0.0f;
-    rh.ray.dir_z[i] = ok ? dirs[i].z() : 1.0f;
-    rh.ray.tnear[i] = ok ? t_near : 0.0f;
-    rh.ray.tfar[i] = ok ? t_far : 0.0f;
-    rh.ray.time[i] = 0.0f;
-    rh.ray.mask[i] = 0xFFFFFFFFu;
-    rh.ray.id[i] = static_cast<unsigned>(i);
-    rh.ray.flags[i] = 0;
+    SetLane(&rh.ray, i, ok ? &origin : nullptr, ok ? &dirs[i] : nullptr, t_near, t_far);
     rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
     rh.hit.primID[i] = RTC_INVALID_GEOMETRY_ID;
     rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;

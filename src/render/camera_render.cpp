@@ -192,11 +192,15 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
   // The sub-sample's primary ray: objects first, the receiver where none (the receiver stands in for the real
   // road, which is in the photo already: it never hides an object; a patch laid on a kerb's slope rises metres
   // away from its object).
-  const auto primary = [&](int x, int y, int s, PixelRng& rng, Eigen::Vector3f* dir, float* cam_z) {
+  // Its direction (scene frame) through sub-sample s's jittered position, and that direction's camera z.
+  const auto sub_sample_ray = [&](int x, int y, int s, PixelRng& rng, Eigen::Vector3f* dir, float* cam_z) {
     const Eigen::Vector2f jitter = pixel_grid(s, rng);
     const Eigen::Vector3d d_cam = camera.RayDirection(Eigen::Vector2d(x + jitter.x(), y + jitter.y()));
     *dir = (R_scene_cam * d_cam).cast<float>().normalized();
     *cam_z = static_cast<float>(d_cam.z());
+  };
+  const auto primary = [&](int x, int y, int s, PixelRng& rng, Eigen::Vector3f* dir, float* cam_z) {
+    sub_sample_ray(x, y, s, rng, dir, cam_z);
     RayHit hit = scene.Intersect(origin, *dir, 0.0f, inf, receiver);
     if (!hit.Hit() && receiver >= 0 && options.receiver_shadow) hit = scene.Intersect(origin, *dir);
     return hit;
@@ -311,12 +315,8 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
         float depth = inf;
         double shadow_sum = 0.0;
         // The sub-samples' primary rays first, as packets (their jitter drawn before any sky ray).
-        for (int s = 0; s < spp; ++s) {
-          const Eigen::Vector2f jitter = pixel_grid(s, rng);
-          const Eigen::Vector3d d_cam = camera.RayDirection(Eigen::Vector2d(x + jitter.x(), y + jitter.y()));
-          primary_dir[static_cast<size_t>(s)] = (R_scene_cam * d_cam).cast<float>().normalized();
-          primary_z[static_cast<size_t>(s)] = static_cast<float>(d_cam.z());
-        }
+        for (int s = 0; s < spp; ++s)
+          sub_sample_ray(x, y, s, rng, &primary_dir[static_cast<size_t>(s)], &primary_z[static_cast<size_t>(s)]);
         for (int s = 0; s < spp; s += RayScene::kMaxFanRays)
           scene.IntersectFan(origin, &primary_dir[static_cast<size_t>(s)], std::min(RayScene::kMaxFanRays, spp - s), 0.0f,
                              inf, receiver, &primary_hit[static_cast<size_t>(s)]);

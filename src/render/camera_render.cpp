@@ -6,6 +6,7 @@
 
 #include "core/error.h"
 #include "core/parallel.h"
+#include "core/stats.h"
 
 namespace sd {
 namespace {
@@ -36,11 +37,11 @@ class PixelRng {
   uint32_t state_;
 };
 
-// Stratified points in [0,1)^2: cells of a cols x rows grid (cols = ceil(sqrt(n))), each jittered.
+// Stratified points in [0,1)^2: the cells of a cols x rows grid of exactly n cells (StratifiedColumns), each
+// jittered.
 class StratifiedGrid {
  public:
-  explicit StratifiedGrid(int n)
-      : cols_(static_cast<int>(std::ceil(std::sqrt(static_cast<double>(n))))), rows_(n > 0 ? (n + cols_ - 1) / cols_ : 1) {}
+  explicit StratifiedGrid(int n) : cols_(StratifiedColumns(n)), rows_(std::max(1, n / cols_)) {}
   // The k-th point.
   Eigen::Vector2f operator()(int k, PixelRng& rng) const {
     const float jx = rng.Next(), jy = rng.Next();

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <map>
 #include <utility>
 #include <vector>
 
@@ -458,6 +459,21 @@ TEST(RenderCamera, DenoisedSkyAgainstAConvergedRender) {
   };
   same_primary_rays(s.Render(4, 4, 3), s.Render(4, 16, 3));
   same_primary_rays(s.Render(1, 16, 3), s.Render(1, 64, 0));
+}
+
+// Sky ray counts that are not squares: the stratified grid holds exactly the count's cells, so no part of the sky is
+// left out. More rays then never mean more error (a ceil(sqrt(n))-wide grid left out a sector of azimuths: 32 rays
+// had more error than 16, and a bias), and the error falls about as 1 / sqrt(rays).
+TEST(RenderCamera, SkyCountsThatAreNotSquaresAreUnbiased) {
+  const BoxBesideWall s;
+  const CameraRender reference = s.Render(1, 1024, 0);
+  std::map<int, RenderError> error;
+  for (int rays : {8, 16, 32, 64}) error[rays] = ErrorAgainst(s.Render(1, rays, 0), reference);
+  for (const auto& [rays, e] : error) std::printf("%d rays: rmse %.5f, bias %+.5f\n", rays, e.rmse, e.bias);
+  EXPECT_LT(error[32].rmse, error[16].rmse);
+  EXPECT_LT(error[32].rmse, 1.15 * std::sqrt(16.0 / 32.0) * error[16].rmse);
+  EXPECT_GT(error[8].rmse, error[16].rmse);
+  for (int rays : {8, 32}) EXPECT_LT(std::abs(error[rays].bias), 0.25 * error[rays].rmse) << rays << " rays";
 }
 
 // The unfiltered sampling (4 sub-samples, 16 sky rays each) against a converged render (16 sub-samples, 256 sky

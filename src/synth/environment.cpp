@@ -40,11 +40,12 @@ void Basis(const Eigen::Vector3d& n, Eigen::Vector3d* t, Eigen::Vector3d* b) {
   *b = n.cross(*t);
 }
 
-// Stratified sample k of n on the unit square.
+// Stratified sample k of n on the unit square: one in each cell of a cols x rows grid with cols x rows = n exactly
+// (StratifiedColumns), so that every part of the square is drawn from whatever n is.
 Eigen::Vector2d Stratified(int k, int n, uint32_t seed, uint32_t salt) {
-  const int g = std::max(1, static_cast<int>(std::ceil(std::sqrt(static_cast<double>(n)))));
-  const int i = k % g, j = k / g;
-  return {(i + Hash01(seed, salt * 2654435761u + 2 * k)) / g, (j + Hash01(seed, salt * 2654435761u + 2 * k + 1)) / g};
+  const int cols = StratifiedColumns(n), rows = std::max(1, n / cols);
+  const int i = k % cols, j = k / cols;
+  return {(i + Hash01(seed, salt * 2654435761u + 2 * k)) / cols, (j + Hash01(seed, salt * 2654435761u + 2 * k + 1)) / rows};
 }
 
 // Camera image area-averaged to about the map's angular resolution, with the share of clipped pixels.

@@ -627,14 +627,15 @@ Eigen::Vector3f ObjectIrradiance(const RayScene& scene, const Eigen::Vector3d& p
   return e;
 }
 
-float ReceiverShadowRatio(const RayScene& scene, const Eigen::Vector3d& p, const Eigen::Vector3d& normal,
-                          const EnvironmentLight& light, const EnvShadingOptions& o) {
-  const Eigen::Vector3d n = normal.normalized();
-  const Eigen::Vector3f origin = Offset(p, n, o.ray_offset);
-  // Sky: cosine-weighted directions, each weighted by the map's luminance there (the same directions for
-  // numerator and denominator so that their noise cancels). The rays are traced first: most road pixels under
-  // a shadow's rectangle see the whole sky, and there the open share is exactly 1 whatever the weights, so the
-  // map is read (a lat-long lookup and a bilinear sample per ray) only where something blocks a ray.
+namespace {
+
+// The sky's open share at a receiver point: cosine-weighted directions round `n` from `origin`, each weighted by
+// the map's luminance there (the same directions for the open and the whole sky, so that their noise cancels).
+// The rays are traced first: most road pixels under a shadow's rectangle see the whole sky, and there the open
+// share is exactly 1 whatever the weights, so the map is read (a lat-long lookup and a bilinear sample per ray)
+// only where something blocks a ray.
+double SkyOpenShare(const RayScene& scene, const Eigen::Vector3f& origin, const Eigen::Vector3d& n,
+                    const EnvironmentLight& light, const EnvShadingOptions& o) {
   const int ns = std::max(1, o.sky_rays);
   const CosineLobe lobe(n);
   // Per thread, reused: this runs once per road pixel.
@@ -654,67 +655,208 @@ float ReceiverShadowRatio(const RayScene& scene, const Eigen::Vector3d& p, const
     for (int i = 0; i < count; ++i) blocked[begin + static_cast<size_t>(i)] = static_cast<char>(occluded >> i & 1u);
     any_blocked = any_blocked || occluded != 0;
   }
+  if (!any_blocked) return 1.0;
   double sky_all = 0, sky_open = 0;
-  if (any_blocked) {
-    for (size_t k = 0; k < dirs.size(); ++k) {
-      double L = 1.0;
-      if (light.radiance && !light.radiance->empty()) {
-        const Eigen::Vector2d uv = LatLongPixel(dirs_d[k], light.radiance->width(), light.radiance->height());
-        float rgb[3];
-        SampleBilinear(*light.radiance, uv.x(), uv.y(), rgb);
-        L = Luma(rgb);
-      }
-      sky_all += L;
-      if (!blocked[k]) sky_open += L;
+  for (size_t k = 0; k < dirs.size(); ++k) {
+    double L = 1.0;
+    if (light.radiance && !light.radiance->empty()) {
+      const Eigen::Vector2d uv = LatLongPixel(dirs_d[k], light.radiance->width(), light.radiance->height());
+      float rgb[3];
+      SampleBilinear(*light.radiance, uv.x(), uv.y(), rgb);
+      L = Luma(rgb);
     }
+    sky_all += L;
+    if (!blocked[k]) sky_open += L;
   }
-  // Monte Carlo estimate of the sky irradiance: pi * mean(L) over cosine-weighted directions; the SH value
-  // is the better-converged unoccluded total, scaled by the sampled open share.
-  const double E_sky = Luma(light.sh.Irradiance(n));
-  const double open_share = any_blocked && sky_all > 0 ? sky_open / sky_all : 1.0;
-  const double cos_sun = n.dot(light.sun_direction.normalized());
-  const double E_sun = cos_sun > 0 ? Luma(light.sun_irradiance) * cos_sun : 0.0;
-  const double without = E_sky + E_sun;
-  if (without <= 0) return 1.0f;
-  const double with = E_sky * open_share + (E_sun > 0 ? E_sun * SunVisibility(scene, p, n, light, o) : 0.0);
-  return static_cast<float>(std::clamp(with / without, 0.0, 1.0));
+  return sky_all > 0 ? sky_open / sky_all : 1.0;
+}
+
+// The road's light with the objects over without them, from the sky's open share and the sun's visible share.
+// Monte Carlo estimate of the sky irradiance is pi * mean(L) over cosine-weighted directions; the SH value is the
+// better-converged unoccluded total, scaled by the sampled open share.
+struct ReceiverLight {
+  double sky = 0, sun = 0;  // luminance of the irradiance without the objects: SH(n); sun x cos
+  ReceiverLight(const EnvironmentLight& light, const Eigen::Vector3d& n) : sky(Luma(light.sh.Irradiance(n))) {
+    const double cos_sun = n.dot(light.sun_direction.normalized());
+    sun = cos_sun > 0 ? Luma(light.sun_irradiance) * cos_sun : 0.0;
+  }
+  float Ratio(double sky_open, double sun_visible) const {
+    const double without = sky + sun;
+    if (without <= 0) return 1.0f;
+    const double with = sky * sky_open + (sun > 0 ? sun * sun_visible : 0.0);
+    return static_cast<float>(std::clamp(with / without, 0.0, 1.0));
+  }
+};
+
+}  // namespace
+
+float ReceiverShadowRatio(const RayScene& scene, const Eigen::Vector3d& p, const Eigen::Vector3d& normal,
+                          const EnvironmentLight& light, const EnvShadingOptions& o) {
+  const Eigen::Vector3d n = normal.normalized();
+  const double open_share = SkyOpenShare(scene, Offset(p, n, o.ray_offset), n, light, o);
+  const ReceiverLight rl(light, n);
+  return rl.Ratio(open_share, rl.sun > 0 ? SunVisibility(scene, p, n, light, o) : 0.0);
 }
 
 namespace {
 
-// ReceiverShadowImage for any rule giving a hit face its light.
-template <typename LightOfFace>
-ImageF ReceiverShadowImageWith(const RayScene& scene, const PinholeCamera& camera, const Rigid3d& T_scene_cam, int receiver_mesh,
-                               const LightOfFace& light_of_face, const EnvShadingOptions& options,
-                               std::vector<std::array<int, 4>> rects) {
-  ImageF out(camera.width, camera.height, 1, 1.0f);
-  if (rects.empty()) rects.push_back({0, 0, camera.width, camera.height});
-  const auto [y0, y1] = RowRange(rects, camera.height);
-  if (y1 <= y0) return out;
-  const Eigen::Vector3f origin = T_scene_cam.translation.cast<float>();
-  std::vector<std::exception_ptr> errors(static_cast<size_t>(y1 - y0));
+// One receiver pixel.
+struct RoadPixel {
+  int x = 0;
+  Eigen::Vector3d p, n;  // the hit point, the normal on the camera's side
+  uint32_t seed = 0;
+  const EnvironmentLight* light = nullptr;
+  float footprint = 0;       // metres per pixel at p, seen face-on
+  float sky_open = 1;        // the sky's open share
+  bool sunlit_face = false;  // its light has a sun, in front of the face
+  float sun = 0;             // the sun's visible share: the disk centre's 0 or 1 until the edge pass
+  float sun_t = std::numeric_limits<float>::infinity();  // how far the disk centre's blocker is
+};
+
+// The widest penumbra the edge pass looks for, in pixels; beyond it (a sun a few degrees from grazing the road,
+// where the sun's share of the light is small anyway) the disk is traced only this far from the hard edge.
+constexpr int kMaxPenumbraPixels = 48;
+
+// 1 where a marked cell lies within `r` cells (a square) of the cell: two passes of running counts.
+Image<uint8_t> DilateSquare(const Image<uint8_t>& marked, int r) {
+  const int w = marked.width(), h = marked.height();
+  Image<uint8_t> rows(w, h, 1, 0), out(w, h, 1, 0);
+  std::vector<int> prefix(static_cast<size_t>(std::max(w, h)) + 1);
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) prefix[static_cast<size_t>(x) + 1] = prefix[static_cast<size_t>(x)] + (marked.at(x, y) ? 1 : 0);
+    for (int x = 0; x < w; ++x)
+      rows.at(x, y) = prefix[static_cast<size_t>(std::min(w, x + r + 1))] > prefix[static_cast<size_t>(std::max(0, x - r))];
+  }
+  for (int x = 0; x < w; ++x) {
+    for (int y = 0; y < h; ++y) prefix[static_cast<size_t>(y) + 1] = prefix[static_cast<size_t>(y)] + (rows.at(x, y) ? 1 : 0);
+    for (int y = 0; y < h; ++y)
+      out.at(x, y) = prefix[static_cast<size_t>(std::min(h, y + r + 1))] > prefix[static_cast<size_t>(std::max(0, y - r))];
+  }
+  return out;
+}
+
+// Runs `body(row)` for rows [y0, y1) in parallel and rethrows the first row's error, if any, once all are done.
+template <typename Body>
+void ParallelRows(int y0, int y1, const Body& body) {
+  std::vector<std::exception_ptr> errors(static_cast<size_t>(std::max(0, y1 - y0)));
   ParallelFor(static_cast<size_t>(y0), static_cast<size_t>(y1), [&](size_t yy) {
-    const int y = static_cast<int>(yy);
     try {
-      for (const auto& [x0, x1] : RowSpans(rects, y, camera.width))
-        for (int x = x0; x < x1; ++x) {
-          const Eigen::Vector3d d = T_scene_cam.rotation * camera.RayDirection({x + 0.5, y + 0.5});
-          const RayHit hit = scene.Intersect(origin, d.cast<float>());
-          if (!hit.Hit() || hit.mesh != receiver_mesh) continue;
-          Eigen::Vector3d n = scene.GeometricNormal(hit).cast<double>();
-          if (n.squaredNorm() == 0) continue;
-          if (n.dot(d) > 0) n = -n;  // the side the camera sees
-          EnvShadingOptions o = options;
-          o.skip_mesh = receiver_mesh;
-          o.seed = options.seed * 0x9E3779B1u + static_cast<uint32_t>(y * camera.width + x);
-          out.at(x, y) = ReceiverShadowRatio(scene, scene.HitPoint(hit).cast<double>(), n, light_of_face(hit.face), o);
-        }
+      body(static_cast<int>(yy));
     } catch (...) {
       errors[yy - static_cast<size_t>(y0)] = std::current_exception();
     }
   });
   for (auto& e : errors)
     if (e) std::rethrow_exception(e);
+}
+
+// ReceiverShadowImage for any rule giving a hit face its light, in three passes over the rectangles' pixels:
+//  1. the primary rays in packets; at each receiver hit, the sky's open share (as ReceiverShadowRatio's) and one
+//     ray to the centre of the sun's disk;
+//  2. the whole disk (`sun_rays`) traced only within the widest penumbra of an edge of the centre rays' hard
+//     shadow: elsewhere the disk is wholly seen or wholly hidden, as its centre is;
+//  3. the ratio composed.
+template <typename LightOfFace>
+ImageF ReceiverShadowImageWith(const RayScene& scene, const PinholeCamera& camera, const Rigid3d& T_scene_cam, int receiver_mesh,
+                               const LightOfFace& light_of_face, const EnvShadingOptions& options,
+                               std::vector<std::array<int, 4>> rects) {
+  constexpr float inf = std::numeric_limits<float>::infinity();
+  ImageF out(camera.width, camera.height, 1, 1.0f);
+  if (receiver_mesh < 0 || receiver_mesh >= scene.NumMeshes()) return out;
+  if (rects.empty()) rects.push_back({0, 0, camera.width, camera.height});
+  const auto [y0, y1] = RowRange(rects, camera.height);
+  int bx0 = camera.width, bx1 = 0;
+  for (const auto& r : rects)
+    if (r[0] < r[2] && r[1] < r[3]) bx0 = std::min(bx0, std::max(0, r[0])), bx1 = std::max(bx1, std::min(camera.width, r[2]));
+  if (y1 <= y0 || bx1 <= bx0) return out;
+  const int bw = bx1 - bx0, bh = y1 - y0;
+  const Eigen::Vector3f origin = T_scene_cam.translation.cast<float>();
+  const float fx = static_cast<float>(camera.fx);
+  std::vector<std::vector<RoadPixel>> rows(static_cast<size_t>(bh));
+  Image<int> index(bw, bh, 1, -1);  // a pixel's place in its row's list; -1: not the receiver
+  const auto options_at = [&](const RoadPixel& rp) {
+    EnvShadingOptions o = options;
+    o.skip_mesh = receiver_mesh;
+    o.seed = rp.seed;
+    return o;
+  };
+
+  // Pass 1.
+  ParallelRows(y0, y1, [&](int y) {
+    std::vector<RoadPixel>& row = rows[static_cast<size_t>(y - y0)];
+    std::vector<int> xs;
+    std::vector<Eigen::Vector3f> dirs;
+    for (const auto& [x0, x1] : RowSpans(rects, y, camera.width))
+      for (int x = x0; x < x1; ++x) {
+        xs.push_back(x);
+        dirs.push_back((T_scene_cam.rotation * camera.RayDirection({x + 0.5, y + 0.5})).cast<float>());
+      }
+    std::array<RayHit, RayScene::kMaxFanRays> hits;
+    for (size_t begin = 0; begin < xs.size(); begin += RayScene::kMaxFanRays) {
+      const int count = static_cast<int>(std::min<size_t>(RayScene::kMaxFanRays, xs.size() - begin));
+      scene.IntersectFan(origin, &dirs[begin], count, 0.0f, inf, -1, hits.data());
+      for (int i = 0; i < count; ++i) {
+        const RayHit& hit = hits[static_cast<size_t>(i)];
+        if (!hit.Hit() || hit.mesh != receiver_mesh) continue;
+        Eigen::Vector3d n = scene.GeometricNormal(hit).cast<double>();
+        if (n.squaredNorm() == 0) continue;
+        if (n.dot(dirs[begin + static_cast<size_t>(i)].cast<double>()) > 0) n = -n;  // the side the camera sees
+        RoadPixel rp;
+        rp.x = xs[begin + static_cast<size_t>(i)];
+        rp.n = n.normalized();
+        rp.p = scene.HitPoint(hit).cast<double>();
+        rp.seed = options.seed * 0x9E3779B1u + static_cast<uint32_t>(y * camera.width + rp.x);
+        rp.light = &light_of_face(hit.face);
+        rp.footprint = std::max(1e-6f, hit.t / fx);
+        const EnvShadingOptions o = options_at(rp);
+        const Eigen::Vector3f from = Offset(rp.p, rp.n, o.ray_offset);
+        rp.sky_open = static_cast<float>(SkyOpenShare(scene, from, rp.n, *rp.light, o));
+        rp.sunlit_face = ReceiverLight(*rp.light, rp.n).sun > 0;
+        if (rp.sunlit_face) {
+          const RayHit block = scene.Intersect(from, rp.light->sun_direction.normalized().cast<float>(), 0.0f, inf, receiver_mesh);
+          rp.sun = block.Hit() ? 0.0f : 1.0f;
+          rp.sun_t = block.t;
+        }
+        index.at(rp.x - bx0, y - y0) = static_cast<int>(row.size());
+        row.push_back(rp);
+      }
+    }
+  });
+  const auto pixel_at = [&](int x, int y) -> const RoadPixel* {
+    if (x < bx0 || x >= bx1 || y < y0 || y >= y1) return nullptr;
+    const int k = index.at(x - bx0, y - y0);
+    return k < 0 ? nullptr : &rows[static_cast<size_t>(y - y0)][static_cast<size_t>(k)];
+  };
+
+  // Pass 2. The disk's centre leaves a hard shadow; the penumbra lies within tan(radius) x the blocker's distance
+  // of its edge, stretched by the sun's slant on the road. The widest over the image, in the smallest footprint,
+  // bounds how far from an edge the disk can be partly hidden.
+  Image<uint8_t> edge(bw, bh, 1, 0);
+  float min_footprint = inf;
+  double reach_m = 0;
+  for (int y = y0; y < y1; ++y)
+    for (const RoadPixel& rp : rows[static_cast<size_t>(y - y0)]) {
+      if (!rp.sunlit_face) continue;
+      min_footprint = std::min(min_footprint, rp.footprint);
+      if (std::isfinite(rp.sun_t)) {
+        const double slant = std::max(0.1, rp.n.dot(rp.light->sun_direction.normalized()));
+        reach_m = std::max(reach_m, std::tan(rp.light->sun_angular_radius_rad) * rp.sun_t / slant);
+      }
+      for (const auto& [dx, dy] : {std::pair{1, 0}, std::pair{0, 1}}) {
+        const RoadPixel* q = pixel_at(rp.x + dx, y + dy);
+        if (q && q->sunlit_face && q->sun != rp.sun) edge.at(rp.x - bx0, y - y0) = edge.at(q->x - bx0, y + dy - y0) = 1;
+      }
+    }
+  const double reach_px = std::isfinite(min_footprint) ? reach_m / min_footprint : 0.0;
+  const Image<uint8_t> near_edge = DilateSquare(edge, static_cast<int>(std::min<double>(kMaxPenumbraPixels, std::ceil(reach_px) + 1)));
+
+  // Passes 2 and 3.
+  ParallelRows(y0, y1, [&](int y) {
+    for (RoadPixel& rp : rows[static_cast<size_t>(y - y0)]) {
+      if (rp.sunlit_face && near_edge.at(rp.x - bx0, y - y0)) rp.sun = static_cast<float>(SunVisibility(scene, rp.p, rp.n, *rp.light, options_at(rp)));
+      out.at(rp.x, y) = ReceiverLight(*rp.light, rp.n).Ratio(rp.sky_open, rp.sun);
+    }
+  });
   return out;
 }
 

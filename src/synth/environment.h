@@ -164,7 +164,10 @@ float ReceiverShadowRatio(const RayScene& scene, const Eigen::Vector3d& p, const
 
 // Drop-in for CameraRender::shadow (render/camera_render.h) with soft shadows and radiance-weighted AO: for each
 // pixel of the rectangle [x0, x1) x [y0, y1) (all zero = whole image) a ray through the pixel centre; where it
-// first hits `receiver_mesh`, ReceiverShadowRatio there (per-pixel seed from options.seed); elsewhere 1.
+// first hits `receiver_mesh`, the ratio ReceiverShadowRatio estimates there (per-pixel seed from options.seed);
+// elsewhere 1. Its economy over calling ReceiverShadowRatio per pixel (bench_road_shade): the sun's disk is traced
+// only within the widest penumbra of the edges of its centre's hard shadow; elsewhere the disk is wholly seen or
+// wholly hidden, as its centre is.
 ImageF ReceiverShadowImage(const RayScene& scene, const PinholeCamera& camera, const Rigid3d& T_scene_cam, int receiver_mesh,
                            const EnvironmentLight& light, const EnvShadingOptions& options = {}, int x0 = 0, int y0 = 0,
                            int x1 = 0, int y1 = 0);

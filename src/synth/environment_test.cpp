@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <functional>
 #include <iostream>
 #include <memory>
@@ -243,6 +244,42 @@ TEST(EnvShading, ReceiverShadowImageTakesEachFacesLight) {
   EXPECT_LT(RoofScene::At(single, -1.8, 0), 0.31f) << "umbra in the sun: the sun is gone";
   EXPECT_GT(RoofScene::At(shaded, -1.8, 0), 0.7f) << "in a shade there is no sun to lose, only a little sky";
   EXPECT_LT(RoofScene::At(shaded, -1.8, 0), 1.0f);
+}
+
+TEST(EnvShading, ReceiverShadowImageTracesTheSunsDiskWhereItsEdgesAre) {
+  // The image traces the disk only near the edges of its centre's hard shadow: it must give exactly what
+  // ReceiverShadowRatio gives at every pixel (same seeds), with a sun wide enough for a penumbra of several pixels.
+  RoofScene r;
+  EnvShadingOptions o;
+  o.sun_rays = 16;
+  o.sky_rays = 16;
+  o.seed = 3;
+  for (double radius_deg : {0.27, 8.0}) {
+    r.light.sun_angular_radius_rad = radius_deg * M_PI / 180;
+    const ImageF image = ReceiverShadowImage(r.scene, r.cam, r.T_scene_cam, r.ground, r.light, o);
+    int penumbra = 0, differ = 0;
+    for (int y = 0; y < r.cam.height; ++y)
+      for (int x = 0; x < r.cam.width; ++x) {
+        const Eigen::Vector3d d = r.T_scene_cam.rotation * r.cam.RayDirection({x + 0.5, y + 0.5});
+        const RayHit hit = r.scene.Intersect(r.T_scene_cam.translation.cast<float>(), d.cast<float>());
+        float expected = 1.0f;
+        if (hit.Hit() && hit.mesh == r.ground) {
+          EnvShadingOptions po = o;
+          po.skip_mesh = r.ground;
+          po.seed = o.seed * 0x9E3779B1u + static_cast<uint32_t>(y * r.cam.width + x);
+          const Eigen::Vector3d p = r.scene.HitPoint(hit).cast<double>(), up(0, 0, 1);
+          expected = ReceiverShadowRatio(r.scene, p, up, r.light, po);
+          const double v = SunVisibility(r.scene, p, up, r.light, po);
+          penumbra += v > 0.01 && v < 0.99;
+        }
+        differ += std::abs(image.at(x, y) - expected) > 1e-6f;
+      }
+    std::printf("sun radius %.2f deg: %d penumbra pixels, %d differ\n", radius_deg, penumbra, differ);
+    EXPECT_EQ(differ, 0) << radius_deg << " deg";
+    if (radius_deg > 1) {
+      EXPECT_GT(penumbra, 50);  // measured 75: a penumbra about 4 pixels wide
+    }
+  }
 }
 
 // ---- Shadows: synthetic ground truth ----

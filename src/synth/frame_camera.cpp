@@ -27,8 +27,9 @@ namespace {
 // guide radius (2) beyond an object's box.
 constexpr int kDepthMargin = 8;
 
-// Shadow rays over the sun's disk per road pixel: soft edges, but grainy (bench_camera_look: the shadowed road's
-// residual 2.8-7.6x its own) until the camera look blurs the shade (kShadeBlurSigma).
+// Shadow rays over the sun's disk per road pixel near a shadow's edge (elsewhere one ray to the disk's centre tells
+// all: ReceiverShadowImage): soft edges, but grainy (bench_camera_look: the shadowed road's residual 2.8-7.6x its
+// own) until the camera look blurs the shade (kShadeBlurSigma).
 constexpr int kShadowSunRays = 8;
 
 // The least blur of the shade map when the camera look blurs (pixels).

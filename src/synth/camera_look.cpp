@@ -274,27 +274,40 @@ void GaussianBlurRegion(ImageF* image, double sigma, int x0, int y0, int x1, int
   double sum = 0;
   for (int i = -r; i <= r; ++i) sum += k[static_cast<size_t>(i + r)] = std::exp(-0.5 * i * i / (sigma * sigma));
   for (double& v : k) v /= sum;
-  // Horizontal pass over rows y0..y1 (plus r rows either side, which the vertical pass reads), then vertical.
+  // Horizontal pass over rows y0..y1 (plus r rows either side, which the vertical pass reads), then vertical. Each
+  // pass runs its taps in the outer loop over a row of double sums, so the inner loop walks memory in order; every
+  // output is still the sum over taps -r..r in that order, as a loop over taps per pixel would give.
   const int ry0 = std::max(0, y0 - r), ry1 = std::min(h, y1 + r);
-  ImageF tmp(w, h, ch, 0.0f);
-  for (int y = ry0; y < ry1; ++y)
-    for (int x = x0; x < x1; ++x)
-      for (int c = 0; c < ch; ++c) {
-        double acc = 0;
-        for (int i = -r; i <= r; ++i) acc += k[static_cast<size_t>(i + r)] * image->at(std::clamp(x + i, 0, w - 1), y, c);
-        tmp.at(x, y, c) = static_cast<float>(acc);
+  const int rw = x1 - x0;
+  const size_t row_values = static_cast<size_t>(rw) * static_cast<size_t>(ch);
+  ImageF tmp(rw, ry1 - ry0, ch, 0.0f);
+  std::vector<double> acc(row_values);
+  for (int y = ry0; y < ry1; ++y) {
+    std::fill(acc.begin(), acc.end(), 0.0);
+    const float* row = image->pixel(0, y);
+    for (int i = -r; i <= r; ++i) {
+      const double ki = k[static_cast<size_t>(i + r)];
+      for (int x = x0; x < x1; ++x) {
+        const float* src = row + static_cast<size_t>(std::clamp(x + i, 0, w - 1)) * static_cast<size_t>(ch);
+        double* dst = &acc[static_cast<size_t>(x - x0) * static_cast<size_t>(ch)];
+        for (int c = 0; c < ch; ++c) dst[c] += ki * src[c];
       }
+    }
+    float* out = tmp.pixel(0, y - ry0);
+    for (size_t v = 0; v < row_values; ++v) out[v] = static_cast<float>(acc[v]);
+  }
   // Rows outside [y0, y1) but within reach keep their own values outside [x0, x1): read those from the image.
-  for (int y = y0; y < y1; ++y)
-    for (int x = x0; x < x1; ++x)
-      for (int c = 0; c < ch; ++c) {
-        double acc = 0;
-        for (int i = -r; i <= r; ++i) {
-          const int yy = std::clamp(y + i, 0, h - 1);
-          acc += k[static_cast<size_t>(i + r)] * (yy >= ry0 && yy < ry1 ? tmp.at(x, yy, c) : image->at(x, yy, c));
-        }
-        image->at(x, y, c) = static_cast<float>(acc);
-      }
+  for (int y = y0; y < y1; ++y) {
+    std::fill(acc.begin(), acc.end(), 0.0);
+    for (int i = -r; i <= r; ++i) {
+      const double ki = k[static_cast<size_t>(i + r)];
+      const int yy = std::clamp(y + i, 0, h - 1);
+      const float* src = yy >= ry0 && yy < ry1 ? tmp.pixel(0, yy - ry0) : image->pixel(x0, yy);
+      for (size_t v = 0; v < row_values; ++v) acc[v] += ki * src[v];
+    }
+    float* out = image->pixel(x0, y);
+    for (size_t v = 0; v < row_values; ++v) out[v] = static_cast<float>(acc[v]);
+  }
 }
 
 void ApplySensorToInserts(ImageU8* image, const ImageF& alpha, const ImageF* shadow_noise, int x0, int y0, int x1, int y1,

@@ -1,6 +1,11 @@
 #pragma once
 // Rigid transforms. Name every instance after the frames it connects: `T_parent_child` maps coordinates
 // expressed in `child` into `parent` (so T_ego_lidar * p_lidar = p_ego, and T_a_b * T_b_c = T_a_c).
+//
+// Unit rotations: every way in renormalises its quaternion (file values, matrices, products and slerps drift
+// off unit length) except FromUnitQuaternion, which stores it as given. Normalising is not idempotent in
+// floating point (about a third of unit quaternions move in the last bit), so values read back from our own
+// files go through FromUnitQuaternion to round-trip exactly.
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
@@ -20,6 +25,8 @@ struct Rigid3d {
   static Rigid3d FromWxyz(double w, double x, double y, double z, const Eigen::Vector3d& t);
   // Rotation about +z by `yaw` radians, then translation.
   static Rigid3d FromYaw(double yaw, const Eigen::Vector3d& t);
+  // `q_unit` kept bit for bit: it must already be unit length (e.g. a rotation this type wrote out).
+  static Rigid3d FromUnitQuaternion(const Eigen::Quaterniond& q_unit, const Eigen::Vector3d& t);
 
   Eigen::Matrix4d Matrix() const;
   Eigen::Matrix3d Rotation() const { return rotation.toRotationMatrix(); }
@@ -32,5 +39,11 @@ struct Rigid3d {
     return Rigid3d(rotation * other.rotation, rotation * other.translation + translation);
   }
 };
+
+// The pose a fraction `s` of the way from `a` (s = 0) to `b` (s = 1): rotation slerped the short way round
+// (Eigen's slerp, so q and -q give the same path), translation (1 - s) * a + s * b. Outside [0, 1] it
+// extrapolates at constant angular and linear velocity along the same great circle and line; the callers
+// (pose tables, box tracks, a sweep's firing times) clamp or bracket, so none does.
+Rigid3d Interpolate(const Rigid3d& a, const Rigid3d& b, double s);
 
 }  // namespace sd

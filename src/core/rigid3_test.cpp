@@ -69,5 +69,58 @@ TEST(Rigid3, Yaw) {
   EXPECT_NEAR(pitched.Yaw(), 0.8, 1e-12);
 }
 
+TEST(Rigid3, InterpolateEndpointsAndMidpoint) {
+  const Rigid3d a = Rigid3d::FromYaw(0.0, {0, 0, 0});
+  const Rigid3d b = Rigid3d::FromYaw(kPi / 2, {2, 4, -6});
+  EXPECT_TRUE(Interpolate(a, b, 0.0).Matrix().isApprox(a.Matrix(), 1e-15));
+  EXPECT_TRUE(Interpolate(a, b, 1.0).Matrix().isApprox(b.Matrix(), 1e-15));
+  EXPECT_EQ(Interpolate(a, b, 0.0).translation, a.translation);
+  EXPECT_EQ(Interpolate(a, b, 1.0).translation, b.translation);
+  // Half of a 90-degree turn about +z is 45 degrees; the translation is the average.
+  const Rigid3d mid = Interpolate(a, b, 0.5);
+  EXPECT_NEAR(mid.Yaw(), kPi / 4, 1e-15);
+  EXPECT_TRUE(mid.Rotation().isApprox(Rigid3d::FromYaw(kPi / 4, {0, 0, 0}).Rotation(), 1e-15));
+  EXPECT_TRUE(mid.translation.isApprox(Eigen::Vector3d(1, 2, -3), 1e-15));
+  EXPECT_NEAR(mid.rotation.norm(), 1.0, 1e-15);
+  // Past the end it extrapolates along the same turn (no caller does): s = 2 is a half turn.
+  EXPECT_NEAR(std::abs(Interpolate(a, b, 2.0).Yaw()), kPi, 1e-12);
+}
+
+TEST(Rigid3, InterpolateTakesTheShortWayForQuaternionsOfOppositeSign) {
+  // -q is the same rotation as q; interpolating towards it must not swing the long way (225 degrees) round.
+  const Rigid3d a = Rigid3d::FromYaw(0.0, {0, 0, 0});
+  const Rigid3d b = Rigid3d::FromYaw(kPi / 2, {0, 0, 0});
+  const Rigid3d b_negated = Rigid3d::FromUnitQuaternion(Eigen::Quaterniond(-b.rotation.coeffs()), b.translation);
+  ASSERT_LT(a.rotation.dot(b_negated.rotation), 0.0);
+  ASSERT_TRUE(b_negated.Rotation().isApprox(b.Rotation(), 1e-15));
+  for (double s : {0.25, 0.5, 0.75}) {
+    EXPECT_NEAR(Interpolate(a, b_negated, s).Yaw(), s * kPi / 2, 1e-12) << s;
+    EXPECT_TRUE(Interpolate(a, b_negated, s).Rotation().isApprox(Interpolate(a, b, s).Rotation(), 1e-12)) << s;
+  }
+}
+
+TEST(Rigid3, FromUnitQuaternionKeepsEveryBitTheConstructorNormalises) {
+  // Normalising a unit quaternion again can move its last bit; find such a quaternion to show the difference.
+  Eigen::Quaterniond q_unit = Eigen::Quaterniond::Identity();
+  bool moves = false;
+  for (int i = 1; i < 1000 && !moves; ++i) {
+    q_unit = Eigen::Quaterniond(Eigen::AngleAxisd(0.001 * i, Eigen::Vector3d(1, 2, 3).normalized())).normalized();
+    moves = q_unit.normalized().coeffs() != q_unit.coeffs();
+  }
+  ASSERT_TRUE(moves);
+  const Eigen::Vector3d t(1, 2, 3);
+  EXPECT_EQ(Rigid3d::FromUnitQuaternion(q_unit, t).rotation.coeffs(), q_unit.coeffs());
+  EXPECT_EQ(Rigid3d::FromUnitQuaternion(q_unit, t).translation, t);
+  EXPECT_NE(Rigid3d(q_unit, t).rotation.coeffs(), q_unit.coeffs());
+}
+
+TEST(Rigid3, CompositionStaysUnit) {
+  // A long chain of products would drift off unit length without the renormalisation in operator*.
+  const Rigid3d step = Example(0.0123, {0.3, -1, 2}, {0.1, 0, 0});
+  Rigid3d T;
+  for (int i = 0; i < 10000; ++i) T = T * step;
+  EXPECT_NEAR(T.rotation.norm(), 1.0, 1e-15);
+}
+
 }  // namespace
 }  // namespace sd

@@ -39,8 +39,7 @@ Rigid3d InterpolatePose(const std::vector<StampedPose>& poses, int64_t t_ns) {
   const StampedPose& b = *it;
   const StampedPose& a = *(it - 1);
   const double s = static_cast<double>(t_ns - a.timestamp_ns) / static_cast<double>(b.timestamp_ns - a.timestamp_ns);
-  return Rigid3d(a.T_city_ego.rotation.slerp(s, b.T_city_ego.rotation),
-                 (1 - s) * a.T_city_ego.translation + s * b.T_city_ego.translation);
+  return Interpolate(a.T_city_ego, b.T_city_ego, s);
 }
 
 }  // namespace

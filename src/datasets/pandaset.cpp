@@ -93,8 +93,7 @@ Rigid3d PoseAt(const StampedPoses& s, double t) {
   if (it == s.times.end()) return s.poses.back();
   const size_t b = static_cast<size_t>(it - s.times.begin()), a = b - 1;
   const double u = (t - s.times[a]) / (s.times[b] - s.times[a]);
-  return Rigid3d(s.poses[a].rotation.slerp(u, s.poses[b].rotation),
-                 (1 - u) * s.poses[a].translation + u * s.poses[b].translation);
+  return Interpolate(s.poses[a], s.poses[b], u);
 }
 
 // Frame numbers with a LiDAR file (lidar/NN.pkl.gz), sorted.

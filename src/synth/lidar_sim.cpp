@@ -207,9 +207,7 @@ LidarSimResult SimulateLidar(const LidarSimInput& input) {
     ray.dir_sensor = dir_sensor;
     if (!moving) return ray;
     const double s = std::clamp(re.model->FiringTime(std::atan2(dir_sensor.y(), dir_sensor.x())) / re.model->SweepPeriod(), 0.0, 1.0);
-    const Rigid3d T_ref_ego(re.T_ref_ego_start.rotation.slerp(s, re.T_ref_ego_end.rotation),
-                            (1 - s) * re.T_ref_ego_start.translation + s * re.T_ref_ego_end.translation);
-    ray.T_ref_sensor = T_lidar_ego * T_ref_ego * input.T_ego_lidar;
+    ray.T_ref_sensor = T_lidar_ego * Interpolate(re.T_ref_ego_start, re.T_ref_ego_end, s) * input.T_ego_lidar;
     ray.static_pose = false;
     return ray;
   };

@@ -47,11 +47,9 @@ json RigidJson(const Rigid3d& T) {
   return {{"q_wxyz", {q.w(), q.x(), q.y(), q.z()}}, {"t", VecJson(T.translation)}};
 }
 Rigid3d RigidFrom(const JsonReader& r) {
-  Rigid3d T;  // fields set directly: the constructor's normalisation could change the last bit
   const JsonReader q = r["q_wxyz"];
-  T.rotation = Eigen::Quaterniond(q[0].Number(), q[1].Number(), q[2].Number(), q[3].Number());
-  T.translation = VecFrom(r["t"]);
-  return T;
+  const Eigen::Quaterniond q_unit(q[0].Number(), q[1].Number(), q[2].Number(), q[3].Number());  // a Rigid3d wrote it
+  return Rigid3d::FromUnitQuaternion(q_unit, VecFrom(r["t"]));
 }
 json BoxJson(const Box3& b) { return {{"T_frame_box", RigidJson(b.T_frame_box)}, {"size", VecJson(b.size)}}; }
 Box3 BoxFrom(const JsonReader& r) {

@@ -73,9 +73,7 @@ std::vector<Box3> Between(const Box3& a, const Box3& b, double step) {
   std::vector<Box3> out;
   for (int i = 1; i < n; ++i) {
     const double t = static_cast<double>(i) / n;
-    out.push_back(Box3{Rigid3d(a.T_frame_box.rotation.slerp(t, b.T_frame_box.rotation),
-                               (1 - t) * a.center() + t * b.center()),
-                       (1 - t) * a.size + t * b.size});
+    out.push_back(Box3{Interpolate(a.T_frame_box, b.T_frame_box, t), (1 - t) * a.size + t * b.size});
   }
   return out;
 }

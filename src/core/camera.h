@@ -27,12 +27,21 @@ struct PinholeCamera {
   // Projects a point in the camera frame. Empty when the point is not in front of the camera
   // (z <= min_depth). The result may lie outside the image; see InImage().
   std::optional<Eigen::Vector2d> Project(const Eigen::Vector3d& p_cam, double min_depth = 1e-3) const;
-  // Unit-length ray direction in the camera frame through image point `uv` (undoes distortion).
+  // Unit-length ray direction in the camera frame through image point `uv` (undoes distortion with Undistort).
   Eigen::Vector3d RayDirection(const Eigen::Vector2d& uv) const;
   bool InImage(const Eigen::Vector2d& uv) const { return uv.x() >= 0 && uv.y() >= 0 && uv.x() < width && uv.y() < height; }
 
   // Normalised image plane <-> distorted normalised plane.
   Eigen::Vector2d Distort(const Eigen::Vector2d& xy) const;
+  // d Distort / d xy (2x2, symmetric); its determinant turns <= 0 past a strong lens's fold.
+  Eigen::Matrix2d DistortJacobian(const Eigen::Vector2d& xy) const;
+  // The xy with Distort(xy) = xy_distorted, by Newton's method (at most 20 steps, from xy_distorted). Empty when
+  // no xy within |Distort(xy) - xy_distorted| <= 1e-14 (1 + |xy_distorted|) was found where Distort is still
+  // invertible (Jacobian determinant > 0): points past the edge of a strong barrel lens's image, whose rays
+  // would have to come from beyond its fold.
+  std::optional<Eigen::Vector2d> TryUndistort(const Eigen::Vector2d& xy_distorted) const;
+  // TryUndistort for callers that cannot fail. Where it finds nothing, the step with the smallest residual that
+  // stayed inside the fold (at worst xy_distorted itself). Without distortion, xy_distorted as given.
   Eigen::Vector2d Undistort(const Eigen::Vector2d& xy_distorted) const;
 };
 

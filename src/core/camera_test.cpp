@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include <Eigen/Geometry>
 
 namespace sd {
@@ -41,6 +43,70 @@ TEST(Camera, ProjectRayRoundTripDistorted) {
   const Eigen::Vector2d d = *cam.Project(p), u = *NuScenesLike().Project(p);
   EXPECT_LT((d - Eigen::Vector2d(cam.cx, cam.cy)).norm(), (u - Eigen::Vector2d(cam.cx, cam.cy)).norm());
   EXPECT_TRUE(cam.Project({0, 0, 3})->isApprox(Eigen::Vector2d(cam.cx, cam.cy)));
+}
+
+PinholeCamera StronglyDistorted() {
+  PinholeCamera cam = NuScenesLike();
+  cam.distortion = {-0.3, 0.1, 1e-3, -1e-3, 0.0};
+  return cam;
+}
+
+TEST(Camera, DistortJacobianMatchesCentralDifferences) {
+  const PinholeCamera cam = StronglyDistorted();
+  const double h = 1e-6;
+  for (const Eigen::Vector2d& xy : {Eigen::Vector2d(0, 0), Eigen::Vector2d(0.3, -0.2), Eigen::Vector2d(-0.9, 0.6)}) {
+    Eigen::Matrix2d numeric;
+    for (int k = 0; k < 2; ++k) {
+      const Eigen::Vector2d e = h * Eigen::Vector2d::Unit(k);
+      numeric.col(k) = (cam.Distort(xy + e) - cam.Distort(xy - e)) / (2 * h);
+    }
+    EXPECT_LT((cam.DistortJacobian(xy) - numeric).norm(), 1e-8 * numeric.norm()) << xy.transpose();
+  }
+  EXPECT_EQ(NuScenesLike().DistortJacobian({0.3, -0.2}), Eigen::Matrix2d::Identity());
+}
+
+TEST(Camera, UndistortInvertsDistortOverAStronglyDistortedImage) {
+  const PinholeCamera cam = StronglyDistorted();
+  for (int v = 0; v <= cam.height; v += 10)
+    for (int u = 0; u <= cam.width; u += 10) {
+      const Eigen::Vector2d xy_distorted((u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy);
+      const auto xy = cam.TryUndistort(xy_distorted);
+      ASSERT_TRUE(xy.has_value()) << u << " " << v;
+      EXPECT_LT((cam.Distort(*xy) - xy_distorted).norm(), 1e-12) << u << " " << v;
+      EXPECT_EQ(cam.Undistort(xy_distorted), *xy);
+    }
+}
+
+TEST(Camera, UndistortReportsPointsPastTheFold) {
+  // Pure barrel k1 = -0.3: the radius maps as f(r) = r (1 - 0.3 r^2), which rises to its maximum
+  // 2 / (3 sqrt(0.9)) = 0.7027 at the fold r = 1 / sqrt(0.9) and falls beyond it. A distorted radius of 0.8 is
+  // reached by no point inside the fold, so no real image has it.
+  PinholeCamera cam = NuScenesLike();
+  cam.distortion = {-0.3, 0, 0, 0, 0};
+  const Eigen::Vector2d direction = Eigen::Vector2d(0.6, -0.8);
+  const Eigen::Vector2d xy_distorted = 0.8 * direction;
+  const double fold = 1 / std::sqrt(0.9);
+  for (double r = 0; r <= fold; r += 1e-4) EXPECT_LE(cam.Distort(r * direction).norm(), 0.7028) << r;
+  EXPECT_GT(cam.DistortJacobian(0.99 * fold * direction).determinant(), 0.0);
+  EXPECT_LT(cam.DistortJacobian(1.01 * fold * direction).determinant(), 0.0);
+  EXPECT_FALSE(cam.TryUndistort(xy_distorted).has_value());
+  // Undistort still answers: its best step inside the fold, here the start.
+  const Eigen::Vector2d best = cam.Undistort(xy_distorted);
+  EXPECT_GT(cam.DistortJacobian(best).determinant(), 0.0);
+  EXPECT_TRUE(best.allFinite());
+  // A radius inside the image of the fold still inverts.
+  EXPECT_TRUE(cam.TryUndistort(0.7 * direction).has_value());
+}
+
+TEST(Camera, UndistortWithoutDistortionIsTheIdentity) {
+  const PinholeCamera cam = NuScenesLike();
+  for (const Eigen::Vector2d& xy : {Eigen::Vector2d(0.1, -0.7), Eigen::Vector2d(5, -9), Eigen::Vector2d(1e-300, 0)}) {
+    EXPECT_EQ(cam.Undistort(xy), xy);
+    EXPECT_EQ(*cam.TryUndistort(xy), xy);
+    EXPECT_EQ(cam.Distort(xy), xy);
+  }
+  const Eigen::Vector2d uv(3.5, 899.5);
+  EXPECT_EQ(cam.RayDirection(uv), Eigen::Vector3d((uv.x() - cam.cx) / cam.fx, (uv.y() - cam.cy) / cam.fy, 1).normalized());
 }
 
 TEST(Camera, PixelCentreConvention) {

@@ -1,7 +1,6 @@
 #include "geometry/marching_cubes.h"
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <limits>
 
@@ -65,19 +64,25 @@ const CubeTables& Tables() {
   return tables;
 }
 
+// A loop fanned from its centre, kept as its vertex ids: the centre's position is the mean of theirs, computed
+// once all edge vertices exist (those of the slab's top layer belong to the next task, see MarchingCubes).
+struct CentreLoop {
+  int n = 0;
+  int ids[12];
+};
+
 // The triangles of one z-slab of cells. Vertex ids >= 0 index the shared edge vertices; a loop that needs a
 // centre vertex (see TriangulateLoop) refers to it as -(1 + index into `centres`).
 struct Slab {
   std::vector<Eigen::Vector3i> faces;
-  std::vector<Eigen::Vector3f> centres;
+  std::vector<CentreLoop> centres;
 };
 
 // Fan-triangulates a loop from a vertex none of whose diagonals joins two vertices on one cube face. Such a
 // diagonal would lie in the face, where the neighbouring cell may draw the same edge (an edge with four
 // triangles); it can only arise when the loop passes through both segments of an ambiguous face. When
 // every start has one (rare loops of 6+ vertices), the loop is fanned from an added centre vertex instead.
-void TriangulateLoop(const int* loop_edges, const int* loop_ids, int n, const std::vector<Eigen::Vector3f>& positions,
-                     Slab& slab) {
+void TriangulateLoop(const int* loop_edges, const int* loop_ids, int n, Slab& slab) {
   const CubeTables& t = Tables();
   // Emitted as (apex, b, a) for the loop step a -> b: reversed, see the winding note at the top.
   if (n == 3) {
@@ -93,9 +98,9 @@ void TriangulateLoop(const int* loop_edges, const int* loop_ids, int n, const st
     }
     return;
   }
-  Eigen::Vector3f centre = Eigen::Vector3f::Zero();
-  for (int i = 0; i < n; ++i) centre += positions[loop_ids[i]];
-  slab.centres.push_back(centre / float(n));
+  CentreLoop& centre = slab.centres.emplace_back();
+  centre.n = n;
+  std::copy(loop_ids, loop_ids + n, centre.ids);
   const int c = -static_cast<int>(slab.centres.size());
   for (int i = 0; i < n; ++i) slab.faces.emplace_back(c, loop_ids[(i + 1) % n], loop_ids[i]);
 }
@@ -112,12 +117,9 @@ TriangleMesh MarchingCubes(const ScalarGrid& grid, float iso) {
   // NaN compares false: an undefined sample counts as outside.
   auto inside = [&](size_t index) { return grid.values[index] > iso; };
 
-  // 1. One vertex per crossed grid edge, numbered layer by layer (k) so the ids are deterministic.
-  //    edge_vertex[axis][node] is the vertex on the edge from `node` towards +axis, or -1.
-  const size_t num_nodes = grid.values.size();
+  // 1. One vertex per crossed grid edge, numbered layer by layer (k), then by node (j, i) and axis, so the ids are
+  //    deterministic: first count each layer's crossings.
   const size_t layer = size_t(nx) * ny;
-  std::array<std::vector<int>, 3> edge_vertex;
-  for (auto& ev : edge_vertex) ev.assign(num_nodes, -1);
   const size_t stride[3] = {1, size_t(nx), layer};
   const int dims[3] = {nx, ny, nz};
   auto crosses = [&](size_t node, int axis, int i, int j, int k) {
@@ -139,13 +141,21 @@ TriangleMesh MarchingCubes(const ScalarGrid& grid, float iso) {
   if (layer_count[nz] > size_t(std::numeric_limits<int>::max() / 2))
     throw InputError("", Msg() << "MarchingCubes: " << layer_count[nz] << " surface vertices exceed the index range");
   mesh.positions.resize(layer_count[nz]);
-  ParallelFor(0, size_t(nz), [&](size_t k) {
+
+  // Numbers the crossed edges leaving the nodes of layer k: ids[3 * (node in layer) + axis] is the vertex on the
+  // edge from that node towards +axis, or -1. Writes the vertices too when `write`: two tasks number a layer
+  // where their slab ranges meet, and only one of them may write it.
+  auto number_layer = [&](int k, std::vector<int>& ids, bool write) {
     int id = static_cast<int>(layer_count[k]);
     for (int j = 0; j < ny; ++j)
       for (int i = 0; i < nx; ++i) {
-        const size_t node = grid.Index(i, j, int(k));
+        const size_t node = grid.Index(i, j, k);
+        int* node_ids = &ids[3 * (size_t(j) * nx + i)];
         for (int axis = 0; axis < 3; ++axis) {
-          if (!crosses(node, axis, i, j, int(k))) continue;
+          node_ids[axis] = -1;
+          if (!crosses(node, axis, i, j, k)) continue;
+          node_ids[axis] = id++;
+          if (!write) continue;
           const float v0 = grid.values[node], v1 = grid.values[node + stride[axis]];
           float s = (iso - v0) / (v1 - v0);
           if (!std::isfinite(s)) s = 0.5f;  // a NaN endpoint: no better guess than the middle
@@ -157,25 +167,26 @@ TriangleMesh MarchingCubes(const ScalarGrid& grid, float iso) {
           s = std::clamp(s, kInset, 1.0f - kInset);
           Eigen::Vector3f offset(static_cast<float>(i), static_cast<float>(j), static_cast<float>(k));
           offset[axis] += s;
-          mesh.positions[id] = grid.origin + grid.voxel_size * offset;
-          edge_vertex[axis][node] = id++;
+          mesh.positions[node_ids[axis]] = grid.origin + grid.voxel_size * offset;
         }
       }
-  });
+  };
 
-  // 2. Cells, one z-slab per task.
+  // 2. Cells, slab by slab. A cell needs the edge ids of the layers below and above it only, so each task walks
+  //    its range of slabs upwards holding two layers of ids (12 bytes per node of a layer) rather than the whole
+  //    grid's. Neighbouring tasks both number the layer where they meet; the one above writes its vertices (the
+  //    last task also writes the grid's top layer). The grain bounds that repeated numbering.
   std::vector<Slab> slabs(nz - 1);
-  ParallelFor(0, size_t(nz - 1), [&](size_t k) {
+  auto polygonise_slab = [&](size_t k, const std::vector<int>& bottom, const std::vector<int>& top) {
     Slab& slab = slabs[k];
     for (int j = 0; j + 1 < ny; ++j) {
       for (int i = 0; i + 1 < nx; ++i) {
-        size_t node[8];
         float value[8];
         int mask = 0;
         for (int c = 0; c < 8; ++c) {
-          node[c] = grid.Index(i + (c & 1), j + ((c >> 1) & 1), int(k) + ((c >> 2) & 1));
-          value[c] = grid.values[node[c]];
-          mask |= inside(node[c]) ? 1 << c : 0;
+          const size_t node = grid.Index(i + (c & 1), j + ((c >> 1) & 1), int(k) + ((c >> 2) & 1));
+          value[c] = grid.values[node];
+          mask |= inside(node) ? 1 << c : 0;
         }
         if (mask == 0 || mask == 255) continue;
 
@@ -219,21 +230,40 @@ TriangleMesh MarchingCubes(const ScalarGrid& grid, float iso) {
             used[e] = true;
             loop_edges[n] = e;
             const int c = t.edge_corner[e];
-            loop_ids[n++] = edge_vertex[t.edge_axis[e]][node[c]];
+            const std::vector<int>& ids = (c & 4) ? top : bottom;
+            loop_ids[n++] = ids[3 * (size_t(j + ((c >> 1) & 1)) * nx + i + (c & 1)) + t.edge_axis[e]];
           }
-          TriangulateLoop(loop_edges, loop_ids, n, mesh.positions, slab);
+          TriangulateLoop(loop_edges, loop_ids, n, slab);
         }
       }
+    }
+  };
+  constexpr size_t kSlabsPerTask = 8;
+  ParallelForRange(0, size_t(nz - 1), kSlabsPerTask, [&](size_t k_begin, size_t k_end) {
+    std::vector<int> bottom(3 * layer), top(3 * layer);
+    number_layer(int(k_begin), bottom, true);
+    for (size_t k = k_begin; k < k_end; ++k) {
+      number_layer(int(k) + 1, top, k + 1 < k_end || k + 2 == size_t(nz));
+      polygonise_slab(k, bottom, top);
+      std::swap(bottom, top);
     }
   });
 
   // 3. Concatenate in slab order; centre vertices go after the edge vertices.
-  size_t num_faces = 0;
-  for (const Slab& s : slabs) num_faces += s.faces.size();
+  size_t num_faces = 0, num_centres = 0;
+  for (const Slab& s : slabs) {
+    num_faces += s.faces.size();
+    num_centres += s.centres.size();
+  }
   mesh.faces.reserve(num_faces);
+  mesh.positions.reserve(mesh.positions.size() + num_centres);
   for (const Slab& s : slabs) {
     const int base = static_cast<int>(mesh.positions.size());
-    mesh.positions.insert(mesh.positions.end(), s.centres.begin(), s.centres.end());
+    for (const CentreLoop& loop : s.centres) {
+      Eigen::Vector3f centre = Eigen::Vector3f::Zero();
+      for (int i = 0; i < loop.n; ++i) centre += mesh.positions[loop.ids[i]];
+      mesh.positions.push_back(centre / float(loop.n));
+    }
     for (Eigen::Vector3i f : s.faces) {
       for (int v = 0; v < 3; ++v)
         if (f[v] < 0) f[v] = base + (-f[v] - 1);

@@ -30,9 +30,10 @@ struct ScalarGrid {
 // consistently). Fields must be <= iso on the grid border for the result to be closed.
 // One vertex per crossed grid edge (linear interpolation, kept a hundredth of a voxel from the edge's ends so that
 // no two vertices coincide and the mesh is manifold by position as well as by index), plus, rarely, a centre
-// vertex for a cell whose
-// contour loop cannot be fanned without an edge in a cell face. Ambiguous faces use the asymptotic decider.
-// NaN samples count as outside. Positions and faces only (no normals). Parallel over z-slabs.
+// vertex for a cell whose contour loop cannot be fanned without an edge in a cell face. Ambiguous faces use the
+// asymptotic decider. NaN samples count as outside. Positions and faces only (no normals). Parallel over z-slabs; memory beyond the
+// grid and the mesh: two xy-layers of edge ids (12 bytes per node of a layer) per worker thread, and the faces
+// once more while they are gathered.
 TriangleMesh MarchingCubes(const ScalarGrid& grid, float iso);
 
 }  // namespace sd::geometry

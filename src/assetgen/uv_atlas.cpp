@@ -13,6 +13,7 @@
 
 #include "core/error.h"
 #include "core/parallel.h"
+#include "geometry/edge_adjacency.h"
 #include "geometry/topology.h"
 #include "raster/raster.h"
 
@@ -50,34 +51,13 @@ struct Chart {
 // Face adjacency across welded, manifold, consistently oriented edges: neighbour[3f + k] is the face across
 // edge (k, k+1), or -1. Edges with more than two faces are cuts (a chart never grows across a non-manifold
 // edge), and so are edges both faces run the same way: a duplicated face or a flipped neighbour, either of
-// which would land on top of its neighbour in the chart's plane.
-std::vector<int> FaceAdjacency(const std::vector<Eigen::Vector3i>& welded_faces) {
-  const size_t nf = welded_faces.size();
-  struct HalfEdge {
-    uint64_t key;     // undirected edge
-    bool forward;     // runs from the lower vertex index to the higher
-    int corner;       // 3f + k
-    bool operator<(const HalfEdge& o) const { return key < o.key || (key == o.key && corner < o.corner); }
-  };
-  std::vector<HalfEdge> edges;
-  edges.reserve(3 * nf);
-  for (size_t f = 0; f < nf; ++f) {
-    for (int k = 0; k < 3; ++k) {
-      const uint32_t a = welded_faces[f][k], b = welded_faces[f][(k + 1) % 3];
-      if (a == b) continue;
-      edges.push_back({(uint64_t{std::min(a, b)} << 32) | std::max(a, b), a < b, static_cast<int>(3 * f + k)});
-    }
-  }
-  std::sort(edges.begin(), edges.end());
-  std::vector<int> neighbour(3 * nf, -1);
-  for (size_t i = 0; i < edges.size();) {
-    size_t j = i;
-    while (j < edges.size() && edges[j].key == edges[i].key) ++j;
-    if (j - i == 2 && edges[i].forward != edges[i + 1].forward) {
-      neighbour[edges[i].corner] = edges[i + 1].corner / 3;
-      neighbour[edges[i + 1].corner] = edges[i].corner / 3;
-    }
-    i = j;
+// which would land on top of its neighbour in the chart's plane. Those are exactly the edges without twins.
+std::vector<int> FaceAdjacency(int num_welded_vertices, const std::vector<Eigen::Vector3i>& welded_faces) {
+  const geometry::EdgeAdjacency adjacency = geometry::BuildEdgeAdjacency(
+      num_welded_vertices, welded_faces, geometry::DegenerateFaces::kKeepProperEdges);
+  std::vector<int> neighbour(adjacency.twin.size(), -1);
+  for (size_t h = 0; h < neighbour.size(); ++h) {
+    if (adjacency.twin[h] >= 0) neighbour[h] = adjacency.twin[h] / 3;
   }
   return neighbour;
 }
@@ -363,7 +343,7 @@ TriangleMesh BuildUvAtlas(const TriangleMesh& mesh, const UvAtlasOptions& option
   std::vector<Eigen::Vector3i> welded_faces(nf);
   for (size_t f = 0; f < nf; ++f)
     for (int k = 0; k < 3; ++k) welded_faces[f][k] = weld[mesh.faces[f][k]];
-  const std::vector<int> neighbour = FaceAdjacency(welded_faces);
+  const std::vector<int> neighbour = FaceAdjacency(static_cast<int>(welded_positions.size()), welded_faces);
 
   std::vector<Eigen::Vector3d> face_normal(nf);
   std::vector<double> face_area(nf);

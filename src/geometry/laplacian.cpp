@@ -2,11 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdint>
 
 #include <Eigen/Geometry>
 
 #include "core/error.h"
+#include "geometry/edge_adjacency.h"
 
 namespace sd::geometry {
 namespace {
@@ -40,24 +40,13 @@ Eigen::SparseMatrix<float> FromOffDiagonal(int n, std::vector<Eigen::Triplet<dou
 
 Eigen::SparseMatrix<float> UniformLaplacian(int num_vertices, const std::vector<Eigen::Vector3i>& faces) {
   CheckFaces(num_vertices, faces, "UniformLaplacian");
-  // Each interior edge appears in two faces: dedupe through a sorted list of (min, max) keys.
-  std::vector<uint64_t> edges;
-  edges.reserve(faces.size() * 3);
-  for (const Eigen::Vector3i& t : faces) {
-    for (int k = 0; k < 3; ++k) {
-      const uint32_t a = static_cast<uint32_t>(t[k]), b = static_cast<uint32_t>(t[(k + 1) % 3]);
-      if (a == b) continue;
-      edges.push_back((uint64_t{std::min(a, b)} << 32) | std::max(a, b));
-    }
-  }
-  std::sort(edges.begin(), edges.end());
-  edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+  // One weight per undirected edge however many faces share it; self-edges of degenerate faces carry none.
+  const EdgeAdjacency adjacency = BuildEdgeAdjacency(num_vertices, faces, DegenerateFaces::kKeepProperEdges);
   std::vector<Eigen::Triplet<double>> offdiag;
-  offdiag.reserve(edges.size() * 2);
-  for (uint64_t e : edges) {
-    const int a = static_cast<int>(e >> 32), b = static_cast<int>(e & 0xffffffffu);
-    offdiag.emplace_back(a, b, 1.0);
-    offdiag.emplace_back(b, a, 1.0);
+  offdiag.reserve(adjacency.edges.size() * 2);
+  for (const Eigen::Vector2i& e : adjacency.edges) {
+    offdiag.emplace_back(e[0], e[1], 1.0);
+    offdiag.emplace_back(e[1], e[0], 1.0);
   }
   return FromOffDiagonal(num_vertices, offdiag);
 }

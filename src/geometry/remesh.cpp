@@ -3,12 +3,12 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
-#include <numeric>
 
 #include <Eigen/Geometry>
 
 #include "core/error.h"
 #include "core/parallel.h"
+#include "geometry/edge_adjacency.h"
 #include "geometry/topology.h"
 
 namespace sd::geometry {
@@ -79,33 +79,14 @@ class HalfEdgeMesh {
       : F_(*faces), data_(data), P_(*data.positions), T_(*data.target), options_(options) {
     const int nv = static_cast<int>(P_.size());
     const int nf = static_cast<int>(F_.size());
-    opp_.assign(3 * nf, -1);
     out_.assign(nv, -1);
     boundary_.assign(nv, 0);
     valence_.assign(nv, 0);
     face_dead_.assign(nf, 0);
     vert_dead_.assign(nv, 0);
-    // Twins by a counting sort of half-edges on their smaller endpoint: linear, and buckets hold only the
-    // few edges of one vertex, so matching inside a bucket is cheap.
-    std::vector<int> start(nv + 1, 0);
-    for (int h = 0; h < 3 * nf; ++h) ++start[std::min(From(h), To(h)) + 1];
-    std::partial_sum(start.begin(), start.end(), start.begin());
-    std::vector<int> bucket(3 * nf), fill(start.begin(), start.end() - 1);
-    for (int h = 0; h < 3 * nf; ++h) bucket[fill[std::min(From(h), To(h))]++] = h;
-    for (int v = 0; v < nv; ++v) {
-      for (int i = start[v]; i < start[v + 1]; ++i) {
-        const int h = bucket[i];
-        if (opp_[h] >= 0) continue;
-        for (int j = i + 1; j < start[v + 1]; ++j) {
-          const int g = bucket[j];
-          if (opp_[g] < 0 && From(g) == To(h) && To(g) == From(h)) {
-            opp_[h] = g;
-            opp_[g] = h;
-            break;
-          }
-        }
-      }
-    }
+    // The constructor admits only manifold, consistently wound meshes and every pass keeps them so: each
+    // edge has one half-edge, or two running opposite ways, and those are twins.
+    opp_ = BuildEdgeAdjacency(nv, F_, DegenerateFaces::kSkip).twin;
     for (int h = 0; h < 3 * nf; ++h) {
       const int v = From(h);
       ++valence_[v];  // faces around v for now
@@ -151,6 +132,8 @@ class HalfEdgeMesh {
     return n;
   }
 
+  const RemeshStats& stats() const { return stats_; }
+
   float EdgeTarget(int a, int b) const { return 0.5f * (T_[a] + T_[b]); }
   float Length(int h) const { return (P_[To(h)] - P_[From(h)]).norm(); }
   bool InteriorEdge(int h) const { return opp_[h] >= 0; }
@@ -175,7 +158,7 @@ class HalfEdgeMesh {
       if (Length(h) >= (1 - tol) * EdgeTarget(a, b)) continue;
       // An interior vertex next to the boundary merges into the boundary vertex (which stays put), else
       // interior vertices pile up along a frozen boundary as slivers.
-      TryCollapse(boundary_[b] ? opp_[h] : h);
+      if (TryCollapse(boundary_[b] ? opp_[h] : h)) ++stats_.collapses;
     }
   }
 
@@ -189,20 +172,22 @@ class HalfEdgeMesh {
     SD_CHECK(!boundary_[b]);
     // Edges a-c and a-d must be interior too (only possible otherwise when a is on the boundary): the
     // stitching below pairs twins on both sides, and the boundary stays exactly as it is.
-    if (opp_[Prev(h)] < 0 || opp_[Next(g)] < 0) return false;
+    RemeshStats::Rejections& rejected = stats_.collapse_rejected;
+    if (opp_[Prev(h)] < 0 || opp_[Next(g)] < 0) return Refuse(&rejected.boundary);
     // Link condition: a and b may share exactly the neighbours c and d, else the collapse pinches the
     // surface into a non-manifold edge or vertex. c and d lose one neighbour and must keep three, else
     // two faces end up on the same three vertices (e.g. a tetrahedron collapsing into a double triangle).
-    if (c == d || valence_[c] <= 3 || valence_[d] <= 3) return false;
+    if (c == d) return Refuse(&rejected.link);
+    if (valence_[c] <= 3 || valence_[d] <= 3) return Refuse(&rejected.valence);
     Neighbours(a, &ring_a_);
     Neighbours(b, &ring_b_);
     int shared = 0;
     for (int x : ring_a_) {
       if (std::find(ring_b_.begin(), ring_b_.end(), x) != ring_b_.end()) ++shared;
     }
-    if (shared != 2) return false;
+    if (shared != 2) return Refuse(&rejected.link);
     // Very high valences make needle triangles that no flip can repair in one pass.
-    if (valence_[a] + valence_[b] - 4 > 12) return false;
+    if (valence_[a] + valence_[b] - 4 > 12) return Refuse(&rejected.valence);
 
     const Eigen::Vector3f p = boundary_[a] ? P_[a] : Eigen::Vector3f(0.5f * (P_[a] + P_[b]));
     const float t_new = 0.5f * (T_[a] + T_[b]);
@@ -212,24 +197,27 @@ class HalfEdgeMesh {
     // orientation and also face the same way as the surrounding surface (one-rings of a and b): the second
     // test catches a face that is already steep on a wrinkle and would be turned just past vertical.
     const Eigen::Vector3f ring_normal = RingNormal(a) + RingNormal(b);
-    bool ok = true;
+    int* failed = nullptr;  // the first test a face failed
     auto check_faces_of = [&](int v) {
       ForEachOutgoing(v, [&](int e) {
         const int f = e / 3;
-        if (!ok || f == fa || f == fb) return;
+        if (failed != nullptr || f == fa || f == fb) return;
         const Eigen::Vector3f& q1 = P_[To(e)];
         const Eigen::Vector3f& q2 = P_[From(Prev(e))];
         const Eigen::Vector3f before = (q1 - P_[v]).cross(q2 - P_[v]);
         Eigen::Vector3f after;
-        if (Quality(p, q1, q2, &after) < kMinQuality || !NormalKept(before, after) || after.dot(ring_normal) <= 0) {
-          ok = false;
+        if (Quality(p, q1, q2, &after) < kMinQuality) {
+          failed = &rejected.sliver;
+        } else if (!NormalKept(before, after) || after.dot(ring_normal) <= 0) {
+          failed = &rejected.fold_over;
+        } else if ((q1 - p).norm() > max_len * 0.5f * (t_new + T_[To(e)])) {
+          failed = &rejected.too_long;
         }
-        if ((q1 - p).norm() > max_len * 0.5f * (t_new + T_[To(e)])) ok = false;
       });
     };
     check_faces_of(a);
     check_faces_of(b);
-    if (!ok) return false;
+    if (failed != nullptr) return Refuse(failed);
 
     // Faces around b (except the two removed) now use a.
     ForEachOutgoing(b, [&](int e) {
@@ -285,6 +273,7 @@ class HalfEdgeMesh {
       } else {
         SplitBoundary(h);
       }
+      ++stats_.splits;
     }
   }
 
@@ -351,21 +340,22 @@ class HalfEdgeMesh {
     const int num_half_edges = static_cast<int>(opp_.size());
     for (int h = 0; h < num_half_edges; ++h) {
       if (face_dead_[h / 3] || !InteriorEdge(h) || opp_[h] < h) continue;
-      TryFlip(h);
+      if (TryFlip(h)) ++stats_.flips;
     }
   }
 
   bool TryFlip(int h) {
     const int g = opp_[h];
     const int a = From(h), b = To(h), c = From(Prev(h)), d = From(Prev(g));
-    if (c == d) return false;
     auto ideal = [&](int v) { return boundary_[v] ? 4 : 6; };
     auto dev = [&](int v, int delta) { return std::abs(valence_[v] + delta - ideal(v)); };
     const int before = dev(a, 0) + dev(b, 0) + dev(c, 0) + dev(d, 0);
     const int after = dev(a, -1) + dev(b, -1) + dev(c, 1) + dev(d, 1);
     if (after >= before) return false;
+    RemeshStats::Rejections& rejected = stats_.flip_rejected;
+    if (c == d) return Refuse(&rejected.link);
     // a and b lose a neighbour: an interior vertex needs 3, a boundary one 2.
-    if (valence_[a] - 1 < 3 - boundary_[a] || valence_[b] - 1 < 3 - boundary_[b]) return false;
+    if (valence_[a] - 1 < 3 - boundary_[a] || valence_[b] - 1 < 3 - boundary_[b]) return Refuse(&rejected.valence);
     // The new edge c-d must not exist yet (else the flip duplicates an edge: non-manifold).
     bool exists = false;
     ForEachOutgoing(c, [&](int e) { exists = exists || To(e) == d; });
@@ -374,16 +364,16 @@ class HalfEdgeMesh {
       ForEachOutgoing(c, [&](int e) { last = e; });
       exists = last >= 0 && From(Prev(last)) == d;
     }
-    if (exists) return false;
+    if (exists) return Refuse(&rejected.link);
     // New faces (c, a, d), (d, b, c): non-degenerate, and neither folds over against the old pair.
     const Eigen::Vector3f n_old = (P_[b] - P_[a]).cross(P_[c] - P_[a]) + (P_[a] - P_[b]).cross(P_[d] - P_[b]);
     Eigen::Vector3f n0, n1;
     if (Quality(P_[c], P_[a], P_[d], &n0) < kMinQuality || Quality(P_[d], P_[b], P_[c], &n1) < kMinQuality) {
-      return false;
+      return Refuse(&rejected.sliver);
     }
-    if (!NormalKept(n_old, n0) || !NormalKept(n_old, n1) || n0.dot(n1) <= 0) return false;
+    if (!NormalKept(n_old, n0) || !NormalKept(n_old, n1) || n0.dot(n1) <= 0) return Refuse(&rejected.fold_over);
     const Eigen::Vector3f ring_normal = RingNormal(a) + RingNormal(b) + RingNormal(c) + RingNormal(d);
-    if (n0.dot(ring_normal) <= 0 || n1.dot(ring_normal) <= 0) return false;
+    if (n0.dot(ring_normal) <= 0 || n1.dot(ring_normal) <= 0) return Refuse(&rejected.fold_over);
 
     const int o_bc = opp_[Next(h)], o_ca = opp_[Prev(h)], o_ad = opp_[Next(g)], o_db = opp_[Prev(g)];
     const int f0 = h / 3, f1 = g / 3;
@@ -477,6 +467,10 @@ class HalfEdgeMesh {
   }
 
  private:
+  static bool Refuse(int* reason) {
+    ++*reason;
+    return false;
+  }
   void Link(int x, int y) {
     if (x >= 0) opp_[x] = y;
     if (y >= 0) opp_[y] = x;
@@ -502,9 +496,41 @@ class HalfEdgeMesh {
   std::vector<int> opp_, out_, valence_;
   std::vector<char> boundary_, face_dead_, vert_dead_;
   std::vector<int> ring_a_, ring_b_;
+  RemeshStats stats_;
 };
 
+// The constructor's option checks, repeated by Step() and Remesh() for options changed since.
+void CheckOptions(const RemeshOptions& options) {
+  if (!(options.edge_length_min > 0) || !(options.edge_length_max >= options.edge_length_min)) {
+    throw InputError("", Msg() << "ContinuousRemesher: bad edge length limits [" << options.edge_length_min << ", "
+                               << options.edge_length_max << "]");
+  }
+  if (!(options.edge_length_tolerance > 0 && options.edge_length_tolerance < 1)) {
+    throw InputError("", Msg() << "ContinuousRemesher: edge_length_tolerance must lie in (0, 1), got "
+                               << options.edge_length_tolerance);
+  }
+}
+
 }  // namespace
+
+RemeshStats::Rejections& RemeshStats::Rejections::operator+=(const Rejections& other) {
+  boundary += other.boundary;
+  link += other.link;
+  valence += other.valence;
+  sliver += other.sliver;
+  fold_over += other.fold_over;
+  too_long += other.too_long;
+  return *this;
+}
+
+RemeshStats& RemeshStats::operator+=(const RemeshStats& other) {
+  splits += other.splits;
+  collapses += other.collapses;
+  flips += other.flips;
+  collapse_rejected += other.collapse_rejected;
+  flip_rejected += other.flip_rejected;
+  return *this;
+}
 
 ContinuousRemesher::ContinuousRemesher(std::vector<Eigen::Vector3f> positions, std::vector<Eigen::Vector3i> faces,
                                        const RemeshOptions& options)
@@ -518,14 +544,7 @@ ContinuousRemesher::ContinuousRemesher(std::vector<Eigen::Vector3f> positions, s
     throw InputError("", "ContinuousRemesher: the mesh must be manifold and consistently oriented (" +
                              topology.Describe() + ")");
   }
-  if (!(options_.edge_length_min > 0) || !(options_.edge_length_max >= options_.edge_length_min)) {
-    throw InputError("", Msg() << "ContinuousRemesher: bad edge length limits [" << options_.edge_length_min << ", "
-                               << options_.edge_length_max << "]");
-  }
-  if (!(options_.edge_length_tolerance > 0 && options_.edge_length_tolerance < 1)) {
-    throw InputError("", Msg() << "ContinuousRemesher: edge_length_tolerance must lie in (0, 1), got "
-                               << options_.edge_length_tolerance);
-  }
+  CheckOptions(options_);
   const size_t n = positions_.size();
   m1_.assign(n, Eigen::Vector3f::Zero());
   m2_.assign(n, 0.0f);
@@ -551,6 +570,7 @@ ContinuousRemesher::ContinuousRemesher(std::vector<Eigen::Vector3f> positions, s
 }
 
 void ContinuousRemesher::Step(const std::vector<Eigen::Vector3f>& grad) {
+  CheckOptions(options_);
   SD_CHECK(grad.size() == positions_.size(),
            << "Step: " << grad.size() << " gradients for " << positions_.size() << " vertices");
   ++step_count_;
@@ -579,27 +599,17 @@ void ContinuousRemesher::Step(const std::vector<Eigen::Vector3f>& grad) {
       }
     }
     if (std::any_of(fan_xor.begin(), fan_xor.end(), [](int x) { return x != 0; })) {
-      // Open mesh: boundary edges are those with one face (sorted undirected keys, as in AnalyzeTopology).
-      std::vector<std::pair<uint64_t, int>> keys;
-      keys.reserve(faces_.size() * 3);
-      for (size_t f = 0; f < faces_.size(); ++f) {
-        for (int k = 0; k < 3; ++k) {
-          const uint32_t a = static_cast<uint32_t>(faces_[f][k]), b = static_cast<uint32_t>(faces_[f][(k + 1) % 3]);
-          keys.emplace_back((uint64_t{std::min(a, b)} << 32) | std::max(a, b), static_cast<int>(3 * f + k));
-        }
-      }
-      std::sort(keys.begin(), keys.end());
+      // Open mesh: boundary edges are those with one face.
+      const EdgeAdjacency adjacency = BuildEdgeAdjacency(static_cast<int>(n), faces_, DegenerateFaces::kSkip);
       for (int v = 0; v < static_cast<int>(n); ++v) {
         if (fan_xor[v] != 0) {
           neighbour_sum[v] = Eigen::Vector3f::Zero();
           neighbour_count[v] = 0;
         }
       }
-      for (size_t i = 0; i < keys.size(); ++i) {
-        const bool single = (i == 0 || keys[i - 1].first != keys[i].first) &&
-                            (i + 1 == keys.size() || keys[i + 1].first != keys[i].first);
-        if (!single) continue;
-        const int a = static_cast<int>(keys[i].first >> 32), b = static_cast<int>(keys[i].first & 0xffffffffu);
+      for (int e = 0; e < adjacency.NumEdges(); ++e) {
+        if (adjacency.NumFacesOn(e) != 1) continue;
+        const int a = adjacency.edges[e][0], b = adjacency.edges[e][1];
         neighbour_sum[a] += positions_[b];
         neighbour_sum[b] += positions_[a];
         neighbour_count[a] += 1;
@@ -638,8 +648,9 @@ void ContinuousRemesher::Step(const std::vector<Eigen::Vector3f>& grad) {
   });
 }
 
-void ContinuousRemesher::Remesh() {
-  if (!options_.remesh) return;
+RemeshStats ContinuousRemesher::Remesh() {
+  CheckOptions(options_);
+  if (!options_.remesh) return {};
   for (float& t : target_length_) t = std::clamp(t, options_.edge_length_min, options_.edge_length_max);
   HalfEdgeMesh mesh(&faces_, VertexData{&positions_, &m1_, &m2_, &velocity_, &target_length_}, options_);
   // Collapse before split (a split right next to a short edge would otherwise be undone at once), flip for
@@ -649,6 +660,7 @@ void ContinuousRemesher::Remesh() {
   mesh.FlipEdges();
   mesh.SmoothTangentially(options_.smooth_gain);
   mesh.Compact();
+  return mesh.stats();
 }
 
 float ContinuousRemesher::MeanTargetEdgeLength() const {

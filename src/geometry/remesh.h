@@ -33,16 +33,42 @@ struct RemeshOptions {
   int max_vertices = 1000000;
 };
 
+// What one Remesh() pass did. A rejection is a wanted operation that was refused: the collapse of an edge
+// shorter than (1 - tol) * target, or a flip that would bring the valences closer to 6 (4 on the boundary).
+// Each refusal is counted once, under the first test it failed; candidates that an earlier operation of the
+// same pass already changed are dropped without counting.
+struct RemeshStats {
+  struct Rejections {
+    int boundary = 0;   // collapse: another edge of the two faces lies on the boundary, which stays as it is
+    int link = 0;       // the surface would pinch (collapse: link condition) or an edge would double (flip)
+    int valence = 0;    // a vertex would keep too few neighbours, or (collapse) the merged one too many
+    int sliver = 0;     // a resulting face would fall below the quality floor
+    int fold_over = 0;  // a resulting face would turn too far, or against the surrounding surface
+    int too_long = 0;   // collapse: a resulting edge would be split again at once
+    int Total() const { return boundary + link + valence + sliver + fold_over + too_long; }
+    Rejections& operator+=(const Rejections& other);
+  };
+  int splits = 0;  // interior and boundary edges split at their midpoints
+  int collapses = 0;
+  int flips = 0;
+  Rejections collapse_rejected, flip_rejected;
+
+  RemeshStats& operator+=(const RemeshStats& other);
+};
+
 class ContinuousRemesher {
  public:
   // Throws InputError when the mesh is empty, not manifold or not consistently oriented, or the options are
-  // out of range. Target edge lengths start at each vertex's mean edge length (clamped to the limits).
+  // out of range (edge length limits not 0 < min <= max, tolerance outside (0, 1)). Target edge lengths start
+  // at each vertex's mean edge length (clamped to the limits).
   ContinuousRemesher(std::vector<Eigen::Vector3f> positions, std::vector<Eigen::Vector3i> faces,
                      const RemeshOptions& options);
 
   const std::vector<Eigen::Vector3f>& positions() const { return positions_; }
   const std::vector<Eigen::Vector3i>& faces() const { return faces_; }
   const RemeshOptions& options() const { return options_; }
+  // Options changed here are checked as the constructor checks them, at the next Step() or Remesh(): that
+  // call throws the same InputError and leaves the mesh and the optimiser state as they were.
   RemeshOptions& mutable_options() { return options_; }
 
   // One optimiser step from dL/dpositions (one entry per current vertex).
@@ -53,8 +79,8 @@ class ContinuousRemesher {
   // their boundary curve: boundary edges are split at midpoints but never collapsed or flipped, and boundary
   // vertices are never moved or removed by Remesh() (Step still moves them). Vertex and face arrays are
   // renumbered compactly (unreferenced vertices are dropped), so callers re-read positions() and faces().
-  // No-op when options().remesh is false.
-  void Remesh();
+  // No-op (all counts zero) when options().remesh is false.
+  RemeshStats Remesh();
 
   float MeanTargetEdgeLength() const;
 

@@ -3,7 +3,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <functional>
 #include <random>
+#include <string>
 
 #include <Eigen/Geometry>
 
@@ -274,6 +276,77 @@ TEST(ContinuousRemesher, RejectsBadInput) {
   bad.edge_length_min = 0;
   const TriangleMesh sphere = testing::Icosphere(1);
   EXPECT_THROW(ContinuousRemesher(sphere.positions, sphere.faces, bad), InputError);
+}
+
+std::string ErrorOf(const std::function<void()>& fn) {
+  try {
+    fn();
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(ContinuousRemesher, OptionsChangedLaterAreCheckedAsAtConstruction) {
+  const TriangleMesh sphere = testing::Icosphere(1);
+  auto break_limits = [](RemeshOptions* o) { o->edge_length_max = 0.5f * o->edge_length_min; };
+  auto break_tolerance = [](RemeshOptions* o) { o->edge_length_tolerance = 1.0f; };
+  using Breaker = std::function<void(RemeshOptions*)>;
+  for (const Breaker& breaks : {Breaker(break_limits), Breaker(break_tolerance)}) {
+    RemeshOptions bad;
+    breaks(&bad);
+    const std::string at_construction = ErrorOf([&] { ContinuousRemesher(sphere.positions, sphere.faces, bad); });
+    ASSERT_FALSE(at_construction.empty());
+
+    ContinuousRemesher remesher(sphere.positions, sphere.faces, RemeshOptions());
+    breaks(&remesher.mutable_options());
+    const std::vector<Eigen::Vector3f> zero(sphere.positions.size(), Eigen::Vector3f::Zero());
+    EXPECT_EQ(ErrorOf([&] { remesher.Step(zero); }), at_construction);
+    EXPECT_EQ(ErrorOf([&] { remesher.Remesh(); }), at_construction);
+    // Refused before touching anything; valid options work again.
+    EXPECT_EQ(remesher.positions(), sphere.positions);
+    EXPECT_EQ(remesher.faces(), sphere.faces);
+    remesher.mutable_options() = RemeshOptions();
+    EXPECT_EQ(ErrorOf([&] { remesher.Step(zero); }), "");
+    EXPECT_EQ(ErrorOf([&] { remesher.Remesh(); }), "");
+  }
+}
+
+// On a closed mesh a split adds two faces, a collapse removes two and a flip none: the counts must account
+// for the change in face count of every pass.
+TEST(ContinuousRemesher, StatsAccountForTheFaceCount) {
+  const TriangleMesh sphere = testing::Icosphere(3);  // edges ~0.1
+  RemeshOptions options;
+  options.edge_length_min = 0.05f;
+  options.edge_length_max = 0.3f;
+  ContinuousRemesher remesher(sphere.positions, sphere.faces, options);
+  RemeshStats total;
+  std::mt19937 rng(5);
+  std::normal_distribution<float> noise(0.0f, 1.0f);
+  for (int round = 0; round < 30; ++round) {
+    // A steady pull (the surface travels) grows the targets: collapses; then noise (settled) shrinks them:
+    // splits.
+    std::vector<Eigen::Vector3f> grad(remesher.positions().size());
+    for (size_t v = 0; v < grad.size(); ++v) {
+      grad[v] = round < 10 ? remesher.positions()[v] : Eigen::Vector3f(noise(rng), noise(rng), noise(rng));
+    }
+    remesher.Step(grad);
+    const int faces_before = static_cast<int>(remesher.faces().size());
+    const RemeshStats stats = remesher.Remesh();
+    EXPECT_EQ(static_cast<int>(remesher.faces().size()), faces_before + 2 * stats.splits - 2 * stats.collapses)
+        << "round " << round;
+    total += stats;
+  }
+  EXPECT_GT(total.splits, 0);
+  EXPECT_GT(total.collapses, 0);
+  EXPECT_GT(total.flips, 0);
+  EXPECT_GT(total.collapse_rejected.Total() + total.flip_rejected.Total(), 0);
+  EXPECT_EQ(total.collapse_rejected.boundary, 0);  // closed: no boundary
+
+  options.remesh = false;
+  ContinuousRemesher fixed(sphere.positions, sphere.faces, options);
+  const RemeshStats none = fixed.Remesh();
+  EXPECT_EQ(none.splits + none.collapses + none.flips, 0);
 }
 
 // The MetaDrive traffic cone (OBJ export of the Sketchfab model), welded. What the test holds the remesher

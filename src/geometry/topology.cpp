@@ -3,10 +3,12 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <span>
 #include <unordered_map>
 
 #include "core/error.h"
 #include "core/union_find.h"
+#include "geometry/edge_adjacency.h"
 
 namespace sd::geometry {
 namespace {
@@ -44,14 +46,6 @@ TopologyReport AnalyzeTopology(int num_vertices, const std::vector<Eigen::Vector
   r.num_vertices = num_vertices;
   r.num_faces = num_faces;
 
-  // Half-edge h = 3 f + k runs from corner k to corner k+1 of face f. Sorting them by undirected key groups
-  // the faces of each edge (a sorted edge list: no hashing, cache-friendly).
-  struct HalfEdge {
-    uint64_t key;
-    int h;
-  };
-  std::vector<HalfEdge> half_edges;
-  half_edges.reserve(faces.size() * 3);
   std::vector<char> referenced(num_vertices, 0);
   for (int f = 0; f < num_faces; ++f) {
     const Eigen::Vector3i& t = faces[f];
@@ -60,18 +54,10 @@ TopologyReport AnalyzeTopology(int num_vertices, const std::vector<Eigen::Vector
                                  << ")");
     }
     for (int k = 0; k < 3; ++k) referenced[t[k]] = 1;
-    // Degenerate faces have no well-defined edges or fans: counted, then left out of everything else.
-    if (IsDegenerate(t)) {
-      ++r.degenerate_faces;
-      continue;
-    }
-    for (int k = 0; k < 3; ++k) {
-      const uint32_t a = static_cast<uint32_t>(t[k]), b = static_cast<uint32_t>(t[(k + 1) % 3]);
-      half_edges.push_back({(uint64_t{std::min(a, b)} << 32) | std::max(a, b), 3 * f + k});
-    }
+    if (IsDegenerate(t)) ++r.degenerate_faces;
   }
-  std::sort(half_edges.begin(), half_edges.end(),
-            [](const HalfEdge& x, const HalfEdge& y) { return x.key < y.key || (x.key == y.key && x.h < y.h); });
+  // Degenerate faces have no well-defined edges or fans: counted, then left out of everything else.
+  const EdgeAdjacency adjacency = BuildEdgeAdjacency(num_vertices, faces, DegenerateFaces::kSkip);
 
   // Corners (f, k) are united when their faces share an edge through that vertex; a vertex is manifold when
   // all its corners end up in one set, i.e. its faces form a single fan (open or closed).
@@ -79,23 +65,21 @@ TopologyReport AnalyzeTopology(int num_vertices, const std::vector<Eigen::Vector
   UnionFind face_sets(faces.size());
   auto from = [&](int h) { return faces[h / 3][h % 3]; };
   auto corner_of = [&](int h, int v) { return from(h) == v ? h : 3 * (h / 3) + (h % 3 + 1) % 3; };
-  for (size_t i = 0; i < half_edges.size();) {
-    size_t j = i;
-    while (j < half_edges.size() && half_edges[j].key == half_edges[i].key) ++j;
-    const int count = static_cast<int>(j - i);
-    ++r.num_edges;
+  r.num_edges = adjacency.NumEdges();
+  for (int e = 0; e < adjacency.NumEdges(); ++e) {
+    const std::span<const int> half_edges = adjacency.HalfEdgesOf(e);
+    const size_t count = half_edges.size();
     if (count == 1) ++r.boundary_edges;
     if (count > 2) ++r.nonmanifold_edges;
-    if (count == 2 && from(half_edges[i].h) == from(half_edges[i + 1].h)) ++r.inconsistent_edges;
-    const int h0 = half_edges[i].h;
-    const int a = static_cast<int>(half_edges[i].key >> 32), b = static_cast<int>(half_edges[i].key & 0xffffffffu);
-    for (size_t k = i + 1; k < j; ++k) {
-      const int h = half_edges[k].h;
+    if (count == 2 && from(half_edges[0]) == from(half_edges[1])) ++r.inconsistent_edges;
+    const int h0 = half_edges[0];
+    const int a = adjacency.edges[e][0], b = adjacency.edges[e][1];
+    for (size_t k = 1; k < count; ++k) {
+      const int h = half_edges[k];
       face_sets.Unite(h0 / 3, h / 3);
       corners.Unite(corner_of(h0, a), corner_of(h, a));
       corners.Unite(corner_of(h0, b), corner_of(h, b));
     }
-    i = j;
   }
 
   // Each corner set is one fan, and its root is one of its corners: count roots per vertex.

@@ -113,7 +113,8 @@ void ViewLossAndGradient(const std::vector<Eigen::Vector3f>& positions, const st
   s.grad_normals.assign(nv, Eigen::Vector3f::Zero());
   s.clip.resize(4 * nv);
   raster::TransformToClip(Floats(positions), s.clip_from_world, s.clip);
-  raster::Rasterize(s.clip, tris, w, h, &s.rast);
+  const raster::RasterizeInputs raster_in{s.clip, tris, w, h};
+  raster::Rasterize(raster_in, &s.rast);
 
   s.grad_clip.assign(4 * nv, 0.0f);
   s.grad_bary.assign(2 * np, 0.0f);
@@ -121,7 +122,8 @@ void ViewLossAndGradient(const std::vector<Eigen::Vector3f>& positions, const st
   // Normal term: re-normalised interpolated normals against the target where both cover the pixel.
   if (o.lambda_normal > 0 && s.valid_normal_pixels > 0) {
     s.normal_img.resize(3 * np);
-    raster::Interpolate(Floats(vertex_normals), 3, tris, s.rast, s.normal_img);
+    const raster::InterpolateInputs normals_in{Floats(vertex_normals), 3, tris, s.rast};
+    raster::Interpolate(normals_in, s.normal_img);
     s.grad_normal_img.assign(3 * np, 0.0f);
     const float scale = o.lambda_normal * view_weight / static_cast<float>(s.valid_normal_pixels);
     double sum = 0;
@@ -142,9 +144,8 @@ void ViewLossAndGradient(const std::vector<Eigen::Vector3f>& positions, const st
       for (int c = 0; c < 3; ++c) s.grad_normal_img[3 * p + c] = g[c];
     }
     s.losses.normal = sum / static_cast<double>(s.valid_normal_pixels) * view_weight;
-    raster::InterpolateBackward(Floats(vertex_normals), 3, tris, s.rast, s.grad_normal_img,
-                                MutableFloats(s.grad_normals), s.grad_bary);
-    raster::RasterizeBackward(s.clip, tris, s.rast, s.grad_bary, {}, s.grad_clip);
+    raster::InterpolateBackward(normals_in, s.grad_normal_img, MutableFloats(s.grad_normals), s.grad_bary);
+    raster::RasterizeBackward(raster_in, s.rast, s.grad_bary, {}, s.grad_clip);
   }
 
   // Silhouette term: antialiased coverage against the target mask.
@@ -152,7 +153,8 @@ void ViewLossAndGradient(const std::vector<Eigen::Vector3f>& positions, const st
     s.coverage.resize(np);
     for (size_t p = 0; p < np; ++p) s.coverage[p] = s.rast.triangle[p] >= 0 ? 1.0f : 0.0f;
     s.aa.resize(np);
-    raster::Antialias(s.coverage, 1, s.rast, s.clip, tris, topology, s.aa, &s.aa_record, /*color_gradient=*/false);
+    const raster::AntialiasInputs coverage_in{s.coverage, 1, s.rast, s.clip, tris, topology};
+    raster::Antialias(coverage_in, s.aa, &s.aa_record, /*color_gradient=*/false);
     s.grad_aa.resize(np);
     double sum = 0;
     const float scale = o.lambda_mask * view_weight / s.mask_area;
@@ -168,8 +170,7 @@ void ViewLossAndGradient(const std::vector<Eigen::Vector3f>& positions, const st
     }
     s.losses.mask = sum / s.mask_area * view_weight;
     s.grad_coverage.assign(np, 0.0f);
-    raster::AntialiasBackward(s.coverage, 1, s.rast, s.clip, tris, topology, s.aa_record, s.grad_aa, s.grad_coverage,
-                              s.grad_clip);
+    raster::AntialiasBackward(coverage_in, s.aa_record, s.grad_aa, s.grad_coverage, s.grad_clip);
   }
   raster::TransformToClipBackward(s.clip_from_world, s.grad_clip, MutableFloats(s.grad_positions));
 }
@@ -195,7 +196,8 @@ Losses LossAndGradient(const std::vector<Eigen::Vector3f>& positions, const std:
   if (gpu != nullptr) {
     // The views' gradients come summed (in view order, as below).
     const std::vector<raster::NormalMaskLoss::Terms> terms =
-        gpu->Evaluate(Floats(positions), Floats(vertex_normals), tris, cache.edges, MutableFloats(*grad), MutableFloats(grad_vn));
+        gpu->Evaluate({Floats(positions), Floats(vertex_normals), tris, cache.edges}, MutableFloats(*grad),
+                      MutableFloats(grad_vn));
     for (const raster::NormalMaskLoss::Terms& t : terms) losses.normal += t.normal, losses.mask += t.mask;
   } else {
     std::vector<std::exception_ptr> errors(views.size());

@@ -149,8 +149,8 @@ PreparedView PrepareView(const ColorView& in, const std::vector<Eigen::Vector3f>
   const size_t nv = positions.size();
   std::vector<float> clip(4 * nv);
   raster::TransformToClip({reinterpret_cast<const float*>(positions.data()), 3 * nv}, M, clip);
-  raster::Rasterize(clip, {reinterpret_cast<const int32_t*>(faces.data()), 3 * faces.size()}, cam.width,
-                    cam.height, &pv.rast);
+  raster::Rasterize({clip, {reinterpret_cast<const int32_t*>(faces.data()), 3 * faces.size()}, cam.width, cam.height},
+                    &pv.rast);
   pv.depth.resize(nv);
   const Eigen::Matrix3f R = pv.T_cam_world.Rotation().cast<float>();
   const Eigen::Vector3f t = pv.T_cam_world.translation.cast<float>();

@@ -24,8 +24,8 @@ ColorView Render(const TriangleMesh& mesh, const ViewCamera& view, Shade shade) 
   std::vector<float> clip(4 * mesh.NumVertices());
   raster::TransformToClip({reinterpret_cast<const float*>(mesh.positions.data()), 3 * mesh.NumVertices()}, M, clip);
   raster::RasterBuffer rast;
-  raster::Rasterize(clip, {reinterpret_cast<const int32_t*>(mesh.faces.data()), 3 * mesh.NumFaces()}, cam.width,
-                    cam.height, &rast);
+  raster::Rasterize(
+      {clip, {reinterpret_cast<const int32_t*>(mesh.faces.data()), 3 * mesh.NumFaces()}, cam.width, cam.height}, &rast);
   ColorView out;
   out.view = view;
   out.color = ImageF(cam.width, cam.height, 3);

@@ -567,7 +567,7 @@ ImageU8 BakeTexture(const TriangleMesh& mesh, const ColorViewSet& views, int tex
     std::vector<float> clip(4 * mesh.NumVertices());
     raster::TransformToClip(positions, b.clip_from_world, clip);
     raster::RasterBuffer rast;
-    raster::Rasterize(clip, tris, b.width, b.height, &rast);
+    raster::Rasterize({clip, tris, b.width, b.height}, &rast);
     b.triangle = std::move(rast.triangle);
     b.depth.assign(rast.NumPixels(), std::numeric_limits<float>::infinity());
     b.point.assign(rast.NumPixels(), Eigen::Vector3f::Zero());
@@ -594,7 +594,7 @@ ImageU8 BakeTexture(const TriangleMesh& mesh, const ColorViewSet& views, int tex
     uv_clip[4 * v + 3] = 1;
   }
   raster::RasterBuffer uv_rast;
-  raster::Rasterize(uv_clip, tris, size, size, &uv_rast);
+  raster::Rasterize({uv_clip, tris, size, size}, &uv_rast);
   std::vector<int32_t>& texel_tri = uv_rast.triangle;
   std::vector<float>& texel_bary = uv_rast.bary;
   {

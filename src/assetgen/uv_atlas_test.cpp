@@ -196,8 +196,9 @@ raster::RasterBuffer RasterizeAt(const TriangleMesh& mesh, const ViewCamera& vie
   std::vector<float> clip(4 * mesh.NumVertices());
   raster::TransformToClip({reinterpret_cast<const float*>(mesh.positions.data()), 3 * mesh.NumVertices()}, M, clip);
   raster::RasterBuffer rast;
-  raster::Rasterize(clip, {reinterpret_cast<const int32_t*>(mesh.faces.data()), 3 * mesh.NumFaces()},
-                    view.camera.width, view.camera.height, &rast);
+  raster::Rasterize({clip, {reinterpret_cast<const int32_t*>(mesh.faces.data()), 3 * mesh.NumFaces()},
+                     view.camera.width, view.camera.height},
+                    &rast);
   return rast;
 }
 
@@ -241,8 +242,9 @@ ImageF RenderGroundTruth(const TriangleMesh& mesh, const std::vector<Eigen::Vect
 ImageF RenderTextured(const TriangleMesh& mesh, const ImageU8& texture, const ViewCamera& cam) {
   const raster::RasterBuffer rast = RasterizeAt(mesh, cam);
   std::vector<float> uv(2 * rast.NumPixels());
-  raster::Interpolate({reinterpret_cast<const float*>(mesh.uvs.data()), 2 * mesh.NumVertices()}, 2,
-                      {reinterpret_cast<const int32_t*>(mesh.faces.data()), 3 * mesh.NumFaces()}, rast, uv);
+  raster::Interpolate({{reinterpret_cast<const float*>(mesh.uvs.data()), 2 * mesh.NumVertices()}, 2,
+                       {reinterpret_cast<const int32_t*>(mesh.faces.data()), 3 * mesh.NumFaces()}, rast},
+                      uv);
   ImageF out(rast.width, rast.height, 3);
   for (size_t p = 0; p < rast.NumPixels(); ++p) {
     if (rast.triangle[p] < 0) continue;

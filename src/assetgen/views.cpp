@@ -178,8 +178,9 @@ raster::RasterBuffer RasterizeView(const TriangleMesh& mesh, const PinholeCamera
   raster::TransformToClip({reinterpret_cast<const float*>(mesh.positions.data()), 3 * mesh.NumVertices()},
                           ClipFromWorldAround(camera, T_world_cam, sphere), clip);
   raster::RasterBuffer rast;
-  raster::Rasterize(clip, {reinterpret_cast<const int32_t*>(mesh.faces.data()), 3 * mesh.NumFaces()}, camera.width,
-                    camera.height, &rast);
+  raster::Rasterize(
+      {clip, {reinterpret_cast<const int32_t*>(mesh.faces.data()), 3 * mesh.NumFaces()}, camera.width, camera.height},
+      &rast);
   return rast;
 }
 

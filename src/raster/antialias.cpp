@@ -59,29 +59,30 @@ struct Scene {
   std::vector<int8_t> facing;                // per triangle: ScreenFacing
   shared::AntialiasScene view;
 
-  Scene(const RasterBuffer& r, std::span<const float> clip_pos, std::span<const int32_t> t, const EdgeTopology& top)
-      : screen(internal::NumVertices(clip_pos)), facing(t.size() / 3) {
+  explicit Scene(const AntialiasInputs& in) : screen(internal::NumVertices(in.clip_pos)), facing(in.tris.size() / 3) {
+    const RasterBuffer& r = in.rast;
+    const float* clip_pos = in.clip_pos.data();
+    const int32_t* t = in.tris.data();
     ParallelForRange(0, screen.size(), 1024, [&](size_t begin, size_t end) {
       for (size_t v = begin; v < end; ++v)
-        screen[v] = shared::Project(clip_pos.data(), static_cast<int32_t>(v), r.width, r.height);
+        screen[v] = shared::Project(clip_pos, static_cast<int32_t>(v), r.width, r.height);
     });
     ParallelForRange(0, facing.size(), 1024, [&](size_t begin, size_t end) {
-      for (size_t f = begin; f < end; ++f) facing[f] = static_cast<int8_t>(shared::ScreenFacing(clip_pos.data(), t.data(), f));
+      for (size_t f = begin; f < end; ++f) facing[f] = static_cast<int8_t>(shared::ScreenFacing(clip_pos, t, f));
     });
-    view = {r.width, r.height, r.triangle.data(), r.depth.data(), t.data(), top.neighbour.data(), screen.data(),
+    view = {r.width, r.height, r.triangle.data(), r.depth.data(), t, in.topology.neighbour.data(), screen.data(),
             facing.data()};
   }
 };
 
-void CheckAntialiasArgs(std::span<const float> color, int channels, const RasterBuffer& rast,
-                        std::span<const float> clip_pos, std::span<const int32_t> tris, const EdgeTopology& topology) {
-  internal::CheckRaster(rast);
-  internal::CheckTriangles(clip_pos, tris);
-  internal::CheckVertexIndices(tris, internal::NumVertices(clip_pos));
-  internal::CheckRasterTriangles(rast, tris);
-  SD_CHECK(channels > 0 && color.size() == static_cast<size_t>(channels) * rast.NumPixels(),
-           << "color: " << color.size() << " floats for " << channels << " channels");
-  SD_CHECK(topology.neighbour.size() == tris.size(), << "topology built for another mesh");
+void CheckInputs(const AntialiasInputs& in) {
+  internal::CheckRaster(in.rast);
+  internal::CheckTriangles(in.clip_pos, in.tris);
+  internal::CheckVertexIndices(in.tris, internal::NumVertices(in.clip_pos));
+  internal::CheckRasterTriangles(in.rast, in.tris);
+  SD_CHECK(in.channels > 0 && in.color.size() == static_cast<size_t>(in.channels) * in.rast.NumPixels(),
+           << "color: " << in.color.size() << " floats for " << in.channels << " channels");
+  SD_CHECK(in.topology.neighbour.size() == in.tris.size(), << "topology built for another mesh");
 }
 
 #if SYNTHDRIVE_WITH_CUDA
@@ -90,23 +91,22 @@ static_assert(sizeof(AntialiasRecord::PixelPair) == sizeof(cuda::PairRecord) &&
 #endif
 
 // The silhouette pairs of the image, in row order, and the geometry of each.
-void FindPairs(std::span<const float> color, int channels, const RasterBuffer& rast, std::span<const float> clip_pos,
-               std::span<const int32_t> tris, const EdgeTopology& topology, bool color_gradient,
-               std::vector<AntialiasRecord::PixelPair>* pairs, std::vector<PairGeometry>* geometry) {
+void FindPairs(const AntialiasInputs& in, bool color_gradient, std::vector<AntialiasRecord::PixelPair>* pairs,
+               std::vector<PairGeometry>* geometry) {
   if (UseCuda()) {
 #if SYNTHDRIVE_WITH_CUDA
     std::vector<cuda::PairRecord> found;
-    cuda::FindAntialiasPairs(color.data(), channels, internal::View(rast), clip_pos.data(),
-                             internal::NumVertices(clip_pos), tris.data(), tris.size() / 3, topology.neighbour.data(),
-                             !color_gradient, &found, geometry);
+    cuda::FindAntialiasPairs(internal::ToCuda(in), !color_gradient, &found, geometry);
     pairs->resize(found.size());
     if (!found.empty()) std::memcpy(pairs->data(), found.data(), found.size() * sizeof(cuda::PairRecord));
     return;
 #endif
   }
-  const Scene sc(rast, clip_pos, tris, topology);
+  const Scene sc(in);
+  const RasterBuffer& rast = in.rast;
+  const std::span<const float> color = in.color;
   const int width = rast.width, height = rast.height;
-  const size_t C = static_cast<size_t>(channels);
+  const size_t C = static_cast<size_t>(in.channels);
   auto same_color = [&](int32_t a, int32_t b) {
     for (size_t c = 0; c < C; ++c)
       if (color[C * a + c] != color[C * b + c]) return false;
@@ -133,21 +133,18 @@ void FindPairs(std::span<const float> color, int channels, const RasterBuffer& r
 }
 
 // The geometry of recorded pairs, recomputed from the same inputs (for the backward pass).
-std::vector<PairGeometry> RecordedGeometry(const RasterBuffer& rast, std::span<const float> clip_pos,
-                                           std::span<const int32_t> tris, const EdgeTopology& topology,
-                                           const AntialiasRecord& record) {
+std::vector<PairGeometry> RecordedGeometry(const AntialiasInputs& in, const AntialiasRecord& record) {
   std::vector<PairGeometry> geometry(record.pairs.size());
   if (UseCuda()) {
 #if SYNTHDRIVE_WITH_CUDA
-    const bool match = cuda::RecordedPairGeometry(
-        internal::View(rast), clip_pos.data(), internal::NumVertices(clip_pos), tris.data(), tris.size() / 3,
-        topology.neighbour.data(), reinterpret_cast<const cuda::PairRecord*>(record.pairs.data()), record.pairs.size(),
-        &geometry);
+    const bool match = cuda::RecordedPairGeometry(internal::ToCuda(in),
+                                                  reinterpret_cast<const cuda::PairRecord*>(record.pairs.data()),
+                                                  record.pairs.size(), &geometry);
     SD_CHECK(match, << "AntialiasRecord does not match the geometry it is used with");
     return geometry;
 #endif
   }
-  const Scene sc(rast, clip_pos, tris, topology);
+  const Scene sc(in);
   for (size_t n = 0; n < record.pairs.size(); ++n) {
     const AntialiasRecord::PixelPair& p = record.pairs[n];
     SD_CHECK(shared::RecordedPair(sc.view, p.pixel_a, p.pixel_b, p.triangle, p.edge, &geometry[n]),
@@ -190,17 +187,16 @@ EdgeTopology BuildEdgeTopology(std::span<const int32_t> tris, int num_vertices) 
   return topology;
 }
 
-void Antialias(std::span<const float> color, int channels, const RasterBuffer& rast, std::span<const float> clip_pos,
-               std::span<const int32_t> tris, const EdgeTopology& topology, std::span<float> out,
-               AntialiasRecord* record, bool color_gradient) {
-  CheckAntialiasArgs(color, channels, rast, clip_pos, tris, topology);
+void Antialias(const AntialiasInputs& in, std::span<float> out, AntialiasRecord* record, bool color_gradient) {
+  CheckInputs(in);
+  const std::span<const float> color = in.color;
   SD_CHECK(out.size() == color.size(), << "out: " << out.size());
   SD_CHECK(out.data() != color.data(), << "Antialias cannot work in place");
   SD_CHECK(record != nullptr);
   std::vector<PairGeometry> geometry;
-  FindPairs(color, channels, rast, clip_pos, tris, topology, color_gradient, &record->pairs, &geometry);
+  FindPairs(in, color_gradient, &record->pairs, &geometry);
 
-  const size_t C = static_cast<size_t>(channels);
+  const size_t C = static_cast<size_t>(in.channels);
   std::copy(color.begin(), color.end(), out.begin());
   for (const PairGeometry& g : geometry) {
     const shared::Blend blend = shared::BlendOf(g);
@@ -209,16 +205,15 @@ void Antialias(std::span<const float> color, int channels, const RasterBuffer& r
   }
 }
 
-void AntialiasBackward(std::span<const float> color, int channels, const RasterBuffer& rast,
-                       std::span<const float> clip_pos, std::span<const int32_t> tris, const EdgeTopology& topology,
-                       const AntialiasRecord& record, std::span<const float> grad_out, std::span<float> grad_color,
-                       std::span<float> grad_clip) {
-  CheckAntialiasArgs(color, channels, rast, clip_pos, tris, topology);
+void AntialiasBackward(const AntialiasInputs& in, const AntialiasRecord& record, std::span<const float> grad_out,
+                       std::span<float> grad_color, std::span<float> grad_clip) {
+  CheckInputs(in);
+  const std::span<const float> color = in.color;
   SD_CHECK(grad_out.size() == color.size(), << "grad_out: " << grad_out.size());
   SD_CHECK(grad_color.size() == color.size(), << "grad_color: " << grad_color.size());
-  SD_CHECK(grad_clip.size() == clip_pos.size(), << "grad_clip: " << grad_clip.size());
-  const std::vector<PairGeometry> geometry = RecordedGeometry(rast, clip_pos, tris, topology, record);
-  const size_t C = static_cast<size_t>(channels);
+  SD_CHECK(grad_clip.size() == in.clip_pos.size(), << "grad_clip: " << grad_clip.size());
+  const std::vector<PairGeometry> geometry = RecordedGeometry(in, record);
+  const size_t C = static_cast<size_t>(in.channels);
 
   for (size_t n = 0; n < grad_out.size(); ++n) grad_color[n] += grad_out[n];  // out = color + deltas
   std::vector<double> dL_dclip(grad_clip.size(), 0.0);
@@ -235,7 +230,7 @@ void AntialiasBackward(std::span<const float> color, int channels, const RasterB
     const double dL_dt = dL_dalpha * blend.dalpha_dt;
     if (dL_dt == 0) continue;
     double d[2][3];
-    shared::CrossingClipGradient(g, rast.width, dL_dt, d);
+    shared::CrossingClipGradient(g, in.rast.width, dL_dt, d);
     for (int e = 0; e < 2; ++e) {
       double* out = &dL_dclip[4 * static_cast<size_t>(g.end_vertices[e])];
       out[0] += d[e][0];

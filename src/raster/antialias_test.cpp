@@ -43,10 +43,10 @@ Quad MakeQuad(double u0, double v0, double u1, double v1, int width, int height)
 std::vector<float> AntialiasedMask(const std::vector<float>& clip, const std::vector<int32_t>& tris,
                                    const EdgeTopology& topology, int width, int height, RasterBuffer* rast,
                                    AntialiasRecord* record) {
-  Rasterize(clip, tris, width, height, rast);
+  Rasterize({clip, tris, width, height}, rast);
   const std::vector<float> mask = CoverageMask(*rast);
   std::vector<float> out(mask.size());
-  Antialias(mask, 1, *rast, clip, tris, topology, out, record);
+  Antialias({mask, 1, *rast, clip, tris, topology}, out, record);
   return out;
 }
 
@@ -169,12 +169,12 @@ TEST(Antialias, InteriorEdgesAreNotBlended) {
   const Quad q = MakeQuad(-2, -2, 18, 18, kSize, kSize);
   const EdgeTopology topology = BuildEdgeTopology(q.tris, 4);
   RasterBuffer rast;
-  Rasterize(q.clip, q.tris, kSize, kSize, &rast);
+  Rasterize({q.clip, q.tris, kSize, kSize}, &rast);
   std::vector<float> color(rast.NumPixels());
   for (size_t p = 0; p < color.size(); ++p) color[p] = static_cast<float>(rast.triangle[p]);  // differs across diagonal
   std::vector<float> out(color.size());
   AntialiasRecord record;
-  Antialias(color, 1, rast, q.clip, q.tris, topology, out, &record);
+  Antialias({color, 1, rast, q.clip, q.tris, topology}, out, &record);
   EXPECT_TRUE(record.pairs.empty());
   EXPECT_EQ(out, color);
 }
@@ -196,12 +196,12 @@ SphereView MakeSphereView(int size, uint32_t seed) {
   std::mt19937 rng(seed);
   const PinholeCamera cam = testing::SquareCamera(size, 0.8);
   s.clip = testing::ToClip(s.mesh.positions, ClipFromWorld(cam, testing::LookAtOrigin(rng, 3.0), 0.5f, 6.f));
-  Rasterize(s.clip, s.mesh.tris, size, size, &s.rast);
+  Rasterize({s.clip, s.mesh.tris, size, size}, &s.rast);
   std::uniform_real_distribution<float> unit(0, 1);
   std::vector<float> vertex_color(3 * s.mesh.NumVertices());
   for (float& c : vertex_color) c = unit(rng);
   s.color.resize(3 * s.rast.NumPixels());
-  Interpolate(vertex_color, 3, s.mesh.tris, s.rast, s.color);
+  Interpolate({vertex_color, 3, s.mesh.tris, s.rast}, s.color);
   return s;
 }
 
@@ -246,7 +246,7 @@ TEST(AntialiasBackward, GeometryGradientMatchesFiniteDifferences) {
     for (float& w : weights) w = unit(rng);
     auto run = [&](const std::vector<float>& clip, AntialiasRecord* record) {
       std::vector<float> out(s.color.size());
-      Antialias(s.color, 3, s.rast, clip, s.mesh.tris, s.topology, out, record);
+      Antialias({s.color, 3, s.rast, clip, s.mesh.tris, s.topology}, out, record);
       double l = 0;
       for (size_t n = 0; n < out.size(); ++n) l += double(weights[n]) * out[n];
       return l;
@@ -255,7 +255,7 @@ TEST(AntialiasBackward, GeometryGradientMatchesFiniteDifferences) {
     run(s.clip, &record);
     ASSERT_GT(record.pairs.size(), 100u) << "the silhouette should cross many pixel pairs";
     std::vector<float> grad_color(s.color.size(), 0.0f), grad_clip(s.clip.size(), 0.0f);
-    AntialiasBackward(s.color, 3, s.rast, s.clip, s.mesh.tris, s.topology, record, weights, grad_color, grad_clip);
+    AntialiasBackward({s.color, 3, s.rast, s.clip, s.mesh.tris, s.topology}, record, weights, grad_color, grad_clip);
 
     const float h = 3e-4f;
     int checked = 0, nonzero = 0, skipped = 0;
@@ -297,15 +297,15 @@ TEST(Antialias, SkippingEqualColoursKeepsOutputAndGeometryGradient) {
   for (float& g : grad_out) g = unit(rng);
   std::vector<float> out_full(coverage.size()), out_fast(coverage.size());
   AntialiasRecord full, fast;
-  Antialias(coverage, 1, s.rast, s.clip, s.mesh.tris, s.topology, out_full, &full, true);
-  Antialias(coverage, 1, s.rast, s.clip, s.mesh.tris, s.topology, out_fast, &fast, false);
+  Antialias({coverage, 1, s.rast, s.clip, s.mesh.tris, s.topology}, out_full, &full, true);
+  Antialias({coverage, 1, s.rast, s.clip, s.mesh.tris, s.topology}, out_fast, &fast, false);
   EXPECT_LT(fast.pairs.size(), full.pairs.size());  // the bumpy sphere has interior silhouettes
   EXPECT_GT(fast.pairs.size(), 0u);
   EXPECT_EQ(out_full, out_fast);
   std::vector<float> gc_full(coverage.size()), gc_fast(coverage.size());
   std::vector<float> gx_full(s.clip.size()), gx_fast(s.clip.size());
-  AntialiasBackward(coverage, 1, s.rast, s.clip, s.mesh.tris, s.topology, full, grad_out, gc_full, gx_full);
-  AntialiasBackward(coverage, 1, s.rast, s.clip, s.mesh.tris, s.topology, fast, grad_out, gc_fast, gx_fast);
+  AntialiasBackward({coverage, 1, s.rast, s.clip, s.mesh.tris, s.topology}, full, grad_out, gc_full, gx_full);
+  AntialiasBackward({coverage, 1, s.rast, s.clip, s.mesh.tris, s.topology}, fast, grad_out, gc_fast, gx_fast);
   for (size_t i = 0; i < gx_full.size(); ++i) EXPECT_NEAR(gx_full[i], gx_fast[i], 1e-5f * (1 + std::abs(gx_full[i]))) << i;
 }
 
@@ -319,16 +319,16 @@ TEST(AntialiasBackward, ColorGradientMatchesFiniteDifferences) {
   auto loss = [&](const std::vector<float>& color) {
     std::vector<float> out(color.size());
     AntialiasRecord record;
-    Antialias(color, 3, s.rast, s.clip, s.mesh.tris, s.topology, out, &record);
+    Antialias({color, 3, s.rast, s.clip, s.mesh.tris, s.topology}, out, &record);
     double l = 0;
     for (size_t n = 0; n < out.size(); ++n) l += double(weights[n]) * out[n];
     return l;
   };
   AntialiasRecord record;
   std::vector<float> out(s.color.size());
-  Antialias(s.color, 3, s.rast, s.clip, s.mesh.tris, s.topology, out, &record);
+  Antialias({s.color, 3, s.rast, s.clip, s.mesh.tris, s.topology}, out, &record);
   std::vector<float> grad_color(s.color.size(), 0.0f), grad_clip(s.clip.size(), 0.0f);
-  AntialiasBackward(s.color, 3, s.rast, s.clip, s.mesh.tris, s.topology, record, weights, grad_color, grad_clip);
+  AntialiasBackward({s.color, 3, s.rast, s.clip, s.mesh.tris, s.topology}, record, weights, grad_color, grad_clip);
   const float h = 1e-2f;
   for (size_t n = 0; n < s.color.size(); ++n) {
     std::vector<float> plus = s.color, minus = s.color;
@@ -336,6 +336,33 @@ TEST(AntialiasBackward, ColorGradientMatchesFiniteDifferences) {
     const double fd = (loss(plus) - loss(minus)) / (2.0 * h);
     ASSERT_NEAR(grad_color[n], fd, 1e-3 * (1 + std::abs(fd))) << n;
   }
+}
+
+// The per-pair code indexes vertices and triangles without checks: a tris array naming vertices past the clip
+// positions, or a raster buffer of a bigger mesh (here: the same sphere, of which only the first triangles are
+// passed), stop both passes at their entry with the culprit named instead of reading out of bounds.
+TEST(AntialiasDeathTest, IndicesOutsideTheirBuffersAreContractViolations) {
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  const SphereView s = MakeSphereView(24, 2);
+  std::vector<float> out(s.color.size()), grad_color(s.color.size()), grad_clip(s.clip.size());
+  AntialiasRecord record;
+  const std::vector<float> too_few(s.clip.begin(), s.clip.end() - 4);  // the south pole's vertex is missing
+  std::vector<float> grad_too_few(too_few.size());
+  EXPECT_DEATH(Antialias({s.color, 3, s.rast, too_few, s.mesh.tris, s.topology}, out, &record), "names vertex");
+  EXPECT_DEATH(AntialiasBackward({s.color, 3, s.rast, too_few, s.mesh.tris, s.topology}, record, s.color,
+                                 grad_color, grad_too_few),
+               "names vertex");
+  const std::vector<int32_t> first_triangles(s.mesh.tris.begin(), s.mesh.tris.begin() + 3 * 14);
+  const EdgeTopology first_topology = BuildEdgeTopology(first_triangles, s.mesh.NumVertices());
+  ASSERT_GT(*std::max_element(s.rast.triangle.begin(), s.rast.triangle.end()), 13);
+  EXPECT_DEATH(Antialias({s.color, 3, s.rast, s.clip, first_triangles, first_topology}, out, &record),
+               "a raster buffer of another mesh");
+  EXPECT_DEATH(AntialiasBackward({s.color, 3, s.rast, s.clip, first_triangles, first_topology}, record, s.color,
+                                 grad_color, grad_clip),
+               "a raster buffer of another mesh");
+  const AntialiasInputs matching{s.color, 3, s.rast, s.clip, s.mesh.tris, s.topology};
+  Antialias(matching, out, &record);
+  AntialiasBackward(matching, record, s.color, grad_color, grad_clip);
 }
 
 // --- the whole chain ---------------------------------------------------------------------------------------
@@ -371,21 +398,21 @@ TEST(AntialiasBackward, WholeChainMatchesFiniteDifferencesOnWorldPositions) {
     auto forward = [&](const std::vector<float>& positions) {
       Forward f;
       f.clip = testing::ToClip(positions, M);
-      Rasterize(f.clip, mesh.tris, kSize, kSize, &f.rast);
+      Rasterize({f.clip, mesh.tris, kSize, kSize}, &f.rast);
       f.color.resize(3 * f.rast.NumPixels());
-      Interpolate(vertex_color, 3, mesh.tris, f.rast, f.color);
+      Interpolate({vertex_color, 3, mesh.tris, f.rast}, f.color);
       f.out.resize(f.color.size());
-      Antialias(f.color, 3, f.rast, f.clip, mesh.tris, topology, f.out, &f.record);
+      Antialias({f.color, 3, f.rast, f.clip, mesh.tris, topology}, f.out, &f.record);
       for (size_t n = 0; n < f.out.size(); ++n) f.loss += double(weights[n]) * f.out[n];
       return f;
     };
     const Forward base = forward(mesh.positions);
     std::vector<float> grad_color(base.color.size(), 0.0f), grad_clip(base.clip.size(), 0.0f);
-    AntialiasBackward(base.color, 3, base.rast, base.clip, mesh.tris, topology, base.record, weights, grad_color,
+    AntialiasBackward({base.color, 3, base.rast, base.clip, mesh.tris, topology}, base.record, weights, grad_color,
                       grad_clip);
     std::vector<float> grad_attr(vertex_color.size(), 0.0f), grad_bary(2 * base.rast.NumPixels(), 0.0f);
-    InterpolateBackward(vertex_color, 3, mesh.tris, base.rast, grad_color, grad_attr, grad_bary);
-    RasterizeBackward(base.clip, mesh.tris, base.rast, grad_bary, {}, grad_clip);
+    InterpolateBackward({vertex_color, 3, mesh.tris, base.rast}, grad_color, grad_attr, grad_bary);
+    RasterizeBackward({base.clip, mesh.tris, kSize, kSize}, base.rast, grad_bary, {}, grad_clip);
     std::vector<float> grad_positions(mesh.positions.size(), 0.0f);
     TransformToClipBackward(M, grad_clip, grad_positions);
 
@@ -430,16 +457,16 @@ TEST(AntialiasBackward, ChainIsIndependentOfThreadCount) {
   for (float& g : grad_out) g = unit(rng) - 0.5f;
   auto run = [&]() {
     RasterBuffer rast;
-    Rasterize(clip, mesh.tris, kSize, kSize, &rast);
+    Rasterize({clip, mesh.tris, kSize, kSize}, &rast);
     std::vector<float> color(3 * rast.NumPixels()), out(color.size());
-    Interpolate(vertex_color, 3, mesh.tris, rast, color);
+    Interpolate({vertex_color, 3, mesh.tris, rast}, color);
     AntialiasRecord record;
-    Antialias(color, 3, rast, clip, mesh.tris, topology, out, &record);
+    Antialias({color, 3, rast, clip, mesh.tris, topology}, out, &record);
     std::vector<float> grad_color(color.size(), 0.0f), grad_clip(clip.size(), 0.0f);
-    AntialiasBackward(color, 3, rast, clip, mesh.tris, topology, record, grad_out, grad_color, grad_clip);
+    AntialiasBackward({color, 3, rast, clip, mesh.tris, topology}, record, grad_out, grad_color, grad_clip);
     std::vector<float> grad_attr(vertex_color.size(), 0.0f), grad_bary(2 * rast.NumPixels(), 0.0f);
-    InterpolateBackward(vertex_color, 3, mesh.tris, rast, grad_color, grad_attr, grad_bary);
-    RasterizeBackward(clip, mesh.tris, rast, grad_bary, rast.depth, grad_clip);
+    InterpolateBackward({vertex_color, 3, mesh.tris, rast}, grad_color, grad_attr, grad_bary);
+    RasterizeBackward({clip, mesh.tris, kSize, kSize}, rast, grad_bary, rast.depth, grad_clip);
     return std::vector<std::vector<float>>{out, grad_clip, grad_attr};
   };
   const auto all_threads = run();
@@ -477,7 +504,7 @@ TEST(Antialias, GradientDescentMovesSquareOntoShiftedTarget) {
     const std::vector<float> mask = CoverageMask(rast);
     std::vector<float> grad_color(mask.size(), 0.0f);
     grad_clip->assign(q.clip.size(), 0.0f);
-    AntialiasBackward(mask, 1, rast, q.clip, tris, topology, record, grad_out, grad_color, *grad_clip);
+    AntialiasBackward({mask, 1, rast, q.clip, tris, topology}, record, grad_out, grad_color, *grad_clip);
     return loss;
   };
   std::vector<float> grad_clip;

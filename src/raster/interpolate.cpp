@@ -9,14 +9,14 @@
 namespace sd::raster {
 namespace {
 
-void CheckInterpolateArgs(std::span<const float> attr, int channels, std::span<const int32_t> tris,
-                          const RasterBuffer& rast) {
-  SD_CHECK(channels > 0, << "channels " << channels);
-  SD_CHECK(attr.size() % channels == 0, << "attr: " << attr.size() << " floats for " << channels << " channels");
-  SD_CHECK(tris.size() % 3 == 0);
-  internal::CheckVertexIndices(tris, attr.size() / channels);
-  internal::CheckRaster(rast);
-  internal::CheckRasterTriangles(rast, tris);
+void CheckInputs(const InterpolateInputs& in) {
+  SD_CHECK(in.channels > 0, << "channels " << in.channels);
+  SD_CHECK(in.attr.size() % in.channels == 0,
+           << "attr: " << in.attr.size() << " floats for " << in.channels << " channels");
+  SD_CHECK(in.tris.size() % 3 == 0);
+  internal::CheckVertexIndices(in.tris, in.attr.size() / in.channels);
+  internal::CheckRaster(in.rast);
+  internal::CheckRasterTriangles(in.rast, in.tris);
 }
 
 // Rows per task: interpolation is cheap per pixel, so tasks need a few rows to be worth scheduling.
@@ -24,15 +24,16 @@ constexpr size_t kRowsPerTask = 8;
 
 }  // namespace
 
-void Interpolate(std::span<const float> attr, int channels, std::span<const int32_t> tris, const RasterBuffer& rast,
-                 std::span<float> out) {
-  CheckInterpolateArgs(attr, channels, tris, rast);
-  const size_t C = static_cast<size_t>(channels);
+void Interpolate(const InterpolateInputs& in, std::span<float> out) {
+  CheckInputs(in);
+  const std::span<const float> attr = in.attr;
+  const std::span<const int32_t> tris = in.tris;
+  const RasterBuffer& rast = in.rast;
+  const size_t C = static_cast<size_t>(in.channels);
   SD_CHECK(out.size() == C * rast.NumPixels(), << "out: " << out.size());
   if (UseCuda()) {
 #if SYNTHDRIVE_WITH_CUDA
-    cuda::Interpolate(attr.data(), attr.size() / C, channels, tris.data(), tris.size() / 3, internal::View(rast),
-                      out.data());
+    cuda::Interpolate(internal::ToCuda(in), out.data());
     return;
 #endif
   }
@@ -44,11 +45,13 @@ void Interpolate(std::span<const float> attr, int channels, std::span<const int3
   });
 }
 
-void InterpolateBackward(std::span<const float> attr, int channels, std::span<const int32_t> tris,
-                         const RasterBuffer& rast, std::span<const float> grad_out, std::span<float> grad_attr,
+void InterpolateBackward(const InterpolateInputs& in, std::span<const float> grad_out, std::span<float> grad_attr,
                          std::span<float> grad_bary) {
-  CheckInterpolateArgs(attr, channels, tris, rast);
-  const size_t C = static_cast<size_t>(channels);
+  CheckInputs(in);
+  const std::span<const float> attr = in.attr;
+  const std::span<const int32_t> tris = in.tris;
+  const RasterBuffer& rast = in.rast;
+  const size_t C = static_cast<size_t>(in.channels);
   const size_t num_pixels = rast.NumPixels();
   SD_CHECK(grad_out.size() == C * num_pixels, << "grad_out: " << grad_out.size());
   SD_CHECK(grad_attr.size() == attr.size(), << "grad_attr: " << grad_attr.size());
@@ -57,8 +60,7 @@ void InterpolateBackward(std::span<const float> attr, int channels, std::span<co
   std::vector<double> sum(grad_attr.size(), 0.0);
   if (UseCuda()) {
 #if SYNTHDRIVE_WITH_CUDA
-    cuda::InterpolateBackward(attr.data(), attr.size() / C, channels, tris.data(), tris.size() / 3,
-                              internal::View(rast), grad_out.data(), sum.data(),
+    cuda::InterpolateBackward(internal::ToCuda(in), grad_out.data(), sum.data(),
                               grad_bary.empty() ? nullptr : grad_bary.data());
     for (size_t n = 0; n < sum.size(); ++n) grad_attr[n] += static_cast<float>(sum[n]);
     return;

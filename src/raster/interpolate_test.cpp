@@ -21,7 +21,7 @@ Scene SphereScene(int size, uint32_t seed) {
   std::mt19937 rng(seed);
   const PinholeCamera cam = testing::SquareCamera(size, 0.9);
   s.clip = testing::ToClip(s.mesh.positions, ClipFromWorld(cam, testing::LookAtOrigin(rng, 3.0), 0.1f, 10.f));
-  Rasterize(s.clip, s.mesh.tris, size, size, &s.rast);
+  Rasterize({s.clip, s.mesh.tris, size, size}, &s.rast);
   return s;
 }
 
@@ -31,7 +31,7 @@ TEST(Interpolate, ReproducesConstantAndVertexValues) {
   std::vector<float> attr(2 * V);
   for (int v = 0; v < V; ++v) attr[2 * v] = 3.5f, attr[2 * v + 1] = static_cast<float>(v);
   std::vector<float> out(2 * s.rast.NumPixels());
-  Interpolate(attr, 2, s.mesh.tris, s.rast, out);
+  Interpolate({attr, 2, s.mesh.tris, s.rast}, out);
   int covered = 0;
   for (size_t p = 0; p < s.rast.NumPixels(); ++p) {
     if (s.rast.triangle[p] < 0) {
@@ -60,10 +60,26 @@ TEST(InterpolateDeathTest, IndicesOutsideTheirBuffersAreContractViolations) {
   const int V = s.mesh.NumVertices();
   std::vector<float> attr(static_cast<size_t>(V)), out(s.rast.NumPixels());
   const std::vector<float> too_few(static_cast<size_t>(V - 1));
-  EXPECT_DEATH(Interpolate(too_few, 1, s.mesh.tris, s.rast, out), "names vertex");
+  EXPECT_DEATH(Interpolate({too_few, 1, s.mesh.tris, s.rast}, out), "names vertex");
   const std::vector<int32_t> first_triangle(s.mesh.tris.begin(), s.mesh.tris.begin() + 3);
-  EXPECT_DEATH(Interpolate(attr, 1, first_triangle, s.rast, out), "a raster buffer of another mesh");
-  Interpolate(attr, 1, s.mesh.tris, s.rast, out);  // the matching buffers pass
+  EXPECT_DEATH(Interpolate({attr, 1, first_triangle, s.rast}, out), "a raster buffer of another mesh");
+  Interpolate({attr, 1, s.mesh.tris, s.rast}, out);  // the matching buffers pass
+}
+
+TEST(InterpolateDeathTest, BackwardRefusesIndicesOutsideTheirBuffers) {
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  const Scene s = SphereScene(16, 3);
+  const int V = s.mesh.NumVertices();
+  const size_t np = s.rast.NumPixels();
+  std::vector<float> attr(static_cast<size_t>(V)), grad_out(np, 1.0f), grad_attr(attr.size()), grad_bary(2 * np);
+  const std::vector<float> too_few(static_cast<size_t>(V - 1));
+  std::vector<float> grad_too_few(too_few.size());
+  EXPECT_DEATH(InterpolateBackward({too_few, 1, s.mesh.tris, s.rast}, grad_out, grad_too_few, grad_bary),
+               "names vertex");
+  const std::vector<int32_t> first_triangle(s.mesh.tris.begin(), s.mesh.tris.begin() + 3);
+  EXPECT_DEATH(InterpolateBackward({attr, 1, first_triangle, s.rast}, grad_out, grad_attr, grad_bary),
+               "a raster buffer of another mesh");
+  InterpolateBackward({attr, 1, s.mesh.tris, s.rast}, grad_out, grad_attr, grad_bary);
 }
 
 TEST(Interpolate, BackwardMatchesFiniteDifferences) {
@@ -76,13 +92,13 @@ TEST(Interpolate, BackwardMatchesFiniteDifferences) {
   for (float& g : grad_out) g = unit(rng);
   auto loss = [&](const std::vector<float>& a, const RasterBuffer& rast) {
     std::vector<float> out(grad_out.size());
-    Interpolate(a, C, s.mesh.tris, rast, out);
+    Interpolate({a, C, s.mesh.tris, rast}, out);
     double l = 0;
     for (size_t n = 0; n < out.size(); ++n) l += double(out[n]) * grad_out[n];
     return l;
   };
   std::vector<float> grad_attr(attr.size(), 0.25f), grad_bary(2 * s.rast.NumPixels(), 0.25f);
-  InterpolateBackward(attr, C, s.mesh.tris, s.rast, grad_out, grad_attr, grad_bary);
+  InterpolateBackward({attr, C, s.mesh.tris, s.rast}, grad_out, grad_attr, grad_bary);
   const float h = 1e-2f;
   for (size_t n = 0; n < attr.size(); ++n) {
     std::vector<float> plus = attr, minus = attr;
@@ -102,7 +118,7 @@ TEST(Interpolate, BackwardMatchesFiniteDifferences) {
   EXPECT_GT(checked, 50);
   // The geometry gradient is optional.
   std::vector<float> grad_attr2(attr.size(), 0.0f);
-  InterpolateBackward(attr, C, s.mesh.tris, s.rast, grad_out, grad_attr2, {});
+  InterpolateBackward({attr, C, s.mesh.tris, s.rast}, grad_out, grad_attr2, {});
   for (size_t n = 0; n < attr.size(); ++n) ASSERT_FLOAT_EQ(grad_attr2[n] + 0.25f, grad_attr[n]);
 }
 

@@ -36,20 +36,22 @@ NormalMaskLoss::NormalMaskLoss(const std::vector<NormalMaskView>& views) : num_v
 
 NormalMaskLoss::~NormalMaskLoss() = default;
 
-std::vector<NormalMaskLoss::Terms> NormalMaskLoss::Evaluate(std::span<const float> positions,
-                                                            std::span<const float> vertex_normals,
-                                                            std::span<const int32_t> tris, const EdgeTopology& topology,
+std::vector<NormalMaskLoss::Terms> NormalMaskLoss::Evaluate(const NormalMaskInputs& in,
                                                             std::span<float> grad_positions,
                                                             std::span<float> grad_normals) {
-  const size_t nv = positions.size() / 3;
-  SD_CHECK(positions.size() == 3 * nv && vertex_normals.size() == 3 * nv, << "positions / normals sizes");
-  SD_CHECK(tris.size() % 3 == 0 && topology.neighbour.size() == tris.size(), << "topology built for another mesh");
+  const size_t nv = in.positions.size() / 3;
+  SD_CHECK(in.positions.size() == 3 * nv && in.vertex_normals.size() == 3 * nv, << "positions / normals sizes");
+  SD_CHECK(in.tris.size() % 3 == 0 && in.topology.neighbour.size() == in.tris.size(),
+           << "topology built for another mesh");
+  // The kernels index positions and normals by these without checks.
+  internal::CheckVertexIndices(in.tris, nv);
   SD_CHECK(grad_positions.size() == 3 * nv && grad_normals.size() == 3 * nv, << "gradient buffers hold 3 floats per vertex");
   std::vector<Terms> terms(num_views_);
 #if SYNTHDRIVE_WITH_CUDA
   std::vector<double> losses(2 * num_views_);
-  cuda::EvaluateLoss(*targets_->device, positions.data(), vertex_normals.data(), nv, tris.data(), tris.size() / 3,
-                     topology.neighbour.data(), losses.data(), grad_positions.data(), grad_normals.data());
+  const cuda::NormalMaskInputs device_in{in.positions.data(), in.vertex_normals.data(), nv, in.tris.data(),
+                                         in.tris.size() / 3, in.topology.neighbour.data()};
+  cuda::EvaluateLoss(*targets_->device, device_in, losses.data(), grad_positions.data(), grad_normals.data());
   for (size_t v = 0; v < num_views_; ++v) terms[v] = {losses[2 * v], losses[2 * v + 1]};
 #endif
   return terms;

@@ -30,6 +30,14 @@ struct NormalMaskView {
   float normal_grad_scale = 0, normal_loss_scale = 0, mask_grad_scale = 0, mask_loss_scale = 0;
 };
 
+// The mesh a NormalMaskLoss evaluates.
+struct NormalMaskInputs {
+  std::span<const float> positions;       // 3 per vertex, world frame
+  std::span<const float> vertex_normals;  // 3 per vertex, world frame
+  std::span<const int32_t> tris;          // 3 per triangle
+  const EdgeTopology& topology;           // BuildEdgeTopology(tris, ...)
+};
+
 class NormalMaskLoss {
  public:
   // Uploads the targets. InputError when the ops cannot run on CUDA (UseCuda()).
@@ -45,9 +53,8 @@ class NormalMaskLoss {
   // vertex each, overwritten) are the views' shares summed in view order, each rounded to float first, as
   // refine.cpp sums them on the CPU. The connectivity (tris, topology) is uploaded only when it differs from
   // the last evaluation's: refinement changes it once per remeshing pass.
-  std::vector<Terms> Evaluate(std::span<const float> positions, std::span<const float> vertex_normals,
-                              std::span<const int32_t> tris, const EdgeTopology& topology,
-                              std::span<float> grad_positions, std::span<float> grad_normals);
+  std::vector<Terms> Evaluate(const NormalMaskInputs& in, std::span<float> grad_positions,
+                              std::span<float> grad_normals);
   size_t num_views() const { return num_views_; }
 
  private:

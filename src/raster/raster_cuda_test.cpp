@@ -35,21 +35,21 @@ struct ChainResult {
 ChainResult RunChain(const std::vector<float>& clip, const std::vector<int32_t>& tris, int size,
                      const std::vector<float>& vertex_attr, const std::vector<float>& grad_out, bool color_gradient) {
   ChainResult r;
-  Rasterize(clip, tris, size, size, &r.rast);
+  Rasterize({clip, tris, size, size}, &r.rast);
   r.interpolated.resize(3 * r.rast.NumPixels());
-  Interpolate(vertex_attr, 3, tris, r.rast, r.interpolated);
+  Interpolate({vertex_attr, 3, tris, r.rast}, r.interpolated);
   const EdgeTopology topology = BuildEdgeTopology(tris, static_cast<int>(clip.size() / 4));
   r.antialiased.resize(r.interpolated.size());
-  Antialias(r.interpolated, 3, r.rast, clip, tris, topology, r.antialiased, &r.record, color_gradient);
+  Antialias({r.interpolated, 3, r.rast, clip, tris, topology}, r.antialiased, &r.record, color_gradient);
   r.grad_color_aa.assign(r.interpolated.size(), 0.0f);
   r.grad_clip_aa.assign(clip.size(), 0.0f);
-  AntialiasBackward(r.interpolated, 3, r.rast, clip, tris, topology, r.record, grad_out, r.grad_color_aa,
+  AntialiasBackward({r.interpolated, 3, r.rast, clip, tris, topology}, r.record, grad_out, r.grad_color_aa,
                     r.grad_clip_aa);
   r.grad_attr.assign(vertex_attr.size(), 0.0f);
   r.grad_bary.assign(2 * r.rast.NumPixels(), 0.0f);
-  InterpolateBackward(vertex_attr, 3, tris, r.rast, r.grad_color_aa, r.grad_attr, r.grad_bary);
+  InterpolateBackward({vertex_attr, 3, tris, r.rast}, r.grad_color_aa, r.grad_attr, r.grad_bary);
   r.grad_clip.assign(clip.size(), 0.0f);
-  RasterizeBackward(clip, tris, r.rast, r.grad_bary, r.rast.depth, r.grad_clip);
+  RasterizeBackward({clip, tris, size, size}, r.rast, r.grad_bary, r.rast.depth, r.grad_clip);
   return r;
 }
 
@@ -96,7 +96,7 @@ TEST(Device, ParseAndRefusal) {
     // Asked for the GPU without one: every op refuses rather than quietly running on the CPU.
     EXPECT_THROW(UseCuda(), InputError);
     RasterBuffer rast;
-    EXPECT_THROW(Rasterize({}, {}, 4, 4, &rast), InputError);
+    EXPECT_THROW(Rasterize({{}, {}, 4, 4}, &rast), InputError);
   }
 }
 
@@ -171,9 +171,9 @@ TEST(CudaAgreement, TiesOnPixelCentresAndEqualDepth) {
   tris.insert(tris.end(), tris.begin(), tris.begin() + static_cast<std::ptrdiff_t>(grid_tris));  // same depth, higher index
   RasterBuffer cpu, gpu;
   SetDevice(Device::kCpu);
-  Rasterize(clip, tris, kSize, kSize, &cpu);
+  Rasterize({clip, tris, kSize, kSize}, &cpu);
   SetDevice(Device::kCuda);
-  Rasterize(clip, tris, kSize, kSize, &gpu);
+  Rasterize({clip, tris, kSize, kSize}, &gpu);
   EXPECT_EQ(cpu.triangle, gpu.triangle);
   EXPECT_EQ(cpu.bary, gpu.bary);
   EXPECT_EQ(cpu.depth, gpu.depth);
@@ -185,9 +185,9 @@ TEST(CudaAgreement, EmptyInputsAndDeviceCopyReuse) {
   DeviceScope scope;
   SetDevice(Device::kCuda);
   RasterBuffer rast;
-  Rasterize({}, {}, 16, 8, &rast);
+  Rasterize({{}, {}, 16, 8}, &rast);
   EXPECT_EQ(std::count(rast.triangle.begin(), rast.triangle.end(), -1), 16 * 8);
-  Rasterize({}, {}, 0, 0, &rast);
+  Rasterize({{}, {}, 0, 0}, &rast);
   EXPECT_EQ(rast.NumPixels(), 0u);
   // Two rasterizations in flight, and one changed by the caller: the ops must read each one's own data.
   const testing::Mesh mesh = testing::Sphere(20, 40, 1.0f);
@@ -197,16 +197,16 @@ TEST(CudaAgreement, EmptyInputsAndDeviceCopyReuse) {
   const std::vector<float> clip_b = testing::ToClip(
       mesh.positions, ClipFromWorld(testing::SquareCamera(64), testing::LookAtOrigin(rng, 3.0), 0.5f, 6.f));
   RasterBuffer a, b;
-  Rasterize(clip_a, mesh.tris, 64, 64, &a);
-  Rasterize(clip_b, mesh.tris, 64, 64, &b);
+  Rasterize({clip_a, mesh.tris, 64, 64}, &a);
+  Rasterize({clip_b, mesh.tris, 64, 64}, &b);
   b.bary[2 * (32 * 64 + 32)] += 0.25f;  // what the finite-difference tests do to a copy
   std::vector<float> ia(3 * a.NumPixels()), ib(ia.size());
-  Interpolate(mesh.positions, 3, mesh.tris, a, ia);
-  Interpolate(mesh.positions, 3, mesh.tris, b, ib);
+  Interpolate({mesh.positions, 3, mesh.tris, a}, ia);
+  Interpolate({mesh.positions, 3, mesh.tris, b}, ib);
   SetDevice(Device::kCpu);
   std::vector<float> ca(ia.size()), cb(ib.size());
-  Interpolate(mesh.positions, 3, mesh.tris, a, ca);
-  Interpolate(mesh.positions, 3, mesh.tris, b, cb);
+  Interpolate({mesh.positions, 3, mesh.tris, a}, ca);
+  Interpolate({mesh.positions, 3, mesh.tris, b}, cb);
   EXPECT_EQ(ia, ca);
   EXPECT_EQ(ib, cb);
 }
@@ -220,11 +220,12 @@ NormalMaskLoss::Terms CpuNormalMaskLoss(const NormalMaskView& v, const std::vect
   const size_t nv = positions.size() / 3, np = static_cast<size_t>(v.width) * v.height;
   std::vector<float> clip(4 * nv);
   TransformToClip(positions, v.clip_from_world, clip);
+  const RasterizeInputs raster_in{clip, tris, v.width, v.height};
   RasterBuffer rast;
-  Rasterize(clip, tris, v.width, v.height, &rast);
+  Rasterize(raster_in, &rast);
   std::vector<float> grad_clip(4 * nv, 0.0f), grad_bary(2 * np, 0.0f), img(3 * np), grad_img(3 * np, 0.0f);
   NormalMaskLoss::Terms terms;
-  Interpolate(normals, 3, tris, rast, img);
+  Interpolate({normals, 3, tris, rast}, img);
   double sum = 0;
   for (size_t p = 0; p < np; ++p) {
     const Eigen::Vector3f t = Eigen::Map<const Eigen::Vector3f>(&v.normals[3 * p]);
@@ -238,12 +239,12 @@ NormalMaskLoss::Terms CpuNormalMaskLoss(const NormalMaskView& v, const std::vect
   }
   terms.normal = sum * v.normal_loss_scale;
   grad_normals->assign(3 * nv, 0.0f);
-  InterpolateBackward(normals, 3, tris, rast, grad_img, *grad_normals, grad_bary);
-  RasterizeBackward(clip, tris, rast, grad_bary, {}, grad_clip);
+  InterpolateBackward({normals, 3, tris, rast}, grad_img, *grad_normals, grad_bary);
+  RasterizeBackward(raster_in, rast, grad_bary, {}, grad_clip);
   std::vector<float> coverage(np), aa(np), grad_aa(np), grad_coverage(np, 0.0f);
   for (size_t p = 0; p < np; ++p) coverage[p] = rast.triangle[p] >= 0 ? 1.0f : 0.0f;
   AntialiasRecord record;
-  Antialias(coverage, 1, rast, clip, tris, topology, aa, &record, /*color_gradient=*/false);
+  Antialias({coverage, 1, rast, clip, tris, topology}, aa, &record, /*color_gradient=*/false);
   sum = 0;
   for (size_t p = 0; p < np; ++p) {
     if (v.mask[p] < 0) {  // unknown: past the source image's border
@@ -255,7 +256,7 @@ NormalMaskLoss::Terms CpuNormalMaskLoss(const NormalMaskView& v, const std::vect
     grad_aa[p] = v.mask_grad_scale * 2.0f * d;
   }
   terms.mask = sum * v.mask_loss_scale;
-  AntialiasBackward(coverage, 1, rast, clip, tris, topology, record, grad_aa, grad_coverage, grad_clip);
+  AntialiasBackward({coverage, 1, rast, clip, tris, topology}, record, grad_aa, grad_coverage, grad_clip);
   grad_positions->assign(3 * nv, 0.0f);
   TransformToClipBackward(v.clip_from_world, grad_clip, *grad_positions);
   return terms;
@@ -289,14 +290,14 @@ TEST(CudaAgreement, DeviceResidentRefinementLossMatchesTheOps) {
     v.width = v.height = kSize;
     const std::vector<float> clip = testing::ToClip(target.positions, v.clip_from_world);
     RasterBuffer rast;
-    Rasterize(clip, target.tris, kSize, kSize, &rast);
+    Rasterize({clip, target.tris, kSize, kSize}, &rast);
     v.normals.resize(3 * rast.NumPixels());
-    Interpolate(target_normals, 3, target.tris, rast, v.normals);
+    Interpolate({target_normals, 3, target.tris, rast}, v.normals);
     std::vector<float> coverage(rast.NumPixels());
     for (size_t p = 0; p < coverage.size(); ++p) coverage[p] = rast.triangle[p] >= 0 ? 1.0f : 0.0f;
     v.mask.resize(coverage.size());
     AntialiasRecord record;
-    Antialias(coverage, 1, rast, clip, target.tris, target_topology, v.mask, &record, false);
+    Antialias({coverage, 1, rast, clip, target.tris, target_topology}, v.mask, &record, false);
     v.normal_grad_scale = 0.5f / 5000, v.normal_loss_scale = 1.0f / 5000;
     v.mask_grad_scale = 0.7f / 8000, v.mask_loss_scale = 1.0f / 8000;
     // The last view is cut by an image border: its left third unknown (a negative target, no term).
@@ -321,7 +322,8 @@ TEST(CudaAgreement, DeviceResidentRefinementLossMatchesTheOps) {
     }
     SetDevice(Device::kCuda);
     std::vector<float> gp(3 * nv), gn(3 * nv);
-    const std::vector<NormalMaskLoss::Terms> terms = loss.Evaluate(m.positions, m_normals, m.tris, m_topology, gp, gn);
+    const std::vector<NormalMaskLoss::Terms> terms =
+        loss.Evaluate({m.positions, m_normals, m.tris, m_topology}, gp, gn);
     ASSERT_EQ(terms.size(), views.size());
     for (size_t v = 0; v < views.size(); ++v) {
       SCOPED_TRACE(::testing::Message() << "view " << v);
@@ -348,6 +350,31 @@ TEST(CudaAgreement, DeviceResidentRefinementLossMatchesTheOps) {
     SCOPED_TRACE("smooth sphere again");
     check(mesh, topology);
   }
+}
+
+// The loss's kernels index positions and normals by tris without checks: a tris array naming a vertex past
+// them stops at the entry with the culprit named.
+TEST(CudaAgreementDeathTest, RefinementLossRefusesIndicesPastTheVertices) {
+  SD_REQUIRE_CUDA();
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  DeviceScope scope;
+  constexpr int kSize = 16;
+  const testing::Mesh mesh = testing::Sphere(6, 10, 1.0f);
+  const EdgeTopology topology = BuildEdgeTopology(mesh.tris, mesh.NumVertices());
+  std::mt19937 rng(2);
+  NormalMaskView v;
+  v.clip_from_world = ClipFromWorld(testing::SquareCamera(kSize), testing::LookAtOrigin(rng, 3.0), 0.5f, 6.f);
+  v.width = v.height = kSize;
+  v.normals.assign(3 * kSize * kSize, 0.0f);
+  v.mask.assign(kSize * kSize, 0.0f);
+  v.mask_grad_scale = v.mask_loss_scale = 1.0f;
+  SetDevice(Device::kCuda);
+  NormalMaskLoss loss({v});
+  const std::vector<float> too_few(mesh.positions.begin(), mesh.positions.end() - 3);
+  std::vector<float> g(too_few.size());
+  EXPECT_DEATH(loss.Evaluate({too_few, too_few, mesh.tris, topology}, g, g), "names vertex");
+  std::vector<float> gp(mesh.positions.size()), gn(mesh.positions.size());
+  loss.Evaluate({mesh.positions, mesh.positions, mesh.tris, topology}, gp, gn);
 }
 
 }  // namespace

@@ -102,12 +102,13 @@ void RasterizeBand(const std::vector<TriangleSetup>& setups, const Bins& bins, c
 
 }  // namespace
 
-void Rasterize(std::span<const float> clip_pos, std::span<const int32_t> tris, int width, int height,
-               RasterBuffer* out) {
+void Rasterize(const RasterizeInputs& in, RasterBuffer* out) {
+  const std::span<const float> clip_pos = in.clip_pos;
+  const std::span<const int32_t> tris = in.tris;
+  const int width = in.width, height = in.height;
   internal::CheckTriangles(clip_pos, tris);
   SD_CHECK(width >= 0 && height >= 0 && out != nullptr);
-  const size_t num_vertices = internal::NumVertices(clip_pos);
-  internal::CheckVertexIndices(tris, num_vertices);
+  internal::CheckVertexIndices(tris, internal::NumVertices(clip_pos));
 
   out->width = width;
   out->height = height;
@@ -117,8 +118,7 @@ void Rasterize(std::span<const float> clip_pos, std::span<const int32_t> tris, i
   if (out->NumPixels() == 0) return;
   if (UseCuda()) {
 #if SYNTHDRIVE_WITH_CUDA
-    cuda::Rasterize(clip_pos.data(), num_vertices, tris.data(), tris.size() / 3,
-                    {width, height, out->bary.data(), out->depth.data(), out->triangle.data()});
+    cuda::Rasterize(internal::ToCuda(in), {out->bary.data(), out->depth.data(), out->triangle.data()});
     return;
 #endif
   }
@@ -150,12 +150,16 @@ using PixelGrad = std::array<float, 12>;
 
 }  // namespace
 
-void RasterizeBackward(std::span<const float> clip_pos, std::span<const int32_t> tris, const RasterBuffer& rast,
-                       std::span<const float> grad_bary, std::span<const float> grad_depth,
-                       std::span<float> grad_clip) {
+void RasterizeBackward(const RasterizeInputs& in, const RasterBuffer& rast, std::span<const float> grad_bary,
+                       std::span<const float> grad_depth, std::span<float> grad_clip) {
+  const std::span<const float> clip_pos = in.clip_pos;
+  const std::span<const int32_t> tris = in.tris;
   internal::CheckTriangles(clip_pos, tris);
   internal::CheckVertexIndices(tris, internal::NumVertices(clip_pos));
   internal::CheckRaster(rast);
+  SD_CHECK(rast.width == in.width && rast.height == in.height,
+           << "RasterBuffer of " << rast.width << "x" << rast.height << " for inputs of " << in.width << "x"
+           << in.height);
   internal::CheckRasterTriangles(rast, tris);
   const size_t num_pixels = rast.NumPixels();
   SD_CHECK(grad_bary.size() == 2 * num_pixels, << "grad_bary: " << grad_bary.size());
@@ -165,9 +169,8 @@ void RasterizeBackward(std::span<const float> clip_pos, std::span<const int32_t>
   if (UseCuda()) {
 #if SYNTHDRIVE_WITH_CUDA
     std::vector<double> sum(grad_clip.size());
-    cuda::RasterizeBackward(clip_pos.data(), internal::NumVertices(clip_pos), tris.data(), tris.size() / 3,
-                            internal::View(rast), grad_bary.data(), grad_depth.empty() ? nullptr : grad_depth.data(),
-                            sum.data());
+    cuda::RasterizeBackward(internal::ToCuda(in), internal::View(rast), grad_bary.data(),
+                            grad_depth.empty() ? nullptr : grad_depth.data(), sum.data());
     for (size_t n = 0; n < sum.size(); ++n) grad_clip[n] += static_cast<float>(sum[n]);
     return;
 #endif

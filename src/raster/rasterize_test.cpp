@@ -51,7 +51,7 @@ TEST(Rasterize, TriangleCoverageCountMatchesArea) {
     double perimeter = 0;
     for (int k = 0; k < 3; ++k) perimeter += std::hypot(u[(k + 1) % 3] - u[k], v[(k + 1) % 3] - v[k]);
     RasterBuffer rast;
-    Rasterize(clip, std::vector<int32_t>{0, 1, 2}, kSize, kSize, &rast);
+    Rasterize({clip, std::vector<int32_t>{0, 1, 2}, kSize, kSize}, &rast);
     const int count = CountCovered(rast);
     EXPECT_LE(std::abs(count - area), perimeter / 4) << "trial " << trial;
     total_area += area, total_count += count;
@@ -77,7 +77,7 @@ TEST(Rasterize, AxisAlignedRectangleCoverageIsExact) {
       std::vector<int32_t> tris = {0, 1, 2, 0, 2, 3};
       if (flip_winding) tris = {0, 2, 1, 0, 3, 2};
       RasterBuffer rast;
-      Rasterize(clip, tris, kW, kH, &rast);
+      Rasterize({clip, tris, kW, kH}, &rast);
       EXPECT_EQ(CountCovered(rast), 27 * 25) << "offset " << offset << " flip " << flip_winding;
       // And the covered pixels are exactly those whose centre lies in [u0, u1) x [v0, v1).
       for (int j = 0; j < kH; ++j)
@@ -95,7 +95,7 @@ std::vector<int> CoverageCounts(const std::vector<float>& clip, const std::vecto
   std::vector<int> count(static_cast<size_t>(width) * height, 0);
   for (size_t t = 0; t < tris.size() / 3; ++t) {
     RasterBuffer rast;
-    Rasterize(clip, std::vector<int32_t>(tris.begin() + 3 * t, tris.begin() + 3 * t + 3), width, height, &rast);
+    Rasterize({clip, std::vector<int32_t>(tris.begin() + 3 * t, tris.begin() + 3 * t + 3), width, height}, &rast);
     for (size_t p = 0; p < count.size(); ++p) count[p] += rast.triangle[p] >= 0;
   }
   return count;
@@ -166,7 +166,7 @@ TEST(Rasterize, ClosedMeshHasNoHoles) {
     const Rigid3d T_cam_world = testing::LookAtOrigin(rng, 4.0);
     const std::vector<float> clip = testing::ToClip(mesh.positions, ClipFromWorld(cam, T_cam_world, 0.1f, 20.f));
     RasterBuffer rast;
-    Rasterize(clip, mesh.tris, kSize, kSize, &rast);
+    Rasterize({clip, mesh.tris, kSize, kSize}, &rast);
     // Sphere radius 1 at distance 4: the outline is a circle of angular radius asin(1/4) about the centre.
     const double outline_px = cam.fx * std::tan(std::asin(0.25));
     for (int j = 0; j < kSize; ++j)
@@ -204,9 +204,9 @@ TEST(Rasterize, PlaneDepthAndPositionsMatchAnalytic) {
   const std::vector<int32_t> tris = {0, 1, 2, 0, 2, 3};
   const std::vector<float> clip = testing::ToClip(positions, ClipFromWorld(cam, T_cam_world, near, far));
   RasterBuffer rast;
-  Rasterize(clip, tris, cam.width, cam.height, &rast);
+  Rasterize({clip, tris, cam.width, cam.height}, &rast);
   std::vector<float> interpolated(3 * rast.NumPixels());
-  Interpolate(positions, 3, tris, rast, interpolated);
+  Interpolate({positions, 3, tris, rast}, interpolated);
   ASSERT_EQ(CountCovered(rast), cam.width * cam.height);
   for (int j = 0; j < cam.height; ++j)
     for (int i = 0; i < cam.width; ++i) {
@@ -230,15 +230,15 @@ TEST(Rasterize, NearestWinsAndEqualDepthGoesToLowerIndex) {
     PushPixelVertex(&clip, 10, 30, kSize, kSize, 0.5, depth);
   }
   RasterBuffer rast;
-  Rasterize(clip, Tris({0, 1, 2, 3, 4, 5, 6, 7, 8}), kSize, kSize, &rast);
+  Rasterize({clip, Tris({0, 1, 2, 3, 4, 5, 6, 7, 8}), kSize, kSize}, &rast);
   const size_t centre = 12 * kSize + 12;
   EXPECT_EQ(rast.triangle[centre], 1);
   EXPECT_NEAR(rast.depth[centre], -0.2, 1e-6);
   // Without the near one, the two identical far triangles tie: the lower index wins in either order.
-  Rasterize(clip, Tris({6, 7, 8, 0, 1, 2}), kSize, kSize, &rast);
+  Rasterize({clip, Tris({6, 7, 8, 0, 1, 2}), kSize, kSize}, &rast);
   EXPECT_EQ(rast.triangle[centre], 0);
   EXPECT_NEAR(rast.depth[centre], 0.5, 1e-6);
-  Rasterize(clip, Tris({0, 1, 2, 6, 7, 8}), kSize, kSize, &rast);
+  Rasterize({clip, Tris({0, 1, 2, 6, 7, 8}), kSize, kSize}, &rast);
   EXPECT_EQ(rast.triangle[centre], 0);
 }
 
@@ -250,23 +250,23 @@ TEST(Rasterize, BackgroundAndUndrawableTriangles) {
   PushPixelVertex(&clip, 0, 16, kSize, kSize);
   clip.insert(clip.end(), {0.f, 0.f, 0.f, -1.f});  // a vertex behind the eye
   RasterBuffer rast;
-  Rasterize(clip, Tris({0, 1, 3}), kSize, kSize, &rast);  // w <= 0: not drawn
+  Rasterize({clip, Tris({0, 1, 3}), kSize, kSize}, &rast);  // w <= 0: not drawn
   EXPECT_EQ(CountCovered(rast), 0);
   for (float d : rast.depth) ASSERT_EQ(d, 1.0f);
   for (float b : rast.bary) ASSERT_EQ(b, 0.0f);
   // Depth outside [-1, 1] is clipped per pixel.
   std::vector<float> far_clip = clip;
   for (int v = 0; v < 3; ++v) far_clip[4 * v + 2] = 1.5f;
-  Rasterize(far_clip, Tris({0, 1, 2}), kSize, kSize, &rast);
+  Rasterize({far_clip, Tris({0, 1, 2}), kSize, kSize}, &rast);
   EXPECT_EQ(CountCovered(rast), 0);
-  Rasterize(clip, Tris({0, 1, 2}), kSize, kSize, &rast);
+  Rasterize({clip, Tris({0, 1, 2}), kSize, kSize}, &rast);
   EXPECT_EQ(CountCovered(rast), 15 * 16 / 2);  // centres with i + j < 15; the hypotenuse row (i + j = 15) is a
                                               // bottom-right edge, excluded by the top-left rule
 }
 
 TEST(Rasterize, EmptyMeshAndEmptyImage) {
   RasterBuffer rast;
-  Rasterize({}, {}, 8, 4, &rast);
+  Rasterize({{}, {}, 8, 4}, &rast);
   EXPECT_EQ(rast.NumPixels(), 32u);
   EXPECT_EQ(CountCovered(rast), 0);
   for (float d : rast.depth) EXPECT_EQ(d, 1.0f);
@@ -274,7 +274,7 @@ TEST(Rasterize, EmptyMeshAndEmptyImage) {
   PushPixelVertex(&clip, 0, 0, 8, 8);
   PushPixelVertex(&clip, 8, 0, 8, 8);
   PushPixelVertex(&clip, 0, 8, 8, 8);
-  Rasterize(clip, Tris({0, 1, 2}), 0, 0, &rast);
+  Rasterize({clip, Tris({0, 1, 2}), 0, 0}, &rast);
   EXPECT_EQ(rast.NumPixels(), 0u);
   EXPECT_TRUE(rast.bary.empty());
 }
@@ -286,9 +286,9 @@ TEST(Rasterize, ResultDoesNotDependOnThreadCount) {
   const std::vector<float> clip =
       testing::ToClip(mesh.positions, ClipFromWorld(cam, testing::LookAtOrigin(rng, 3.5), 0.1f, 10.f));
   RasterBuffer many, one;
-  Rasterize(clip, mesh.tris, 200, 200, &many);
+  Rasterize({clip, mesh.tris, 200, 200}, &many);
   SetMaxThreads(1);
-  Rasterize(clip, mesh.tris, 200, 200, &one);
+  Rasterize({clip, mesh.tris, 200, 200}, &one);
   SetMaxThreads(0);
   EXPECT_EQ(many.triangle, one.triangle);
   EXPECT_EQ(many.bary, one.bary);
@@ -320,8 +320,9 @@ TEST(RasterizeBackward, MatchesFiniteDifferencesAtFixedTriangleAssignment) {
     for (float& w : w_bary) w = unit(rng);
     for (float& w : w_depth) w = unit(rng);
 
+    const RasterizeInputs in{clip, mesh.tris, kSize, kSize};
     RasterBuffer base;
-    Rasterize(clip, mesh.tris, kSize, kSize, &base);
+    Rasterize(in, &base);
     auto loss = [&](const RasterBuffer& rast, const std::vector<uint8_t>& keep) {
       double l = 0;
       for (size_t p = 0; p < num_pixels; ++p) {
@@ -338,8 +339,8 @@ TEST(RasterizeBackward, MatchesFiniteDifferencesAtFixedTriangleAssignment) {
       std::vector<float> plus = clip, minus = clip;
       plus[n] += h, minus[n] -= h;
       RasterBuffer rast_plus, rast_minus;
-      Rasterize(plus, mesh.tris, kSize, kSize, &rast_plus);
-      Rasterize(minus, mesh.tris, kSize, kSize, &rast_minus);
+      Rasterize({plus, mesh.tris, kSize, kSize}, &rast_plus);
+      Rasterize({minus, mesh.tris, kSize, kSize}, &rast_minus);
       std::vector<uint8_t> keep(num_pixels);
       for (size_t p = 0; p < num_pixels; ++p)
         keep[p] = base.triangle[p] >= 0 && rast_plus.triangle[p] == base.triangle[p] &&
@@ -352,7 +353,7 @@ TEST(RasterizeBackward, MatchesFiniteDifferencesAtFixedTriangleAssignment) {
         g_bary[2 * p] = w_bary[2 * p], g_bary[2 * p + 1] = w_bary[2 * p + 1], g_depth[p] = w_depth[p];
       }
       std::vector<float> grad_clip(clip.size(), 0.0f);
-      RasterizeBackward(clip, mesh.tris, base, g_bary, g_depth, grad_clip);
+      RasterizeBackward(in, base, g_bary, g_depth, grad_clip);
       const double err = std::abs(grad_clip[n] - fd);
       max_err = std::max(max_err, err / (1 + std::abs(fd)));
       ASSERT_LE(err, 2e-3 * (1 + std::abs(fd))) << "seed " << seed << " coordinate " << n << " analytic "
@@ -364,6 +365,29 @@ TEST(RasterizeBackward, MatchesFiniteDifferencesAtFixedTriangleAssignment) {
   }
 }
 
+// The per-pixel gradient indexes without checks: a tris array naming vertices past the clip positions, a
+// raster buffer of a bigger mesh, or one of another resolution, stop at the entry with the culprit named.
+TEST(RasterizeBackwardDeathTest, IndicesOutsideTheirBuffersAreContractViolations) {
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  const testing::Mesh mesh = testing::Sphere(6, 10, 1.0f);
+  std::mt19937 rng(4);
+  const std::vector<float> clip = testing::ToClip(
+      mesh.positions, ClipFromWorld(testing::SquareCamera(16, 0.9), testing::LookAtOrigin(rng, 3.0), 0.5f, 6.f));
+  const RasterizeInputs in{clip, mesh.tris, 16, 16};
+  RasterBuffer rast;
+  Rasterize(in, &rast);
+  std::vector<float> g_bary(2 * rast.NumPixels(), 1.0f), grad_clip(clip.size());
+  const std::vector<float> too_few(clip.begin(), clip.end() - 4);
+  std::vector<float> grad_too_few(too_few.size());
+  EXPECT_DEATH(RasterizeBackward({too_few, mesh.tris, 16, 16}, rast, g_bary, {}, grad_too_few), "names vertex");
+  const std::vector<int32_t> first_triangle(mesh.tris.begin(), mesh.tris.begin() + 3);
+  EXPECT_DEATH(RasterizeBackward({clip, first_triangle, 16, 16}, rast, g_bary, {}, grad_clip),
+               "a raster buffer of another mesh");
+  std::vector<float> g_bary_wide(2 * 32 * 8, 1.0f);
+  EXPECT_DEATH(RasterizeBackward({clip, mesh.tris, 32, 8}, rast, g_bary_wide, {}, grad_clip), "for inputs of 32x8");
+  RasterizeBackward(in, rast, g_bary, {}, grad_clip);
+}
+
 // Gradients accumulate, and an empty grad_depth means "barycentrics only".
 TEST(RasterizeBackward, AccumulatesAndAcceptsEmptyDepthGradient) {
   const testing::Mesh mesh = testing::Sphere(6, 10, 1.0f);
@@ -371,14 +395,15 @@ TEST(RasterizeBackward, AccumulatesAndAcceptsEmptyDepthGradient) {
   const PinholeCamera cam = testing::SquareCamera(32, 0.9);
   const std::vector<float> clip =
       testing::ToClip(mesh.positions, ClipFromWorld(cam, testing::LookAtOrigin(rng, 3.0), 0.5f, 6.f));
+  const RasterizeInputs in{clip, mesh.tris, 32, 32};
   RasterBuffer rast;
-  Rasterize(clip, mesh.tris, 32, 32, &rast);
+  Rasterize(in, &rast);
   std::vector<float> g_bary(2 * rast.NumPixels(), 0.7f), zeros(rast.NumPixels(), 0.0f);
   std::vector<float> once(clip.size(), 0.0f), twice(clip.size(), 0.0f), with_zero_depth(clip.size(), 0.0f);
-  RasterizeBackward(clip, mesh.tris, rast, g_bary, {}, once);
-  RasterizeBackward(clip, mesh.tris, rast, g_bary, {}, twice);
-  RasterizeBackward(clip, mesh.tris, rast, g_bary, {}, twice);
-  RasterizeBackward(clip, mesh.tris, rast, g_bary, zeros, with_zero_depth);
+  RasterizeBackward(in, rast, g_bary, {}, once);
+  RasterizeBackward(in, rast, g_bary, {}, twice);
+  RasterizeBackward(in, rast, g_bary, {}, twice);
+  RasterizeBackward(in, rast, g_bary, zeros, with_zero_depth);
   for (size_t n = 0; n < clip.size(); ++n) {
     EXPECT_FLOAT_EQ(twice[n], 2 * once[n]);
     EXPECT_EQ(with_zero_depth[n], once[n]);

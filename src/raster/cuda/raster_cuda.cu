@@ -312,13 +312,14 @@ __global__ void RecordedGeometryKernel(shared::AntialiasScene sc, const PairReco
 }
 
 // Scene tables on the device: projected vertices and facings, for the pair kernels.
-shared::AntialiasScene DeviceScene(const RasterView& rast, const float* clip, size_t num_vertices,
-                                   const int32_t* tris, size_t num_tris, const int32_t* neighbour) {
+shared::AntialiasScene DeviceScene(const AntialiasInputs& in) {
   Workspace& ws = workspace;
+  const RasterView& rast = in.rast;
+  const size_t num_vertices = in.num_vertices, num_tris = in.num_tris;
   const DeviceRaster r = Resident(rast);
-  const float* d_clip = ws.clip.Upload(clip, 4 * num_vertices);
-  const int32_t* d_tris = ws.tris.Upload(tris, 3 * num_tris);
-  const int32_t* d_neighbour = ws.neighbour.Upload(neighbour, 3 * num_tris);
+  const float* d_clip = ws.clip.Upload(in.clip, 4 * num_vertices);
+  const int32_t* d_tris = ws.tris.Upload(in.tris, 3 * num_tris);
+  const int32_t* d_neighbour = ws.neighbour.Upload(in.neighbour, 3 * num_tris);
   shared::ScreenVertex* screen = ws.screen.Get(num_vertices);
   int8_t* facing = ws.facing.Get(num_tris);
   if (num_vertices) ProjectKernel<<<Blocks(num_vertices), kThreads>>>(d_clip, num_vertices, rast.width, rast.height, screen);
@@ -349,24 +350,24 @@ const char* DeviceDescription() {
   return description.c_str();
 }
 
-void Rasterize(const float* clip, size_t num_vertices, const int32_t* tris, size_t num_tris, RasterOut out) {
+void Rasterize(const RasterizeInputs& in, RasterOut out) {
   Workspace& ws = workspace;
-  const size_t np = static_cast<size_t>(out.width) * out.height;
+  const size_t np = static_cast<size_t>(in.width) * in.height;
   if (np == 0) return;
-  const DeviceRaster r = RasterizeOnDevice(ws.clip.Upload(clip, 4 * num_vertices), ws.tris.Upload(tris, 3 * num_tris),
-                                           num_tris, out.width, out.height);
+  const DeviceRaster r = RasterizeOnDevice(ws.clip.Upload(in.clip, 4 * in.num_vertices),
+                                           ws.tris.Upload(in.tris, 3 * in.num_tris), in.num_tris, in.width, in.height);
   Download(out.bary, r.bary, 2 * np);
   Download(out.depth, r.depth, np);
   Download(out.triangle, r.triangle, np);
 }
 
-void RasterizeBackward(const float* clip, size_t num_vertices, const int32_t* tris, size_t num_tris,
-                       const RasterView& rast, const float* grad_bary, const float* grad_depth, double* grad_clip_sum) {
+void RasterizeBackward(const RasterizeInputs& in, const RasterView& rast, const float* grad_bary,
+                       const float* grad_depth, double* grad_clip_sum) {
   Workspace& ws = workspace;
-  const size_t np = static_cast<size_t>(rast.width) * rast.height;
+  const size_t np = static_cast<size_t>(rast.width) * rast.height, num_vertices = in.num_vertices;
   const DeviceRaster r = Resident(rast);
-  const float* d_clip = ws.clip.Upload(clip, 4 * num_vertices);
-  const int32_t* d_tris = ws.tris.Upload(tris, 3 * num_tris);
+  const float* d_clip = ws.clip.Upload(in.clip, 4 * num_vertices);
+  const int32_t* d_tris = ws.tris.Upload(in.tris, 3 * in.num_tris);
   const float* d_grad_bary = ws.grad_a.Upload(grad_bary, 2 * np);
   const float* d_grad_depth = grad_depth ? ws.grad_b.Upload(grad_depth, np) : nullptr;
   double* sum = ws.sum.Get(4 * num_vertices);
@@ -379,56 +380,53 @@ void RasterizeBackward(const float* clip, size_t num_vertices, const int32_t* tr
   Download(grad_clip_sum, sum, 4 * num_vertices);
 }
 
-void Interpolate(const float* attr, size_t num_attr_vertices, int channels, const int32_t* tris, size_t num_tris,
-                 const RasterView& rast, float* out) {
+void Interpolate(const InterpolateInputs& in, float* out) {
   Workspace& ws = workspace;
-  const size_t np = static_cast<size_t>(rast.width) * rast.height, C = static_cast<size_t>(channels);
+  const size_t np = static_cast<size_t>(in.rast.width) * in.rast.height, C = static_cast<size_t>(in.channels);
   if (np == 0) return;
-  const DeviceRaster r = Resident(rast);
-  const float* d_attr = ws.attr.Upload(attr, C * num_attr_vertices);
-  const int32_t* d_tris = ws.tris.Upload(tris, 3 * num_tris);
+  const DeviceRaster r = Resident(in.rast);
+  const float* d_attr = ws.attr.Upload(in.attr, C * in.num_attr_vertices);
+  const int32_t* d_tris = ws.tris.Upload(in.tris, 3 * in.num_tris);
   float* d_out = ws.out.Get(C * np);
-  InterpolateKernel<<<Blocks(np), kThreads>>>(d_attr, channels, d_tris, np, r, d_out);
+  InterpolateKernel<<<Blocks(np), kThreads>>>(d_attr, in.channels, d_tris, np, r, d_out);
   SD_CUDA(cudaGetLastError());
   Download(out, d_out, C * np);
 }
 
-void InterpolateBackward(const float* attr, size_t num_attr_vertices, int channels, const int32_t* tris,
-                         size_t num_tris, const RasterView& rast, const float* grad_out, double* grad_attr_sum,
-                         float* grad_bary) {
+void InterpolateBackward(const InterpolateInputs& in, const float* grad_out, double* grad_attr_sum, float* grad_bary) {
   Workspace& ws = workspace;
-  const size_t np = static_cast<size_t>(rast.width) * rast.height, C = static_cast<size_t>(channels);
-  const DeviceRaster r = Resident(rast);
-  const float* d_attr = ws.attr.Upload(attr, C * num_attr_vertices);
-  const int32_t* d_tris = ws.tris.Upload(tris, 3 * num_tris);
+  const size_t np = static_cast<size_t>(in.rast.width) * in.rast.height, C = static_cast<size_t>(in.channels);
+  const size_t num_attr_vertices = in.num_attr_vertices;
+  const DeviceRaster r = Resident(in.rast);
+  const float* d_attr = ws.attr.Upload(in.attr, C * num_attr_vertices);
+  const int32_t* d_tris = ws.tris.Upload(in.tris, 3 * in.num_tris);
   const float* d_grad_out = ws.grad_a.Upload(grad_out, C * np);
   float* d_grad_bary = grad_bary ? ws.grad_b.Upload(grad_bary, 2 * np) : nullptr;
   double* sum = ws.sum.Get(C * num_attr_vertices);
   SD_CUDA(cudaMemset(sum, 0, C * num_attr_vertices * sizeof(double)));
   if (np) {
-    InterpolateBackwardKernel<<<Blocks(np), kThreads>>>(d_attr, channels, d_tris, np, r, d_grad_out, sum, d_grad_bary);
+    InterpolateBackwardKernel<<<Blocks(np), kThreads>>>(d_attr, in.channels, d_tris, np, r, d_grad_out, sum,
+                                                        d_grad_bary);
     SD_CUDA(cudaGetLastError());
   }
   Download(grad_attr_sum, sum, C * num_attr_vertices);
   if (grad_bary) Download(grad_bary, d_grad_bary, 2 * np);
 }
 
-void FindAntialiasPairs(const float* color, int channels, const RasterView& rast, const float* clip,
-                        size_t num_vertices, const int32_t* tris, size_t num_tris, const int32_t* neighbour,
-                        bool skip_equal_colors, std::vector<PairRecord>* pairs,
+void FindAntialiasPairs(const AntialiasInputs& in, bool skip_equal_colors, std::vector<PairRecord>* pairs,
                         std::vector<shared::PairGeometry>* geometry) {
   Workspace& ws = workspace;
-  const size_t np = static_cast<size_t>(rast.width) * rast.height, slots = 2 * np;
+  const size_t np = static_cast<size_t>(in.rast.width) * in.rast.height, slots = 2 * np;
   pairs->clear();
   geometry->clear();
   if (np == 0) return;
-  const shared::AntialiasScene sc = DeviceScene(rast, clip, num_vertices, tris, num_tris, neighbour);
-  const float* d_color = skip_equal_colors ? ws.color.Upload(color, static_cast<size_t>(channels) * np) : nullptr;
+  const shared::AntialiasScene sc = DeviceScene(in);
+  const float* d_color = skip_equal_colors ? ws.color.Upload(in.color, static_cast<size_t>(in.channels) * np) : nullptr;
   int32_t* found = ws.pair_offset.Get(2 * slots);  // [0, slots): found flags, [slots, 2 slots): offsets
   int32_t* offset = found + slots;
   PairRecord* slot_pairs = ws.pairs.Get(slots);
   shared::PairGeometry* slot_geometry = ws.geometry.Get(slots);
-  PairKernel<<<Blocks(np), kThreads>>>(sc, d_color, channels, skip_equal_colors, found, slot_pairs, slot_geometry);
+  PairKernel<<<Blocks(np), kThreads>>>(sc, d_color, in.channels, skip_equal_colors, found, slot_pairs, slot_geometry);
   SD_CUDA(cudaGetLastError());
   size_t temp_bytes = 0;
   SD_CUDA(cub::DeviceScan::ExclusiveSum(nullptr, temp_bytes, found, offset, static_cast<int64_t>(slots)));
@@ -449,13 +447,12 @@ void FindAntialiasPairs(const float* color, int channels, const RasterView& rast
   Download(geometry->data(), out_geometry, count);
 }
 
-bool RecordedPairGeometry(const RasterView& rast, const float* clip, size_t num_vertices, const int32_t* tris,
-                          size_t num_tris, const int32_t* neighbour, const PairRecord* pairs, size_t num_pairs,
+bool RecordedPairGeometry(const AntialiasInputs& in, const PairRecord* pairs, size_t num_pairs,
                           std::vector<shared::PairGeometry>* geometry) {
   Workspace& ws = workspace;
   geometry->resize(num_pairs);
   if (num_pairs == 0) return true;
-  const shared::AntialiasScene sc = DeviceScene(rast, clip, num_vertices, tris, num_tris, neighbour);
+  const shared::AntialiasScene sc = DeviceScene(in);
   const PairRecord* d_pairs = ws.pairs.Upload(pairs, num_pairs);
   shared::PairGeometry* d_geometry = ws.geometry.Get(num_pairs);
   int32_t* mismatch = ws.pair_offset.Get(1);
@@ -611,13 +608,13 @@ LossTargets* UploadLossTargets(const LossViewHost* views, size_t num_views) {
 
 void FreeLossTargets(LossTargets* targets) { delete targets; }
 
-void EvaluateLoss(LossTargets& targets, const float* positions, const float* normals, size_t num_vertices,
-                  const int32_t* tris, size_t num_tris, const int32_t* neighbour, double* losses,
-                  float* grad_positions, float* grad_normals) {
+void EvaluateLoss(LossTargets& targets, const NormalMaskInputs& in, double* losses, float* grad_positions,
+                  float* grad_normals) {
   Workspace& ws = workspace;
-  const size_t nv = num_vertices, nt = num_tris, num_views = targets.views.size();
-  const float* d_positions = ws.attr.Upload(positions, 3 * nv);
-  const float* d_normals = ws.color.Upload(normals, 3 * nv);
+  const size_t nv = in.num_vertices, nt = in.num_tris, num_views = targets.views.size();
+  const int32_t *tris = in.tris, *neighbour = in.neighbour;
+  const float* d_positions = ws.attr.Upload(in.positions, 3 * nv);
+  const float* d_normals = ws.color.Upload(in.normals, 3 * nv);
   if (!std::equal(tris, tris + 3 * nt, targets.tris.begin(), targets.tris.end()) ||
       !std::equal(neighbour, neighbour + 3 * nt, targets.neighbour.begin(), targets.neighbour.end())) {
     targets.tris.assign(tris, tris + 3 * nt);

@@ -30,45 +30,65 @@ bool Available();
 // "NVIDIA H100 80GB HBM3, 132 SMs, 79 GiB" (empty when not available).
 const char* DeviceDescription();
 
+// Each op's inputs struct mirrors raster.h's of the same name, field for field, as host pointers and counts
+// (internal.h converts); the public op has checked them before it calls here.
 struct RasterView {  // a RasterBuffer on the host
   int width = 0, height = 0;
   const float* bary = nullptr;
   const float* depth = nullptr;
   const int32_t* triangle = nullptr;
 };
-struct RasterOut {
+
+struct RasterizeInputs {
+  const float* clip = nullptr;  // 4 per vertex
+  size_t num_vertices = 0;
+  const int32_t* tris = nullptr;
+  size_t num_tris = 0;
   int width = 0, height = 0;
+};
+struct RasterOut {  // host buffers of in.width x in.height pixels
   float* bary = nullptr;
   float* depth = nullptr;
   int32_t* triangle = nullptr;
 };
-
-void Rasterize(const float* clip, size_t num_vertices, const int32_t* tris, size_t num_tris, RasterOut out);
+void Rasterize(const RasterizeInputs& in, RasterOut out);
 // grad_clip_sum: host, 4 per vertex, OVERWRITTEN with the sum over pixels (the caller adds it).
-void RasterizeBackward(const float* clip, size_t num_vertices, const int32_t* tris, size_t num_tris,
-                       const RasterView& rast, const float* grad_bary, const float* grad_depth /* nullable */,
-                       double* grad_clip_sum);
+void RasterizeBackward(const RasterizeInputs& in, const RasterView& rast, const float* grad_bary,
+                       const float* grad_depth /* nullable */, double* grad_clip_sum);
 
-void Interpolate(const float* attr, size_t num_attr_vertices, int channels, const int32_t* tris, size_t num_tris,
-                 const RasterView& rast, float* out);
+struct InterpolateInputs {
+  const float* attr = nullptr;  // `channels` per vertex
+  size_t num_attr_vertices = 0;
+  int channels = 0;
+  const int32_t* tris = nullptr;
+  size_t num_tris = 0;
+  RasterView rast;
+};
+void Interpolate(const InterpolateInputs& in, float* out);
 // grad_attr_sum: host, OVERWRITTEN with the sum over pixels; grad_bary: host, accumulated (+=), nullable.
-void InterpolateBackward(const float* attr, size_t num_attr_vertices, int channels, const int32_t* tris,
-                         size_t num_tris, const RasterView& rast, const float* grad_out, double* grad_attr_sum,
-                         float* grad_bary);
+void InterpolateBackward(const InterpolateInputs& in, const float* grad_out, double* grad_attr_sum, float* grad_bary);
 
+struct AntialiasInputs {
+  const float* color = nullptr;  // `channels` per pixel
+  int channels = 0;
+  RasterView rast;
+  const float* clip = nullptr;  // 4 per vertex
+  size_t num_vertices = 0;
+  const int32_t* tris = nullptr;
+  size_t num_tris = 0;
+  const int32_t* neighbour = nullptr;  // EdgeTopology::neighbour, 3 per triangle
+};
 struct PairRecord {  // layout of raster.h's AntialiasRecord::PixelPair
   int32_t pixel_a, pixel_b, triangle, edge;
   float alpha;
 };
 // The silhouette pairs of the image in the CPU's order (row by row, the right neighbour before the lower),
 // with each pair's geometry. skip_equal_colors: Antialias's color_gradient = false.
-void FindAntialiasPairs(const float* color, int channels, const RasterView& rast, const float* clip,
-                        size_t num_vertices, const int32_t* tris, size_t num_tris, const int32_t* neighbour,
-                        bool skip_equal_colors, std::vector<PairRecord>* pairs,
+void FindAntialiasPairs(const AntialiasInputs& in, bool skip_equal_colors, std::vector<PairRecord>* pairs,
                         std::vector<shared::PairGeometry>* geometry);
-// The geometry of recorded pairs, recomputed; returns false when a record does not match the inputs.
-bool RecordedPairGeometry(const RasterView& rast, const float* clip, size_t num_vertices, const int32_t* tris,
-                          size_t num_tris, const int32_t* neighbour, const PairRecord* pairs, size_t num_pairs,
+// The geometry of recorded pairs, recomputed (in.color is not read); returns false when a record does not
+// match the inputs.
+bool RecordedPairGeometry(const AntialiasInputs& in, const PairRecord* pairs, size_t num_pairs,
                           std::vector<shared::PairGeometry>* geometry);
 
 }  // namespace sd::raster::cuda
@@ -88,11 +108,18 @@ struct LossViewHost {
 class LossTargets;
 LossTargets* UploadLossTargets(const LossViewHost* views, size_t num_views);
 void FreeLossTargets(LossTargets* targets);
+struct NormalMaskInputs {  // normal_mask_loss.h's
+  const float* positions = nullptr;  // 3 per vertex
+  const float* normals = nullptr;    // 3 per vertex
+  size_t num_vertices = 0;
+  const int32_t* tris = nullptr;
+  size_t num_tris = 0;
+  const int32_t* neighbour = nullptr;  // 3 per triangle
+};
 // losses: 2 per view (normal, mask); grad_positions / grad_normals: 3 per vertex, the views' shares summed in
 // view order, overwritten. The whole evaluation is queued on the calling thread's stream before the one wait
 // for its results.
-void EvaluateLoss(LossTargets& targets, const float* positions, const float* normals, size_t num_vertices,
-                  const int32_t* tris, size_t num_tris, const int32_t* neighbour, double* losses,
-                  float* grad_positions, float* grad_normals);
+void EvaluateLoss(LossTargets& targets, const NormalMaskInputs& in, double* losses, float* grad_positions,
+                  float* grad_normals);
 
 }  // namespace sd::raster::cuda

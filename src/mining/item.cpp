@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/error.h"
+#include "io/geometry_json.h"
 #include "io/json.h"
 
 namespace sd::mining {
@@ -50,31 +51,6 @@ namespace {
 // No camera or crop comes near this; a larger number in a manifest is corruption, refused before it sizes a buffer.
 constexpr int64_t kMaxImageSide = 1 << 15;
 
-json BoxJson(const Box2& b) { return json::array({b.x1, b.y1, b.x2, b.y2}); }
-
-Box2 ReadBox2(const JsonReader& r) {
-  if (r.Size() != 4) r.Fail("expected [x1, y1, x2, y2]");
-  return Box2{r[0].Number(), r[1].Number(), r[2].Number(), r[3].Number()};
-}
-
-json BoxJson(const Box3& b) {
-  const Eigen::Quaterniond& q = b.T_frame_box.rotation;
-  return {{"center", {b.center().x(), b.center().y(), b.center().z()}},
-          {"size", {b.size.x(), b.size.y(), b.size.z()}},
-          {"rotation_wxyz", {q.w(), q.x(), q.y(), q.z()}}};
-}
-
-Box3 ReadBox3(const JsonReader& b) {
-  const JsonReader c = b["center"], s = b["size"], q = b["rotation_wxyz"];
-  if (c.Size() != 3 || s.Size() != 3 || q.Size() != 4) b.Fail("expected center[3], size[3], rotation_wxyz[4]");
-  Box3 box;
-  box.T_frame_box = Rigid3d::FromWxyz(q[0].Number(), q[1].Number(), q[2].Number(), q[3].Number(),
-                                      {c[0].Number(), c[1].Number(), c[2].Number()});
-  box.size = {s[0].Number(), s[1].Number(), s[2].Number()};
-  if (!(box.size.minCoeff() > 0)) s.Fail("box sizes must be positive");
-  return box;
-}
-
 // A 64-bit hash as 16 hex digits: JSON numbers are doubles in most readers and would lose bits.
 std::string HashHex(uint64_t h) {
   char buf[17];
@@ -108,16 +84,16 @@ json ToJson(const MinedItem& item) {
     j["visibility_level"] = item.visibility_level;
     j["lidar_points"] = item.lidar_points;
   }
-  if (item.box_ego) j["box_ego"] = BoxJson(*item.box_ego);
-  if (item.box_camera) j["box_camera"] = BoxJson(*item.box_camera);
+  if (item.box_ego) j["box_ego"] = Box3Json(*item.box_ego);
+  if (item.box_camera) j["box_camera"] = Box3Json(*item.box_camera);
   if (item.camera_intrinsics) {
     const PinholeCamera& c = *item.camera_intrinsics;
     j["intrinsics"] = {{"width", c.width}, {"height", c.height}, {"fx", c.fx}, {"fy", c.fy}, {"cx", c.cx},
                        {"cy", c.cy}};
   }
-  if (item.annotated_box2d) j["annotated_box2d"] = BoxJson(*item.annotated_box2d);
-  j["box2d"] = BoxJson(item.box2d);
-  j["crop_rect"] = BoxJson(item.crop_rect);
+  if (item.annotated_box2d) j["annotated_box2d"] = Box2Json(*item.annotated_box2d);
+  j["box2d"] = Box2Json(item.box2d);
+  j["crop_rect"] = Box2Json(item.crop_rect);
   j["crop_scale"] = item.crop_scale;
   j["crop_size"] = {item.crop_width, item.crop_height};
   j["truncation"] = item.truncation;

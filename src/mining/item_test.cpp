@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <string>
+
 #include "core/error.h"
 
 namespace sd::mining {
@@ -82,6 +84,40 @@ TEST(MinedItem, MalformedRecordNamesTheLine) {
   j = ToJson(LogItem());
   j["kind"] = "ftp";
   EXPECT_THROW(ItemFromJson(j, "x"), InputError);
+}
+
+// A line of items.jsonl as the build before the shared geometry codec (io/geometry_json.h) wrote it: indexes on
+// users' disks hold such lines. It reads to the same values, and writing the item again gives the same bytes.
+TEST(MinedItem, ReadsALineTheEarlierBuildWrote) {
+  const std::string line =
+      R"({"annotated_box2d":[700.0,400.0,760.0,480.0],"annotation":"a1","box2d":[702.5,401.0,758.25,479.5],"box_camera":{"center":[0.5000000000000003,-11.0,2.9000000000000004],"rotation_wxyz":[0.5691046052048208,-0.41966647273122154,0.5691046052048208,-0.41966647273122154],"size":[0.4,0.4,0.7]},"box_ego":{"center":[12.5,-3.1,0.4],"rotation_wxyz":[0.9887710779360424,0.0,0.0,0.14943813247359924],"size":[0.4,0.4,0.7]},"camera":"CAM_FRONT","category":"traffic_cone","crop_file":"crops/a.png","crop_rect":[680.0,380.0,780.0,500.0],"crop_scale":1.0,"crop_size":[128,128],"dataset_category":"movable_object.trafficcone","frame":"e93e98b6","id":"e3f7116f2c922241","instance":"i1","intrinsics":{"cx":816.3,"cy":491.5,"fx":1266.4,"fy":1266.4,"height":900,"width":1600},"kind":"log","lidar_points":35,"log_name":"n015","mask_file":"crops/a.mask.png","mask_source":"lidar","occlusion":0.1,"origin":"/data/nuscenes/samples/CAM_FRONT/x.jpg","phash":"8f3c00ff12345678","sharpness":143.5,"source":"/data/nuscenes","truncation":0.0,"visibility_level":4})";
+  const MinedItem item = ItemFromJson(nlohmann::json::parse(line), "index/shard-0/items.jsonl:1");
+  EXPECT_EQ(ToJson(item).dump(), line);
+  ASSERT_TRUE(item.box_ego.has_value() && item.box_camera.has_value());
+  EXPECT_EQ(item.box_ego->center(), Eigen::Vector3d(12.5, -3.1, 0.4));
+  EXPECT_EQ(item.box_ego->size, Eigen::Vector3d(0.4, 0.4, 0.7));
+  EXPECT_EQ(item.box_ego->T_frame_box.rotation.coeffs(), Eigen::Vector4d(0.0, 0.0, 0.14943813247359924, 0.9887710779360424));
+  // That build normalised on reading (FromWxyz); the value kept is within an ulp of that one.
+  const Eigen::Quaterniond renormalised = Rigid3d::FromWxyz(0.5691046052048208, -0.41966647273122154, 0.5691046052048208,
+                                                            -0.41966647273122154, Eigen::Vector3d::Zero()).rotation;
+  EXPECT_LT((item.box_camera->T_frame_box.rotation.coeffs() - renormalised.coeffs()).cwiseAbs().maxCoeff(), 2e-16);
+  EXPECT_NEAR(item.box_ego->Yaw(), 0.3, 1e-15);
+  EXPECT_EQ(item.box_camera->center(), Eigen::Vector3d(0.5000000000000003, -11.0, 2.9000000000000004));
+  EXPECT_EQ(item.lidar_points, 35);
+  EXPECT_EQ(item.phash, 0x8f3c00ff12345678ull);
+  EXPECT_DOUBLE_EQ(item.box2d.x2, 758.25);
+}
+
+TEST(MinedItem, NonPositiveBoxSizeNamesTheLineAndKey) {
+  nlohmann::json j = ToJson(LogItem());
+  j["box_ego"]["size"][1] = -0.4;
+  try {
+    ItemFromJson(j, "shard/items.jsonl:3");
+    FAIL() << "expected InputError";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("shard/items.jsonl:3: .box_ego.size: box sizes must be positive"), std::string::npos)
+        << e.what();
+  }
 }
 
 TEST(MinedItem, StableIdIsDeterministicAndSpreads) {

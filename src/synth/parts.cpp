@@ -2,14 +2,15 @@
 
 #include <cmath>
 #include <cstdio>
-#include <limits>
 #include <map>
 #include <string_view>
 
 #include "core/log.h"
+#include "datasets/annotation_json.h"
 #include "datasets/format.h"
 #include "datasets/readers.h"
 #include "io/files.h"
+#include "io/geometry_json.h"
 #include "io/image_io.h"
 #include "io/json.h"
 #include "io/pointcloud_io.h"
@@ -21,7 +22,9 @@ using nlohmann::json;
 
 namespace {
 
-constexpr int kPartVersion = 2;
+// 3: poses, boxes and annotations in the shared codecs (io/geometry_json.h, datasets/annotation_json.h). A part
+// of another version is refused, never read in the wrong layout.
+constexpr int kPartVersion = 3;
 
 std::string Fnv1a64Hex(std::string_view bytes) {
   uint64_t h = 1469598103934665603ull;
@@ -34,56 +37,6 @@ std::string Fnv1a64Hex(std::string_view bytes) {
   return buf;
 }
 
-// Doubles go through nlohmann's shortest round-trip formatting, so a value read back is the value written;
-// non-finite values (unknown velocities) are written as null.
-json Num(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
-double NumFrom(const JsonReader& r) {
-  return r.raw().is_null() ? std::numeric_limits<double>::quiet_NaN() : r.Number();
-}
-json VecJson(const Eigen::Vector3d& v) { return {Num(v.x()), Num(v.y()), Num(v.z())}; }
-Eigen::Vector3d VecFrom(const JsonReader& r) { return {NumFrom(r[0]), NumFrom(r[1]), NumFrom(r[2])}; }
-json RigidJson(const Rigid3d& T) {
-  const Eigen::Quaterniond& q = T.rotation;
-  return {{"q_wxyz", {q.w(), q.x(), q.y(), q.z()}}, {"t", VecJson(T.translation)}};
-}
-Rigid3d RigidFrom(const JsonReader& r) {
-  const JsonReader q = r["q_wxyz"];
-  const Eigen::Quaterniond q_unit(q[0].Number(), q[1].Number(), q[2].Number(), q[3].Number());  // a Rigid3d wrote it
-  return Rigid3d::FromUnitQuaternion(q_unit, VecFrom(r["t"]));
-}
-json BoxJson(const Box3& b) { return {{"T_frame_box", RigidJson(b.T_frame_box)}, {"size", VecJson(b.size)}}; }
-Box3 BoxFrom(const JsonReader& r) {
-  Box3 b;
-  b.T_frame_box = RigidFrom(r["T_frame_box"]);
-  b.size = VecFrom(r["size"]);
-  return b;
-}
-json Box2Json(const Box2& b) { return {b.x1, b.y1, b.x2, b.y2}; }
-Box2 Box2From(const JsonReader& r) { return Box2{r[0].Number(), r[1].Number(), r[2].Number(), r[3].Number()}; }
-
-json AnnotationJson(const Annotation& a) {
-  json j = {{"category", a.category},       {"box", BoxJson(a.box)},          {"token", a.token},
-            {"instance_token", a.instance_token}, {"num_lidar_pts", a.num_lidar_pts},
-            {"velocity", {Num(a.velocity.x()), Num(a.velocity.y())}}, {"visibility", a.visibility},
-            {"truncation", Num(a.truncation)}, {"box2d_by_camera", json::object()}};
-  for (const auto& [channel, b] : a.box2d_by_camera) j["box2d_by_camera"][channel] = Box2Json(b);
-  return j;
-}
-Annotation AnnotationFrom(const JsonReader& r) {
-  Annotation a;
-  a.category = r["category"].String();
-  a.box = BoxFrom(r["box"]);
-  a.token = r["token"].String();
-  a.instance_token = r["instance_token"].String();
-  a.num_lidar_pts = static_cast<int>(r["num_lidar_pts"].Integer());
-  a.velocity = Eigen::Vector2d(NumFrom(r["velocity"][0]), NumFrom(r["velocity"][1]));
-  a.visibility = static_cast<int>(r["visibility"].Integer());
-  a.truncation = NumFrom(r["truncation"]);
-  for (const auto& [channel, b] : r["box2d_by_camera"].raw().items())
-    a.box2d_by_camera[channel] = Box2From(r["box2d_by_camera"][channel]);
-  return a;
-}
-
 json AddedJson(const AddedObject& o) {
   json boxes = json::array();
   for (const CameraBox& cb : o.camera_boxes)
@@ -94,10 +47,10 @@ json AddedJson(const AddedObject& o) {
 AddedObject AddedFrom(const JsonReader& r) {
   AddedObject o;
   o.category = r["category"].String();
-  o.annotation = AnnotationFrom(r["annotation"]);
+  o.annotation = ReadAnnotation(r["annotation"]);
   for (size_t i = 0; i < r["camera_boxes"].Size(); ++i) {
     const JsonReader b = r["camera_boxes"][i];
-    o.camera_boxes.push_back(CameraBox{b["channel"].String(), Box2From(b["box"]), b["visible_fraction"].Number(), b["truncation"].Number()});
+    o.camera_boxes.push_back(CameraBox{b["channel"].String(), ReadBox2(b["box"]), b["visible_fraction"].Number(), b["truncation"].Number()});
   }
   o.asset_id = r["asset_id"].String();
   return o;
@@ -184,8 +137,8 @@ void WritePart(const fs::path& dir, const FrameOutcome& o, const SynthInputs& in
     objects.push_back({{"label", AddedJson(o.edit.added[k])},
                        {"asset", ob.placement.asset->info.id},
                        {"request", ob.placement.request},
-                       {"T_ego_asset", RigidJson(ob.placement.T_ego_asset)},
-                       {"box", BoxJson(ob.placement.box)},
+                       {"T_ego_asset", Rigid3dJson(ob.placement.T_ego_asset)},
+                       {"box", Box3Json(ob.placement.box)},
                        {"ground_height", ob.placement.ground_height},
                        {"lidar_points", ob.lidar_points},
                        {"rendered_pixels", ob.rendered_pixels},
@@ -211,8 +164,11 @@ void WritePart(const fs::path& dir, const FrameOutcome& o, const SynthInputs& in
 }
 
 void CheckPartRequest(const fs::path& part_json, const json& part, const SynthInputs& in) {
-  if (!part.is_object() || part.value("version", 0) != kPartVersion)
-    throw InputError(part_json, Msg() << "not a synth part of version " << kPartVersion);
+  if (!part.is_object() || !part.contains("version") || !part["version"].is_number_integer())
+    throw InputError(part_json, Msg() << "not a synth part (no version; this build's parts are version " << kPartVersion << ")");
+  if (part["version"] != kPartVersion)
+    throw InputError(part_json, Msg() << "a synth part of version " << part["version"].dump() << ", this build reads version "
+                                      << kPartVersion << ": merge it with the build that made it, or remove the part to make it again");
   const json& theirs = part.contains("request") ? part["request"] : json();
   if (theirs == in.fingerprint) return;
   std::string what;
@@ -253,8 +209,8 @@ FrameOutcome ReadPart(const fs::path& dir, size_t frame_index, const SynthInputs
     if (asset == by_id.end()) ro["asset"].Fail("no such asset in this request");
     ob.placement.asset = asset->second;
     ob.placement.request = static_cast<int>(ro["request"].Integer());
-    ob.placement.T_ego_asset = RigidFrom(ro["T_ego_asset"]);
-    ob.placement.box = BoxFrom(ro["box"]);
+    ob.placement.T_ego_asset = ReadRigid3d(ro["T_ego_asset"]);
+    ob.placement.box = ReadBox3(ro["box"]);
     ob.placement.ground_height = ro["ground_height"].Number();
     ob.lidar_points = static_cast<int>(ro["lidar_points"].Integer());
     ob.rendered_pixels = ro["rendered_pixels"].Number();

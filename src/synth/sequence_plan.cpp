@@ -10,6 +10,7 @@
 #include "core/error.h"
 #include "core/log.h"
 #include "datasets/categories.h"
+#include "io/geometry_json.h"
 
 namespace sd {
 namespace {
@@ -486,11 +487,11 @@ SequencePlan PlanSequence(const Log& log, const Scenario& scenario, const Surfac
 }
 
 namespace {
+// The pose codec's encoding plus its heading for people reading plan.json; readers of the pose ignore the extra key.
 nlohmann::json PoseJson(const Rigid3d& T) {
-  const auto& q = T.rotation;
-  return {{"translation", {T.translation.x(), T.translation.y(), T.translation.z()}},
-          {"rotation_wxyz", {q.w(), q.x(), q.y(), q.z()}},
-          {"yaw_deg", T.Yaw() / kDeg}};
+  nlohmann::json j = Rigid3dJson(T);
+  j["yaw_deg"] = T.Yaw() / kDeg;
+  return j;
 }
 }  // namespace
 

@@ -7,6 +7,7 @@
 
 #include "core/error.h"
 #include "datasets/readers.h"
+#include "io/geometry_json.h"
 #include "testing/testing.h"
 
 namespace sd {
@@ -215,6 +216,30 @@ TEST(SequencePlan, ClutterStaysOutOfTheEgoLaneAndPlainObjectsArePlannedToo) {
     FAIL();
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("2000 inside the ego lane"), std::string::npos) << e.what();
+  }
+}
+
+// plan.json's poses are the geometry codec's (io/geometry_json.h), with the heading added for people: each reads
+// back bit for bit, so a tool reading plan.json gets the planner's own poses.
+TEST(SequencePlan, PlanJsonPosesReadBackBitForBit) {
+  const Log log = StraightLog(10, 4.0);
+  const Scenario s = Parse(R"({"seed": 5, "objects": [{"category": "car", "count": 3, "distance_m": [15, 45], "lateral_m": [-6, 6]}]})");
+  const SequencePlan plan = PlanSequence(log, s, PlaneSurface());
+  ASSERT_EQ(plan.objects.size(), 3u);
+  const nlohmann::json j = nlohmann::json::parse(PlanToJson(plan).dump());
+  const JsonReader r(j, "plan.json");
+  for (size_t i = 0; i < plan.objects.size(); ++i) {
+    const JsonReader pose = r["objects"][i]["T_world_object"];
+    const Rigid3d back = ReadRigid3d(pose);
+    EXPECT_EQ(back.rotation.coeffs(), plan.objects[i].T_world_object.rotation.coeffs()) << i;
+    EXPECT_EQ(back.translation, plan.objects[i].T_world_object.translation) << i;
+    EXPECT_DOUBLE_EQ(pose["yaw_deg"].Number(), plan.objects[i].T_world_object.Yaw() * 180 / kPi);
+    nlohmann::json codec = Rigid3dJson(plan.objects[i].T_world_object);
+    codec["yaw_deg"] = pose["yaw_deg"].raw();
+    EXPECT_EQ(pose.raw(), codec);
+    const Rigid3d ego = ReadRigid3d(r["per_frame"][9]["objects"][i]["T_ego_object"]);
+    EXPECT_EQ(ego.rotation.coeffs(), plan.frames[9].objects[i].T_ego_object.rotation.coeffs()) << i;
+    EXPECT_EQ(ego.translation, plan.frames[9].objects[i].T_ego_object.translation) << i;
   }
 }
 

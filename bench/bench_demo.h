@@ -2,8 +2,12 @@
 // What the synthesis benchmarks share: the repo's data/ (bench_paths.h), and the demo's three meshes with the axes and
 // scales the demo imports them with (src/cli/cmd_demo.cpp, data/README.md): y-up; the cone scaled to 0.7 m,
 // the barrier and the car in metres, the barrier's front along the file's z.
+#include <unistd.h>
+
+#include <chrono>
 #include <cstdlib>
 #include <filesystem>
+#include <functional>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -14,6 +18,7 @@
 #include "assetgen/asset.h"
 #include "assetgen/canonical.h"
 #include "datasets/categories.h"
+#include "datasets/readers.h"
 #include "io/mesh_io.h"
 #include "synth/scenario.h"
 #include "bench_paths.h"
@@ -92,6 +97,37 @@ inline Scenario ScenarioWithObjects(const Scenario& demo, int cones, int barrier
   add("barrier", barriers, ObjectRequest::Yaw::kAligned);
   add("car", cars, ObjectRequest::Yaw::kAligned);
   return s;
+}
+
+// The repo keyframe (nuScenes scene-0061), the demo's scenario and its three assets imported into a temp folder that
+// goes with it: where the benchmarks of one keyframe's objects (bench_sky_filter, bench_road_shade) start.
+struct DemoKeyframe {
+  std::filesystem::path root, tmp;
+  std::vector<Asset> assets;
+  Log log;
+  Scenario demo;
+
+  DemoKeyframe(const std::filesystem::path& repo_root, const std::string& name)
+      : root(repo_root),
+        tmp(std::filesystem::temp_directory_path() / ("synthdrive-" + name + "-" + std::to_string(::getpid()))) {
+    const std::filesystem::path data = root / "data";
+    for (const DemoMesh& m : DemoMeshes()) assets.push_back(ImportDemoAsset(data, m, tmp / m.id));
+    log = OpenLog(data / "driving/nuscenes-scene0061-kf0/mmdet3d_info/n015-2018-07-24-11-22-45+0800.json");
+    demo = ReadScenario(data / "scenarios/demo.json");
+  }
+  ~DemoKeyframe() {
+    std::error_code ec;
+    std::filesystem::remove_all(tmp, ec);
+  }
+  DemoKeyframe(const DemoKeyframe&) = delete;
+  DemoKeyframe& operator=(const DemoKeyframe&) = delete;
+};
+
+// Wall-clock seconds `f` takes.
+inline double Seconds(const std::function<void()>& f) {
+  const auto t0 = std::chrono::steady_clock::now();
+  f();
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
 }  // namespace sd::bench

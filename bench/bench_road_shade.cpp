@@ -1,30 +1,27 @@
 // The road's shade under inserted objects (ReceiverShadowImage, the "camera shadows" stage of synth) against
-// ReceiverShadowRatio called at every pixel (what the image did before its economies: the sun's disk near the
-// edges of its centre's hard shadow only, the map read for blocked sky rays only), on the real keyframe: the
-// demo's objects (5) and 20 of them placed by SynthesizeFrame, under the frame's own environment map (sky
-// radiance, SH, sun), in every camera they touch, over each object's box-and-shadow rectangle as synth shades it.
+// ReceiverShadowRatio called at every pixel (what the image did before it traced the sun's disk only near the
+// edges of its centre's hard shadow), on the real keyframe: the demo's objects (5) and 20 of them placed by
+// SynthesizeFrame, under the frame's own environment map (sky radiance, SH, sun), in every camera they touch, over
+// each object's box-and-shadow rectangle as synth shades it.
 //
 // Variants (sun rays over the disk / sky rays per pixel):
 //   per pixel:   8 / 16, ReceiverShadowRatio at every pixel;
 //   image:       8 / 16, ReceiverShadowImage (the synth default);
 //   image 4 sky: 8 / 4, ReceiverShadowImage (what a quarter of the sky rays would give).
-// Quality: against a reference of 64 disk rays and 256 sky rays, ReceiverShadowRatio at every pixel, the error of the ratio (the factor the
-// real road's light is multiplied by, 0-1) over the receiver pixels the reference darkens by more than 1 % or
-// any variant does, raw and as the camera look shows it (the shade map blurred with sigma 1.5 px, the look's
-// least), and over penumbra pixels (the reference changes by more than 0.1 to a 4-neighbour, grown by 1 px).
+// Quality: against a reference of 64 disk rays and 256 sky rays, ReceiverShadowRatio at every pixel, the error of
+// the ratio (the factor the real road's light is multiplied by, 0-1) over the receiver pixels the reference or
+// any variant darkens by more than 1 %: raw, as the camera look shows it (the shade map blurred with sigma 1.5
+// px, the look's least), and over penumbra pixels (the reference changes by more than 0.1 to a 4-neighbour,
+// grown by 1 px).
 // Time: median of 5, interleaved. Crops: bench/results/road_shade/<scene>_<camera>_<object>.png, each a strip of
 // the reference, per-pixel and image shade maps as seen (blurred), grey, enlarged up to 4x.
 //
 // Usage: bench_road_shade [--no-crops]. Repo root: $SYNTHDRIVE_SOURCE_DIR, else build/bin/../../.
-#include <unistd.h>
-
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
-#include <functional>
 #include <string>
 #include <vector>
 
@@ -143,12 +140,6 @@ void WriteStrip(const std::vector<const sd::ImageF*>& maps, const std::array<int
   sd::WriteImage(path, strip);
 }
 
-double Seconds(const std::function<void()>& f) {
-  const auto t0 = std::chrono::steady_clock::now();
-  f();
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -156,13 +147,10 @@ int main(int argc, char** argv) {
   const std::optional<fs::path> found = sd::bench::RepoRootOrSay();
   if (!found) return 1;
   const fs::path root = *found;
-  const fs::path data = root / "data";
-  const fs::path tmp = fs::temp_directory_path() / ("synthdrive-road-shade-" + std::to_string(::getpid()));
-  std::vector<sd::Asset> assets;
-  for (const sd::bench::DemoMesh& m : sd::bench::DemoMeshes())
-    assets.push_back(sd::bench::ImportDemoAsset(data, m, tmp / m.id));
-  const sd::Log log = sd::OpenLog(data / "driving/nuscenes-scene0061-kf0/mmdet3d_info/n015-2018-07-24-11-22-45+0800.json");
-  const sd::Scenario demo = sd::ReadScenario(data / "scenarios/demo.json");
+  const sd::bench::DemoKeyframe keyframe(root, "road-shade");
+  const std::vector<sd::Asset>& assets = keyframe.assets;
+  const sd::Log& log = keyframe.log;
+  const sd::Scenario& demo = keyframe.demo;
   const fs::path out_dir = root / "bench/results/road_shade";
   if (crops) fs::create_directories(out_dir);
   const sd::Frame& frame = log.frames.at(0);
@@ -224,7 +212,8 @@ int main(int argc, char** argv) {
       if (cmp[0].raw.n == 0) continue;
       std::vector<std::vector<double>> times(kVariants.size());
       for (int rep = 0; rep < 5; ++rep)
-        for (size_t i = 0; i < kVariants.size(); ++i) times[i].push_back(Seconds([&] { shade(cam, rects, kVariants[i]); }));
+        for (size_t i = 0; i < kVariants.size(); ++i)
+          times[i].push_back(sd::bench::Seconds([&] { shade(cam, rects, kVariants[i]); }));
       std::printf("| %s | %s | %zu | %ld (%ld) |", c.name, cam.channel.c_str(), rects.size(), cmp[0].raw.n, cmp[0].penumbra.n);
       for (const Comparison& e : cmp) std::printf(" %.4f / %.4f / %.4f |", e.raw.Rmse(), e.seen.Rmse(), e.penumbra.Rmse());
       for (size_t i = 0; i < kVariants.size(); ++i) {
@@ -249,7 +238,5 @@ int main(int argc, char** argv) {
     std::printf(" %.4f / %.4f / %.4f (bias %+.4f) |", e.raw.Rmse(), e.seen.Rmse(), e.penumbra.Rmse(), e.seen.Bias());
   for (double t : total_s) std::printf(" %.3f |", t);
   std::printf("\n");
-  std::error_code ec;
-  fs::remove_all(tmp, ec);
   return 0;
 }

@@ -13,15 +13,11 @@
 // each a strip of the converged (4 sub-samples x 256 rays), plain and filtered renders, enlarged up to 4x.
 //
 // Usage: bench_sky_filter [--no-crops]. Repo root: $SYNTHDRIVE_SOURCE_DIR, else build/bin/../../.
-#include <unistd.h>
-
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
-#include <functional>
 #include <string>
 #include <vector>
 
@@ -105,12 +101,6 @@ void WriteStrip(const std::vector<const sd::CameraRender*>& renders, const std::
   sd::WriteImage(path, strip);
 }
 
-double Seconds(const std::function<void()>& f) {
-  const auto t0 = std::chrono::steady_clock::now();
-  f();
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -118,13 +108,10 @@ int main(int argc, char** argv) {
   const std::optional<fs::path> found = sd::bench::RepoRootOrSay();
   if (!found) return 1;
   const fs::path root = *found;
-  const fs::path data = root / "data";
-  const fs::path tmp = fs::temp_directory_path() / ("synthdrive-sky-filter-" + std::to_string(::getpid()));
-  std::vector<sd::Asset> assets;
-  for (const sd::bench::DemoMesh& m : sd::bench::DemoMeshes())
-    assets.push_back(sd::bench::ImportDemoAsset(data, m, tmp / m.id));
-  const sd::Log log = sd::OpenLog(data / "driving/nuscenes-scene0061-kf0/mmdet3d_info/n015-2018-07-24-11-22-45+0800.json");
-  const sd::Scenario demo = sd::ReadScenario(data / "scenarios/demo.json");
+  const sd::bench::DemoKeyframe keyframe(root, "sky-filter");
+  const std::vector<sd::Asset>& assets = keyframe.assets;
+  const sd::Log& log = keyframe.log;
+  const sd::Scenario& demo = keyframe.demo;
   const fs::path out_dir = root / "bench/results/sky_filter";
   if (crops) fs::create_directories(out_dir);
 
@@ -171,8 +158,8 @@ int main(int argc, char** argv) {
       Compare(filtered1, ref1, &total_filtered);
       std::vector<double> tp, tf;
       for (int rep = 0; rep < 5; ++rep) {
-        tp.push_back(Seconds([&] { Render(s, cam, light, rects, 4, 16, 0); }));
-        tf.push_back(Seconds([&] { Render(s, cam, light, rects, 4, 4, 3); }));
+        tp.push_back(sd::bench::Seconds([&] { Render(s, cam, light, rects, 4, 16, 0); }));
+        tf.push_back(sd::bench::Seconds([&] { Render(s, cam, light, rects, 4, 4, 3); }));
       }
       std::sort(tp.begin(), tp.end());
       std::sort(tf.begin(), tf.end());
@@ -201,7 +188,5 @@ int main(int argc, char** argv) {
               total_plain.edges.Rmse() / mean, total_plain.edges.Bias() / mean, total_filtered.all.Rmse() / mean,
               total_filtered.all.Bias() / mean, total_filtered.edges.Rmse() / mean, total_filtered.edges.Bias() / mean,
               t_plain_total, t_filtered_total);
-  std::error_code ec;
-  fs::remove_all(tmp, ec);
   return 0;
 }

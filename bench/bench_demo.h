@@ -4,6 +4,8 @@
 // the barrier and the car in metres, the barrier's front along the file's z.
 #include <unistd.h>
 
+#include <algorithm>
+#include <array>
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
@@ -19,6 +21,8 @@
 #include "assetgen/canonical.h"
 #include "datasets/categories.h"
 #include "datasets/readers.h"
+#include "core/image.h"
+#include "io/image_io.h"
 #include "io/mesh_io.h"
 #include "synth/scenario.h"
 #include "bench_paths.h"
@@ -122,6 +126,21 @@ struct DemoKeyframe {
   DemoKeyframe(const DemoKeyframe&) = delete;
   DemoKeyframe& operator=(const DemoKeyframe&) = delete;
 };
+
+// `panels` crops of `rect` ({x0, y0, x1, y1}) side by side, each enlarged `zoom` times (nearest), 4 white pixels
+// apart, written as sRGB to `path`; `linear(panel, x, y, channel)` is the linear value at image pixel (x, y).
+inline void WriteZoomedStrip(int panels, const std::array<int, 4>& rect, int zoom, const std::filesystem::path& path,
+                             const std::function<float(int, int, int, int)>& linear) {
+  const int w = rect[2] - rect[0], h = rect[3] - rect[1], gap = 4;
+  ImageU8 strip(panels * w * zoom + (panels - 1) * gap, h * zoom, 3, 255);
+  for (int i = 0; i < panels; ++i)
+    for (int y = 0; y < h * zoom; ++y)
+      for (int x = 0; x < w * zoom; ++x)
+        for (int c = 0; c < 3; ++c)
+          strip.at(i * (w * zoom + gap) + x, y, c) = static_cast<uint8_t>(std::clamp(
+              LinearToSrgb(linear(i, rect[0] + x / zoom, rect[1] + y / zoom, c)) * 255.0f + 0.5f, 0.0f, 255.0f));
+  WriteImage(path, strip);
+}
 
 // Wall-clock seconds `f` takes.
 inline double Seconds(const std::function<void()>& f) {

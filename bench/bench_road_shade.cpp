@@ -125,21 +125,6 @@ void Compare(const sd::ImageF& v, const sd::ImageF& ref, const sd::ImageF& v_see
     }
 }
 
-// The shade maps over `rect`, grey (shade 1 = white), `zoom`x (nearest), side by side.
-void WriteStrip(const std::vector<const sd::ImageF*>& maps, const std::array<int, 4>& rect, int zoom, const fs::path& path) {
-  const int w = rect[2] - rect[0], h = rect[3] - rect[1], gap = 4;
-  const int n = static_cast<int>(maps.size());
-  sd::ImageU8 strip(n * w * zoom + (n - 1) * gap, h * zoom, 3, 255);
-  for (int i = 0; i < n; ++i)
-    for (int y = 0; y < h * zoom; ++y)
-      for (int x = 0; x < w * zoom; ++x) {
-        const float v = maps[i]->at(rect[0] + x / zoom, rect[1] + y / zoom);
-        const auto g = static_cast<uint8_t>(std::clamp(sd::LinearToSrgb(v) * 255.0f + 0.5f, 0.0f, 255.0f));
-        for (int c = 0; c < 3; ++c) strip.at(i * (w * zoom + gap) + x, y, c) = g;
-      }
-  sd::WriteImage(path, strip);
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -228,8 +213,10 @@ int main(int argc, char** argv) {
         const auto& r = rects[i];
         if (r[2] - r[0] < 16 || r[3] - r[1] < 16) continue;
         const int zoom = std::clamp(600 / std::max(r[2] - r[0], r[3] - r[1]), 1, 4);
-        WriteStrip({&ref_seen, &per_pixel_seen, &image_seen}, r, zoom,
-                   out_dir / (std::string(c.name) + "_" + cam.channel + "_" + std::to_string(rect_object[i]) + ".png"));
+        const std::array<const sd::ImageF*, 3> maps_seen = {&ref_seen, &per_pixel_seen, &image_seen};  // grey
+        const fs::path crop = out_dir / (std::string(c.name) + "_" + cam.channel + "_" + std::to_string(rect_object[i]) + ".png");
+        sd::bench::WriteZoomedStrip(3, r, zoom, crop,
+                                    [&](int panel, int x, int y, int) { return maps_seen[panel]->at(x, y); });
       }
     }
   }

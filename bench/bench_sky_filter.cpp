@@ -81,26 +81,6 @@ sd::CameraRender Render(const sd::frame_stages::ObjectScene& s, const sd::Camera
   return sd::RenderCamera(s.scene, cam.intrinsics, cam.T_ego_cam, light, o);
 }
 
-// The render over mid grey, sRGB, `rect` scaled by `zoom` (nearest), written side by side.
-void WriteStrip(const std::vector<const sd::CameraRender*>& renders, const std::array<int, 4>& rect, int zoom,
-                const fs::path& path) {
-  const int w = rect[2] - rect[0], h = rect[3] - rect[1], gap = 4;
-  const int n = static_cast<int>(renders.size());
-  sd::ImageU8 strip(n * w * zoom + (n - 1) * gap, h * zoom, 3, 255);
-  for (int i = 0; i < n; ++i)
-    for (int y = 0; y < h * zoom; ++y)
-      for (int x = 0; x < w * zoom; ++x) {
-        const int sx = rect[0] + x / zoom, sy = rect[1] + y / zoom;
-        const float a = renders[i]->coverage.at(sx, sy);
-        for (int c = 0; c < 3; ++c) {
-          const float lin = renders[i]->color.at(sx, sy, c) + (1 - a) * 0.18f;
-          strip.at(i * (w * zoom + gap) + x, y, c) =
-              static_cast<uint8_t>(std::clamp(sd::LinearToSrgb(lin) * 255.0f + 0.5f, 0.0f, 255.0f));
-        }
-      }
-  sd::WriteImage(path, strip);
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -177,8 +157,13 @@ int main(int argc, char** argv) {
         const auto& r = rects[i];
         if (r[2] - r[0] < 16 || r[3] - r[1] < 16) continue;
         const int zoom = std::clamp(600 / std::max(r[2] - r[0], r[3] - r[1]), 1, 4);
-        WriteStrip({&ref4, &plain4, &filtered4}, r, zoom,
-                   out_dir / (std::string(c.name) + "_" + cam.channel + "_" + std::to_string(rect_object[i]) + ".png"));
+        // Each render over mid grey.
+        const std::array<const sd::CameraRender*, 3> renders = {&ref4, &plain4, &filtered4};
+        const fs::path crop = out_dir / (std::string(c.name) + "_" + cam.channel + "_" + std::to_string(rect_object[i]) + ".png");
+        sd::bench::WriteZoomedStrip(3, r, zoom, crop,
+                                    [&](int panel, int x, int y, int ch) {
+                                      return renders[panel]->color.at(x, y, ch) + (1 - renders[panel]->coverage.at(x, y)) * 0.18f;
+                                    });
       }
     }
   }

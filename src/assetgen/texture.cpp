@@ -25,6 +25,7 @@
 
 #include "core/error.h"
 #include "core/parallel.h"
+#include "geometry/edge_adjacency.h"
 #include "geometry/normals.h"
 #include "geometry/topology.h"
 #include "models/super_resolution.h"
@@ -52,24 +53,19 @@ struct VertexGraph {
   }
 };
 
+// Each vertex's neighbours from the mesh's undirected edges. Edges come ordered by (lower, higher) endpoint, so
+// a vertex collects its lower neighbours (edges that end at it) before its higher ones (edges that start at it),
+// each run ascending: every row is sorted without a sort.
 VertexGraph BuildVertexGraph(int num_vertices, const std::vector<Eigen::Vector3i>& faces) {
-  std::vector<std::vector<int>> rows(num_vertices);
-  for (const Eigen::Vector3i& f : faces) {
-    for (int k = 0; k < 3; ++k) {
-      rows[f[k]].push_back(f[(k + 1) % 3]);
-      rows[f[k]].push_back(f[(k + 2) % 3]);
-    }
-  }
+  const geometry::EdgeAdjacency adjacency =
+      geometry::BuildEdgeAdjacency(num_vertices, faces, geometry::DegenerateFaces::kKeepProperEdges);
   VertexGraph g;
   g.offset.assign(num_vertices + 1, 0);
-  for (int v = 0; v < num_vertices; ++v) {
-    auto& r = rows[v];
-    std::sort(r.begin(), r.end());
-    r.erase(std::unique(r.begin(), r.end()), r.end());
-    g.offset[v + 1] = g.offset[v] + static_cast<int>(r.size());
-  }
-  g.neighbour.reserve(g.offset.back());
-  for (const auto& r : rows) g.neighbour.insert(g.neighbour.end(), r.begin(), r.end());
+  for (const Eigen::Vector2i& e : adjacency.edges) ++g.offset[e[0] + 1], ++g.offset[e[1] + 1];
+  for (int v = 0; v < num_vertices; ++v) g.offset[v + 1] += g.offset[v];
+  g.neighbour.resize(g.offset.back());
+  std::vector<int> fill(g.offset.begin(), g.offset.end() - 1);
+  for (const Eigen::Vector2i& e : adjacency.edges) g.neighbour[fill[e[0]]++] = e[1], g.neighbour[fill[e[1]]++] = e[0];
   return g;
 }
 

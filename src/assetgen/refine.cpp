@@ -16,7 +16,7 @@
 #include "geometry/normals.h"
 #include "geometry/topology.h"
 #include "geometry/visual_hull.h"
-#include "raster/normal_mask_loss.h"
+#include "raster/loss.h"
 #include "raster/raster.h"
 
 namespace sd {
@@ -78,145 +78,162 @@ struct Losses {
   double normal = 0, mask = 0, lap = 0, points = 0;
 };
 
-// Per-view constant data and scratch buffers, reused across iterations.
+using raster::Buffer;
+using raster::Memory;
+using raster::Span;
+
+// Per-view targets and buffers, on the side where the views' loss runs (the host, or the GPU when the device is
+// CUDA), reused across iterations.
 struct ViewState {
+  explicit ViewState(Memory where)
+      : normals_target(where), normals_mask(where), mask_target(where), clip(where), grad_clip(where),
+        normal_img(where), grad_normal_img(where), grad_bary(where), coverage(where), aa(where), grad_aa(where),
+        rast(where) {}
   Eigen::Matrix4f clip_from_world;
   size_t valid_normal_pixels = 0;
   float mask_area = 1;  // target mask area in pixels: both terms are per object pixel
+  float normal_grad_scale = 0, mask_grad_scale = 0;  // 0: the term is off
+  // The normal term's target and the mask it counts inside (the view's own, MultiView::mask).
+  Buffer<float> normals_target, normals_mask;
   // The silhouette target: the mask, and -1 at pixels past the source image's border (MultiView::known), which
   // the silhouette term skips (what the camera did not see says nothing about the outline).
-  std::vector<float> mask_target;
-  std::vector<float> clip, grad_clip, normal_img, grad_normal_img, grad_bary, coverage, aa, grad_aa, grad_coverage;
+  Buffer<float> mask_target;
+  Buffer<float> clip, grad_clip, normal_img, grad_normal_img, grad_bary, coverage, aa, grad_aa;
   raster::RasterBuffer rast;
   raster::AntialiasRecord aa_record;
-  // This view's share of the last evaluation.
-  Losses losses;
-  std::vector<Eigen::Vector3f> grad_positions, grad_normals;
+  // On the host: this view's share of the gradients, summed in view order by the caller.
+  std::vector<float> grad_positions, grad_normals;
+};
+
+// The mesh as the views' loss reads it: on the host, views of the remesher's arrays; on the device, copies.
+struct LossMesh {
+  Span<const float> positions, vertex_normals;  // 3 per vertex
+  Span<const int32_t> tris;
+  const raster::EdgeTopology& topology;
 };
 
 // What depends only on the connectivity: rebuilt after each remeshing pass, not per iteration.
 struct TopologyCache {
   raster::EdgeTopology edges;
   Eigen::SparseMatrix<float> laplacian;
+  // On the device: the connectivity, uploaded once per pass.
+  Buffer<int32_t> device_tris{Memory::kDevice};
+  raster::EdgeTopology device_edges{Buffer<int32_t>(Memory::kDevice)};
 };
 
-// One view's share of the loss: its terms, and its gradients with respect to the positions (through the clip
-// transform) and to the vertex normals. Writes only `s` and the view's own outputs, so views run in parallel.
-void ViewLossAndGradient(const std::vector<Eigen::Vector3f>& positions, const std::vector<Eigen::Vector3f>& vertex_normals,
-                         std::span<const int32_t> tris, const raster::EdgeTopology& topology, const MultiView& view,
-                         ViewState& s, const RefineOptions& o, float view_weight) {
-  const size_t nv = positions.size();
-  const int w = view.view.camera.width, h = view.view.camera.height;
-  const size_t np = static_cast<size_t>(w) * h;
-  s.losses = Losses{};
-  s.grad_positions.assign(nv, Eigen::Vector3f::Zero());
-  s.grad_normals.assign(nv, Eigen::Vector3f::Zero());
-  s.clip.resize(4 * nv);
-  raster::TransformToClip(Floats(positions), s.clip_from_world, s.clip);
-  const raster::RasterizeInputs raster_in{s.clip, tris, w, h};
-  raster::Rasterize(raster_in, &s.rast);
+// The views' loss on the GPU: the mesh's per-evaluation inputs and the summed outputs, device-resident.
+struct DeviceLoss {
+  Buffer<float> positions{Memory::kDevice}, vertex_normals{Memory::kDevice};
+  Buffer<float> grad_positions{Memory::kDevice}, grad_normals{Memory::kDevice};
+  Buffer<double> loss_sums{Memory::kDevice};  // 2 per view: normal, mask (unscaled sums)
+};
 
+// One view's share of the loss: the raster ops and the loss ops composed, on whichever side the buffers are.
+// Accumulates its gradients with respect to the positions (through the clip transform) and to the vertex
+// normals into grad_positions / grad_normals, and its unscaled term sums into loss_sums[0] (normal) and
+// loss_sums[1] (mask). Writes only `s` and its own outputs, so host views run in parallel.
+void ViewLossAndGradient(const LossMesh& mesh, int width, int height, ViewState& s, Span<float> grad_positions,
+                         Span<float> grad_normals, Span<double> loss_sums) {
+  const size_t nv = mesh.positions.size() / 3;
+  const size_t np = static_cast<size_t>(width) * height;
+  const Memory where = loss_sums.where();
+  const Span<double> normal_sum(loss_sums.data(), 1, where), mask_sum(loss_sums.data() + 1, 1, where);
+  s.clip.resize(4 * nv);
+  raster::TransformToClip(mesh.positions, s.clip_from_world, s.clip);
+  const raster::RasterizeInputs raster_in{s.clip, mesh.tris, width, height};
+  raster::Rasterize(raster_in, &s.rast);
   s.grad_clip.assign(4 * nv, 0.0f);
-  s.grad_bary.assign(2 * np, 0.0f);
 
   // Normal term: re-normalised interpolated normals against the target where both cover the pixel.
-  if (o.lambda_normal > 0 && s.valid_normal_pixels > 0) {
+  if (s.normal_grad_scale > 0) {
     s.normal_img.resize(3 * np);
-    const raster::InterpolateInputs normals_in{Floats(vertex_normals), 3, tris, s.rast};
+    const raster::InterpolateInputs normals_in{mesh.vertex_normals, 3, mesh.tris, s.rast};
     raster::Interpolate(normals_in, s.normal_img);
-    s.grad_normal_img.assign(3 * np, 0.0f);
-    const float scale = o.lambda_normal * view_weight / static_cast<float>(s.valid_normal_pixels);
-    double sum = 0;
-    for (size_t p = 0; p < np; ++p) {
-      if (s.rast.triangle[p] < 0) continue;
-      const int x = static_cast<int>(p % w), y = static_cast<int>(p / w);
-      if (view.mask.at(x, y) <= 0.5f) continue;
-      const Eigen::Vector3f target(view.normals.pixel(x, y));
-      if (target.squaredNorm() < 0.5f) continue;
-      const Eigen::Vector3f n(&s.normal_img[3 * p]);
-      const float len = n.norm();
-      if (len < 1e-8f) continue;
-      const Eigen::Vector3f nh = n / len;
-      const Eigen::Vector3f d = nh - target;
-      sum += d.squaredNorm();
-      // d/dn of |n/|n| - t|^2 = (I - nh nh^T) * 2 d / |n|.
-      const Eigen::Vector3f g = scale * 2.0f * (d - nh * nh.dot(d)) / len;
-      for (int c = 0; c < 3; ++c) s.grad_normal_img[3 * p + c] = g[c];
-    }
-    s.losses.normal = sum / static_cast<double>(s.valid_normal_pixels) * view_weight;
-    raster::InterpolateBackward(normals_in, s.grad_normal_img, MutableFloats(s.grad_normals), s.grad_bary);
+    s.grad_normal_img.resize(3 * np);
+    raster::UnitVectorLoss({s.normal_img, s.rast, s.normals_target, s.normals_mask}, s.normal_grad_scale,
+                           s.grad_normal_img, normal_sum);
+    s.grad_bary.assign(2 * np, 0.0f);
+    raster::InterpolateBackward(normals_in, s.grad_normal_img, grad_normals, s.grad_bary);
     raster::RasterizeBackward(raster_in, s.rast, s.grad_bary, {}, s.grad_clip);
   }
 
   // Silhouette term: antialiased coverage against the target mask.
-  if (o.lambda_mask > 0) {
+  if (s.mask_grad_scale > 0) {
     s.coverage.resize(np);
-    for (size_t p = 0; p < np; ++p) s.coverage[p] = s.rast.triangle[p] >= 0 ? 1.0f : 0.0f;
+    raster::Coverage(s.rast, s.coverage);
     s.aa.resize(np);
-    const raster::AntialiasInputs coverage_in{s.coverage, 1, s.rast, s.clip, tris, topology};
+    const raster::AntialiasInputs coverage_in{s.coverage, 1, s.rast, s.clip, mesh.tris, mesh.topology};
     raster::Antialias(coverage_in, s.aa, &s.aa_record, /*color_gradient=*/false);
     s.grad_aa.resize(np);
-    double sum = 0;
-    const float scale = o.lambda_mask * view_weight / s.mask_area;
-    const float* target = s.mask_target.data();
-    for (size_t p = 0; p < np; ++p) {
-      if (target[p] < 0) {
-        s.grad_aa[p] = 0;
-        continue;
-      }
-      const float d = s.aa[p] - target[p];
-      sum += d * d;
-      s.grad_aa[p] = scale * 2.0f * d;
-    }
-    s.losses.mask = sum / s.mask_area * view_weight;
-    s.grad_coverage.assign(np, 0.0f);
-    raster::AntialiasBackward(coverage_in, s.aa_record, s.grad_aa, s.grad_coverage, s.grad_clip);
+    raster::SquaredErrorLoss(s.aa, s.mask_target, s.mask_grad_scale, s.grad_aa, mask_sum);
+    raster::AntialiasBackward(coverage_in, s.aa_record, s.grad_aa, {}, s.grad_clip);
   }
-  raster::TransformToClipBackward(s.clip_from_world, s.grad_clip, MutableFloats(s.grad_positions));
+  raster::TransformToClipBackward(s.clip_from_world, s.grad_clip, grad_positions);
 }
 
-// One evaluation of the loss and its gradient with respect to the vertex positions. The views are evaluated
-// in parallel (on CUDA each host thread has its own stream, so their transfers and kernels overlap) and their
-// shares summed in view order, so the result does not depend on the threads.
-// On CUDA (`gpu` set) the views' terms come from one device-resident pass each (raster/normal_mask_loss.h)
-// instead of the ops one at a time.
+// One evaluation of the loss and its gradient with respect to the vertex positions. On the host the views are
+// evaluated in parallel and their shares summed in view order, so the result does not depend on the threads.
+// On the GPU (`device` set) they are queued one after another on this thread's stream, summing into one
+// gradient in view order, and the evaluation waits once, for the download of the gradients and the terms.
 Losses LossAndGradient(const std::vector<Eigen::Vector3f>& positions, const std::vector<Eigen::Vector3i>& faces,
                        const TopologyCache& cache, const MultiViewSet& views, std::vector<ViewState>& state,
-                       const RefineOptions& o, float lap_scale, raster::NormalMaskLoss* gpu,
+                       const RefineOptions& o, float lap_scale, DeviceLoss* device,
                        const std::vector<Eigen::Vector3f>& points, float radius, std::vector<Eigen::Vector3f>* grad,
                        double* views_seconds) {
   const size_t nv = positions.size();
   const std::vector<Eigen::Vector3f> vertex_normals = geometry::VertexNormals(positions, faces);
   const std::span<const int32_t> tris(reinterpret_cast<const int32_t*>(faces.data()), 3 * faces.size());
-  const float view_weight = 1.0f / static_cast<float>(views.size());
   const auto views_start = std::chrono::steady_clock::now();
-  Losses losses;
   grad->assign(nv, Eigen::Vector3f::Zero());
   std::vector<Eigen::Vector3f> grad_vn(nv, Eigen::Vector3f::Zero());
-  if (gpu != nullptr) {
-    // The views' gradients come summed (in view order, as below).
-    const std::vector<raster::NormalMaskLoss::Terms> terms =
-        gpu->Evaluate({Floats(positions), Floats(vertex_normals), tris, cache.edges}, MutableFloats(*grad),
-                      MutableFloats(grad_vn));
-    for (const raster::NormalMaskLoss::Terms& t : terms) losses.normal += t.normal, losses.mask += t.mask;
+  std::vector<double> sums(2 * views.size(), 0.0);
+  if (device != nullptr) {
+    device->positions.CopyFrom(Floats(positions));
+    device->vertex_normals.CopyFrom(Floats(vertex_normals));
+    device->grad_positions.assign(3 * nv, 0.0f);
+    device->grad_normals.assign(3 * nv, 0.0f);
+    device->loss_sums.assign(2 * views.size(), 0.0);
+    const LossMesh mesh{device->positions, device->vertex_normals, cache.device_tris, cache.device_edges};
+    for (size_t vi = 0; vi < views.size(); ++vi) {
+      const PinholeCamera& c = views[vi].view.camera;
+      ViewLossAndGradient(mesh, c.width, c.height, state[vi], device->grad_positions, device->grad_normals,
+                          Span<double>(device->loss_sums.data() + 2 * vi, 2, Memory::kDevice));
+    }
+    const std::vector<float> g = device->grad_positions.ToHost(), gn = device->grad_normals.ToHost();
+    std::copy(g.begin(), g.end(), MutableFloats(*grad).begin());
+    std::copy(gn.begin(), gn.end(), MutableFloats(grad_vn).begin());
+    sums = device->loss_sums.ToHost();
   } else {
+    const LossMesh mesh{Floats(positions), Floats(vertex_normals), tris, cache.edges};
     std::vector<std::exception_ptr> errors(views.size());
     ParallelFor(0, views.size(), [&](size_t vi) {
       try {
-        ViewLossAndGradient(positions, vertex_normals, tris, cache.edges, views[vi], state[vi], o, view_weight);
+        ViewState& s = state[vi];
+        s.grad_positions.assign(3 * nv, 0.0f);
+        s.grad_normals.assign(3 * nv, 0.0f);
+        const PinholeCamera& c = views[vi].view.camera;
+        ViewLossAndGradient(mesh, c.width, c.height, s, s.grad_positions, s.grad_normals,
+                            std::span<double>(&sums[2 * vi], 2));
       } catch (...) {
         errors[vi] = std::current_exception();
       }
     });
     for (const std::exception_ptr& e : errors)
       if (e) std::rethrow_exception(e);
-    for (const ViewState& s : state) {
-      losses.normal += s.losses.normal;
-      losses.mask += s.losses.mask;
-      for (size_t v = 0; v < nv; ++v) (*grad)[v] += s.grad_positions[v], grad_vn[v] += s.grad_normals[v];
-    }
+    for (const ViewState& s : state)
+      for (size_t v = 0; v < nv; ++v) {
+        (*grad)[v] += Eigen::Vector3f(&s.grad_positions[3 * v]);
+        grad_vn[v] += Eigen::Vector3f(&s.grad_normals[3 * v]);
+      }
   }
   *views_seconds += Seconds(views_start);
+  Losses losses;
+  const float view_weight = 1.0f / static_cast<float>(views.size());
+  for (size_t vi = 0; vi < views.size(); ++vi) {
+    if (state[vi].normal_grad_scale > 0)
+      losses.normal += sums[2 * vi] / static_cast<double>(state[vi].valid_normal_pixels) * view_weight;
+    if (state[vi].mask_grad_scale > 0) losses.mask += sums[2 * vi + 1] / state[vi].mask_area * view_weight;
+  }
   geometry::VertexNormalsBackward(positions, faces, grad_vn, grad);
   if (o.lambda_lap > 0) {
     losses.lap = geometry::LaplacianLoss(cache.laplacian, positions, o.lambda_lap * lap_scale, grad) / (o.lambda_lap * lap_scale);
@@ -302,51 +319,42 @@ RefineResult RefineMesh(const TriangleMesh& coarse_in, const MultiViewSet& views
   remesh.edge_length_min *= radius;
   remesh.edge_length_max *= radius;
 
-  std::vector<ViewState> state(views.size());
+  // The views' loss runs where the process's device says: its targets and buffers live there.
+  const Memory where = raster::UseCuda() ? Memory::kDevice : Memory::kHost;
+  std::unique_ptr<DeviceLoss> device;
+  if (where == Memory::kDevice) device = std::make_unique<DeviceLoss>();
+  const float view_weight = 1.0f / static_cast<float>(views.size());
+  std::vector<ViewState> state;
+  state.reserve(views.size());
   for (size_t i = 0; i < views.size(); ++i) {
+    ViewState& s = state.emplace_back(where);
     const ViewCamera& v = views[i].view;
     // About the object's depth along the optical axis, not its distance: a crop of a wide camera keeps the
     // full camera's principal point, so the object can lie far off the axis.
     const float dist = static_cast<float>((v.T_world_cam.translation.cast<float>() - centre).norm());
     const float depth = static_cast<float>((v.T_world_cam.Inverse() * centre.cast<double>()).z());
     const float near = std::max(1e-3f * dist, depth - 3.0f * radius), far = std::max(near * 1.001f, depth + 3.0f * radius);
-    state[i].clip_from_world = raster::ClipFromWorld(v.camera, v.T_world_cam.Inverse(), near, far);
+    s.clip_from_world = raster::ClipFromWorld(v.camera, v.T_world_cam.Inverse(), near, far);
     const MultiView& mv = views[i];
-    state[i].mask_target.assign(mv.mask.vector().begin(), mv.mask.vector().end());
+    std::vector<float> mask_target(mv.mask.vector().begin(), mv.mask.vector().end());
     if (!mv.known.empty())
-      for (size_t p = 0; p < state[i].mask_target.size(); ++p)
-        if (mv.known.vector()[p] <= 0.5f) state[i].mask_target[p] = -1.0f;
+      for (size_t p = 0; p < mask_target.size(); ++p)
+        if (mv.known.vector()[p] <= 0.5f) mask_target[p] = -1.0f;
     double area = 0;
-    for (float m : state[i].mask_target) area += std::max(m, 0.0f);
-    state[i].mask_area = static_cast<float>(std::max(area, 1.0));
+    for (float m : mask_target) area += std::max(m, 0.0f);
+    s.mask_area = static_cast<float>(std::max(area, 1.0));
     for (int y = 0; y < mv.mask.height(); ++y)
       for (int x = 0; x < mv.mask.width(); ++x)
         if (mv.mask.at(x, y) > 0.5f && Eigen::Vector3f(mv.normals.pixel(x, y)).squaredNorm() >= 0.5f)
-          ++state[i].valid_normal_pixels;
+          ++s.valid_normal_pixels;
+    if (options.lambda_normal > 0 && s.valid_normal_pixels > 0)
+      s.normal_grad_scale = options.lambda_normal * view_weight / static_cast<float>(s.valid_normal_pixels);
+    if (options.lambda_mask > 0) s.mask_grad_scale = options.lambda_mask * view_weight / s.mask_area;
+    s.mask_target.CopyFrom(mask_target);
+    s.normals_target.CopyFrom(mv.normals.vector());
+    s.normals_mask.CopyFrom(mv.mask.vector());
   }
 
-  std::unique_ptr<raster::NormalMaskLoss> gpu_loss;
-  if (raster::UseCuda()) {
-    const float view_weight = 1.0f / static_cast<float>(views.size());
-    std::vector<raster::NormalMaskView> targets(views.size());
-    for (size_t i = 0; i < views.size(); ++i) {
-      raster::NormalMaskView& t = targets[i];
-      const ViewState& s = state[i];
-      t.clip_from_world = s.clip_from_world;
-      t.width = views[i].view.camera.width, t.height = views[i].view.camera.height;
-      t.normals.assign(views[i].normals.vector().begin(), views[i].normals.vector().end());
-      t.mask = s.mask_target;
-      if (options.lambda_normal > 0 && s.valid_normal_pixels > 0) {
-        t.normal_grad_scale = options.lambda_normal * view_weight / static_cast<float>(s.valid_normal_pixels);
-        t.normal_loss_scale = view_weight / static_cast<float>(s.valid_normal_pixels);
-      }
-      if (options.lambda_mask > 0) {
-        t.mask_grad_scale = options.lambda_mask * view_weight / s.mask_area;
-        t.mask_loss_scale = view_weight / s.mask_area;
-      }
-    }
-    gpu_loss = std::make_unique<raster::NormalMaskLoss>(targets);
-  }
   geometry::ContinuousRemesher remesher(coarse.positions, coarse.faces, remesh);
   RefineResult result;
   std::optional<Progress> progress;
@@ -360,6 +368,10 @@ RefineResult RefineMesh(const TriangleMesh& coarse_in, const MultiViewSet& views
     cache.edges = raster::BuildEdgeTopology({reinterpret_cast<const int32_t*>(faces.data()), 3 * faces.size()},
                                             static_cast<int>(remesher.positions().size()));
     if (options.lambda_lap > 0) cache.laplacian = geometry::UniformLaplacian(static_cast<int>(remesher.positions().size()), faces);
+    if (device) {
+      cache.device_tris.CopyFrom(std::span<const int32_t>(reinterpret_cast<const int32_t*>(faces.data()), 3 * faces.size()));
+      cache.device_edges.neighbour.CopyFrom(std::span<const int32_t>(cache.edges.neighbour.host()));
+    }
     RefineStepLog log;
     log.remesh_seconds = Seconds(ts);
     const auto iterations_start = std::chrono::steady_clock::now();
@@ -368,7 +380,7 @@ RefineResult RefineMesh(const TriangleMesh& coarse_in, const MultiViewSet& views
       // The smoothness weight is per squared edge length so that it means the same at every resolution.
       const float edge = std::max(remesher.MeanTargetEdgeLength(), 1e-6f);
       last = LossAndGradient(remesher.positions(), remesher.faces(), cache, views, state, options, 1.0f / (edge * edge),
-                             gpu_loss.get(), points, radius, &grad, &log.views_seconds);
+                             device.get(), points, radius, &grad, &log.views_seconds);
       remesher.Step(grad);
     }
     log.update_seconds = Seconds(iterations_start) - log.views_seconds;

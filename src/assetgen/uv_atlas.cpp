@@ -568,7 +568,7 @@ ImageU8 BakeTexture(const TriangleMesh& mesh, const ColorViewSet& views, int tex
     raster::TransformToClip(positions, b.clip_from_world, clip);
     raster::RasterBuffer rast;
     raster::Rasterize({clip, tris, b.width, b.height}, &rast);
-    b.triangle = std::move(rast.triangle);
+    b.triangle = std::move(rast.triangle.host());
     b.depth.assign(rast.NumPixels(), std::numeric_limits<float>::infinity());
     b.point.assign(rast.NumPixels(), Eigen::Vector3f::Zero());
     ParallelFor(0, rast.NumPixels(), [&](size_t p) {
@@ -595,8 +595,8 @@ ImageU8 BakeTexture(const TriangleMesh& mesh, const ColorViewSet& views, int tex
   }
   raster::RasterBuffer uv_rast;
   raster::Rasterize({uv_clip, tris, size, size}, &uv_rast);
-  std::vector<int32_t>& texel_tri = uv_rast.triangle;
-  std::vector<float>& texel_bary = uv_rast.bary;
+  std::vector<int32_t>& texel_tri = uv_rast.triangle.host();
+  std::vector<float>& texel_bary = uv_rast.bary.host();
   {
     std::vector<float> border_dist(num_texels, std::numeric_limits<float>::infinity());
     const double reach = 0.5 * std::sqrt(2.0);

@@ -40,6 +40,7 @@
 #include <vector>
 
 #include "core/parallel.h"
+#include "geometry/edge_adjacency.h"
 #include "raster/internal.h"
 #include "raster/raster.h"
 
@@ -47,11 +48,6 @@ namespace sd::raster {
 namespace {
 
 using shared::PairGeometry;
-
-// Vertex indices of edge k of triangle t (edges v0v1, v1v2, v2v0, as in EdgeTopology).
-inline std::array<int32_t, 2> EdgeVertices(std::span<const int32_t> tris, size_t t, int k) {
-  return {tris[3 * t + k], tris[3 * t + (k + 1) % 3]};
-}
 
 // Per-call geometry shared by all pairs on the CPU: each vertex projected once, each triangle's facing once.
 struct Scene {
@@ -75,14 +71,18 @@ struct Scene {
   }
 };
 
-void CheckInputs(const AntialiasInputs& in) {
+// Where the op runs (raster.h), after checking the inputs.
+Memory CheckInputs(const AntialiasInputs& in, const char* op) {
   internal::CheckRaster(in.rast);
   internal::CheckTriangles(in.clip_pos, in.tris);
+  const Memory where = internal::CommonMemory(op, in.color, in.rast, in.clip_pos, in.tris,
+                                              Span<const int32_t>(in.topology.neighbour));
   internal::CheckVertexIndices(in.tris, internal::NumVertices(in.clip_pos));
   internal::CheckRasterTriangles(in.rast, in.tris);
   SD_CHECK(in.channels > 0 && in.color.size() == static_cast<size_t>(in.channels) * in.rast.NumPixels(),
            << "color: " << in.color.size() << " floats for " << in.channels << " channels");
   SD_CHECK(in.topology.neighbour.size() == in.tris.size(), << "topology built for another mesh");
+  return where;
 }
 
 #if SYNTHDRIVE_WITH_CUDA
@@ -104,7 +104,7 @@ void FindPairs(const AntialiasInputs& in, bool color_gradient, std::vector<Antia
   }
   const Scene sc(in);
   const RasterBuffer& rast = in.rast;
-  const std::span<const float> color = in.color;
+  const std::span<const float> color = in.color.host();
   const int width = rast.width, height = rast.height;
   const size_t C = static_cast<size_t>(in.channels);
   auto same_color = [&](int32_t a, int32_t b) {
@@ -157,42 +157,49 @@ std::vector<PairGeometry> RecordedGeometry(const AntialiasInputs& in, const Anti
 
 EdgeTopology BuildEdgeTopology(std::span<const int32_t> tris, int num_vertices) {
   SD_CHECK(tris.size() % 3 == 0 && num_vertices >= 0);
-  const size_t num_edges = tris.size();
-  // Sort half-edges by their undirected vertex pair; runs of exactly two are manifold edges.
-  struct HalfEdge {
-    int32_t lo, hi;
-    uint32_t slot;  // 3 * triangle + edge
-  };
-  std::vector<HalfEdge> half(num_edges);
-  for (size_t t = 0; t < num_edges / 3; ++t)
-    for (int k = 0; k < 3; ++k) {
-      const std::array<int32_t, 2> ev = EdgeVertices(tris, t, k);
-      SD_CHECK(ev[0] >= 0 && ev[0] < num_vertices && ev[1] >= 0 && ev[1] < num_vertices, << "triangle " << t);
-      half[3 * t + k] = {std::min(ev[0], ev[1]), std::max(ev[0], ev[1]), static_cast<uint32_t>(3 * t + k)};
-    }
-  std::sort(half.begin(), half.end(), [](const HalfEdge& x, const HalfEdge& y) {
-    return x.lo != y.lo ? x.lo < y.lo : (x.hi != y.hi ? x.hi < y.hi : x.slot < y.slot);
-  });
+  std::vector<Eigen::Vector3i> faces(tris.size() / 3);
+  std::memcpy(faces.data(), tris.data(), tris.size() * sizeof(int32_t));
+  // A degenerate triangle's proper edges count ((a, a, b) puts two half-edges on a-b); runs of exactly two
+  // half-edges are manifold edges, whatever their windings.
+  const geometry::EdgeAdjacency adjacency =
+      geometry::BuildEdgeAdjacency(num_vertices, faces, geometry::DegenerateFaces::kKeepProperEdges);
   EdgeTopology topology;
-  topology.neighbour.assign(num_edges, -1);
-  for (size_t i = 0; i < half.size();) {
-    size_t j = i + 1;
-    while (j < half.size() && half[j].lo == half[i].lo && half[j].hi == half[i].hi) ++j;
-    if (j - i == 2 && half[i].lo != half[i].hi) {
-      topology.neighbour[half[i].slot] = static_cast<int32_t>(half[i + 1].slot / 3);
-      topology.neighbour[half[i + 1].slot] = static_cast<int32_t>(half[i].slot / 3);
-    }
-    i = j;
+  topology.neighbour.assign(tris.size(), -1);
+  for (int e = 0; e < adjacency.NumEdges(); ++e) {
+    if (adjacency.NumFacesOn(e) != 2) continue;
+    const std::span<const int> h = adjacency.HalfEdgesOf(e);
+    topology.neighbour[h[0]] = h[1] / 3;
+    topology.neighbour[h[1]] = h[0] / 3;
   }
   return topology;
 }
 
-void Antialias(const AntialiasInputs& in, std::span<float> out, AntialiasRecord* record, bool color_gradient) {
-  CheckInputs(in);
-  const std::span<const float> color = in.color;
-  SD_CHECK(out.size() == color.size(), << "out: " << out.size());
-  SD_CHECK(out.data() != color.data(), << "Antialias cannot work in place");
+void Antialias(const AntialiasInputs& in, Span<float> out_in, AntialiasRecord* record, bool color_gradient) {
+  const Memory where = CheckInputs(in, "Antialias");
+  SD_CHECK(out_in.size() == in.color.size(), << "out: " << out_in.size());
+  SD_CHECK(out_in.data() != in.color.data() || in.color.empty(), << "Antialias cannot work in place");
   SD_CHECK(record != nullptr);
+  internal::CommonMemory("Antialias", in.color, out_in);
+  if (where == Memory::kDevice) {
+    internal::CheckDeviceBuild("Antialias");
+    record->pairs.clear();
+    const size_t slots = 2 * in.rast.NumPixels();
+    // Reused from the record's last device pass: allocating per call would wait for the device each time.
+    if (record->device_found.where() != Memory::kDevice) record->device_found = Buffer<int32_t>(Memory::kDevice);
+    if (record->device_geometry.where() != Memory::kDevice)
+      record->device_geometry = Buffer<PairGeometry>(Memory::kDevice);
+    record->device_found.resize(slots);
+    record->device_geometry.resize(slots);
+#if SYNTHDRIVE_WITH_CUDA
+    cuda::DeviceAntialias(internal::ToCuda(in), !color_gradient, out_in.data(), record->device_found.data(),
+                          record->device_geometry.data());
+#endif
+    return;
+  }
+  record->device_found.resize(0);
+  record->device_geometry.resize(0);
+  const std::span<const float> color = in.color.host();
+  const std::span<float> out = out_in.host();
   std::vector<PairGeometry> geometry;
   FindPairs(in, color_gradient, &record->pairs, &geometry);
 
@@ -205,17 +212,33 @@ void Antialias(const AntialiasInputs& in, std::span<float> out, AntialiasRecord*
   }
 }
 
-void AntialiasBackward(const AntialiasInputs& in, const AntialiasRecord& record, std::span<const float> grad_out,
-                       std::span<float> grad_color, std::span<float> grad_clip) {
-  CheckInputs(in);
-  const std::span<const float> color = in.color;
-  SD_CHECK(grad_out.size() == color.size(), << "grad_out: " << grad_out.size());
-  SD_CHECK(grad_color.size() == color.size(), << "grad_color: " << grad_color.size());
-  SD_CHECK(grad_clip.size() == in.clip_pos.size(), << "grad_clip: " << grad_clip.size());
+void AntialiasBackward(const AntialiasInputs& in, const AntialiasRecord& record, Span<const float> grad_out_in,
+                       Span<float> grad_color_in, Span<float> grad_clip_in) {
+  const Memory where = CheckInputs(in, "AntialiasBackward");
+  SD_CHECK(grad_out_in.size() == in.color.size(), << "grad_out: " << grad_out_in.size());
+  SD_CHECK(grad_color_in.empty() || grad_color_in.size() == in.color.size(), << "grad_color: " << grad_color_in.size());
+  SD_CHECK(grad_clip_in.size() == in.clip_pos.size(), << "grad_clip: " << grad_clip_in.size());
+  internal::CommonMemory("AntialiasBackward", in.color, grad_out_in, grad_color_in, grad_clip_in);
+  if (where == Memory::kDevice) {
+    internal::CheckDeviceBuild("AntialiasBackward");
+    SD_CHECK(record.device_found.size() == 2 * in.rast.NumPixels() &&
+                 record.device_geometry.size() == record.device_found.size(),
+             << "AntialiasRecord is not a device forward pass's of this resolution");
+#if SYNTHDRIVE_WITH_CUDA
+    cuda::DeviceAntialiasBackward(internal::ToCuda(in), record.device_found.data(), record.device_geometry.data(),
+                                  grad_out_in.data(), grad_color_in.empty() ? nullptr : grad_color_in.data(),
+                                  grad_clip_in.data());
+#endif
+    return;
+  }
+  const std::span<const float> color = in.color.host(), grad_out = grad_out_in.host();
+  const std::span<float> grad_color = grad_color_in.host(), grad_clip = grad_clip_in.host();
+  const bool color_gradient = !grad_color.empty();
   const std::vector<PairGeometry> geometry = RecordedGeometry(in, record);
   const size_t C = static_cast<size_t>(in.channels);
 
-  for (size_t n = 0; n < grad_out.size(); ++n) grad_color[n] += grad_out[n];  // out = color + deltas
+  if (color_gradient)
+    for (size_t n = 0; n < grad_out.size(); ++n) grad_color[n] += grad_out[n];  // out = color + deltas
   std::vector<double> dL_dclip(grad_clip.size(), 0.0);
   for (const PairGeometry& g : geometry) {
     const shared::Blend blend = shared::BlendOf(g);
@@ -224,6 +247,7 @@ void AntialiasBackward(const AntialiasInputs& in, const AntialiasRecord& record,
     for (size_t c = 0; c < C; ++c) {
       const float g_r = grad_out[C * blend.receiver + c];
       dL_dalpha += static_cast<double>(g_r) * (color[C * blend.source + c] - color[C * blend.receiver + c]);
+      if (!color_gradient) continue;
       grad_color[C * blend.source + c] += blend.alpha * g_r;
       grad_color[C * blend.receiver + c] -= blend.alpha * g_r;
     }

@@ -5,7 +5,10 @@
 //   v = (y/w + 1) H/2 = fy Y/Z + cy   =>   y = (2 fy / H) Y + (2 cy / H - 1) Z,
 // and z = a Z + b with z/w = -1 at Z = near and +1 at Z = far: a = (far + near) / (far - near),
 // b = -2 far near / (far - near) (the OpenGL depth mapping, with Z forward instead of -Z).
+#include <array>
+
 #include "core/error.h"
+#include "raster/internal.h"
 #include "raster/raster.h"
 
 namespace sd::raster {
@@ -25,10 +28,30 @@ Eigen::Matrix4f ClipFromWorld(const PinholeCamera& camera, const Rigid3d& T_cam_
   return (clip_from_cam * T_cam_world.Matrix()).cast<float>();
 }
 
-void TransformToClip(std::span<const float> positions, const Eigen::Matrix4f& M, std::span<float> clip) {
-  SD_CHECK(positions.size() % 3 == 0, << "positions: " << positions.size());
-  const size_t num_vertices = positions.size() / 3;
-  SD_CHECK(clip.size() == 4 * num_vertices, << "clip: " << clip.size() << " for " << num_vertices << " vertices");
+namespace {
+
+[[maybe_unused]] std::array<float, 16> RowMajor(const Eigen::Matrix4f& M) {
+  std::array<float, 16> out;
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) out[4 * r + c] = M(r, c);
+  return out;
+}
+
+}  // namespace
+
+void TransformToClip(Span<const float> positions_in, const Eigen::Matrix4f& M, Span<float> clip_in) {
+  SD_CHECK(positions_in.size() % 3 == 0, << "positions: " << positions_in.size());
+  const size_t num_vertices = positions_in.size() / 3;
+  SD_CHECK(clip_in.size() == 4 * num_vertices, << "clip: " << clip_in.size() << " for " << num_vertices << " vertices");
+  if (internal::CommonMemory("TransformToClip", positions_in, clip_in) == Memory::kDevice) {
+    internal::CheckDeviceBuild("TransformToClip");
+#if SYNTHDRIVE_WITH_CUDA
+    cuda::TransformToClip(positions_in.data(), num_vertices, RowMajor(M).data(), clip_in.data());
+#endif
+    return;
+  }
+  const std::span<const float> positions = positions_in.host();
+  const std::span<float> clip = clip_in.host();
   for (size_t v = 0; v < num_vertices; ++v) {
     const Eigen::Vector4f p(positions[3 * v], positions[3 * v + 1], positions[3 * v + 2], 1.0f);
     const Eigen::Vector4f c = M * p;
@@ -36,11 +59,19 @@ void TransformToClip(std::span<const float> positions, const Eigen::Matrix4f& M,
   }
 }
 
-void TransformToClipBackward(const Eigen::Matrix4f& M, std::span<const float> grad_clip,
-                             std::span<float> grad_positions) {
-  SD_CHECK(grad_clip.size() % 4 == 0, << "grad_clip: " << grad_clip.size());
-  const size_t num_vertices = grad_clip.size() / 4;
-  SD_CHECK(grad_positions.size() == 3 * num_vertices, << "grad_positions: " << grad_positions.size());
+void TransformToClipBackward(const Eigen::Matrix4f& M, Span<const float> grad_clip_in, Span<float> grad_positions_in) {
+  SD_CHECK(grad_clip_in.size() % 4 == 0, << "grad_clip: " << grad_clip_in.size());
+  const size_t num_vertices = grad_clip_in.size() / 4;
+  SD_CHECK(grad_positions_in.size() == 3 * num_vertices, << "grad_positions: " << grad_positions_in.size());
+  if (internal::CommonMemory("TransformToClipBackward", grad_clip_in, grad_positions_in) == Memory::kDevice) {
+    internal::CheckDeviceBuild("TransformToClipBackward");
+#if SYNTHDRIVE_WITH_CUDA
+    cuda::TransformToClipBackward(RowMajor(M).data(), grad_clip_in.data(), num_vertices, grad_positions_in.data());
+#endif
+    return;
+  }
+  const std::span<const float> grad_clip = grad_clip_in.host();
+  const std::span<float> grad_positions = grad_positions_in.host();
   // d clip / d p = M's first three columns, so dL/dp = M[:, 0:3]^T dL/dclip.
   const Eigen::Matrix<float, 3, 4> Mt = M.leftCols<3>().transpose();
   for (size_t v = 0; v < num_vertices; ++v) {

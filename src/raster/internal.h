@@ -2,6 +2,7 @@
 // Helpers shared by the raster ops' .cpp files; not part of the public interface.
 #include <cstddef>
 #include <cstdint>
+#include <initializer_list>
 #include <span>
 
 #include "core/error.h"
@@ -22,9 +23,37 @@ inline int NumBands(int height) { return (height + kBandRows - 1) / kBandRows; }
 using shared::ClipToPixel;
 using shared::PixelCentreNdc;
 
-inline size_t NumVertices(std::span<const float> clip_pos) { return clip_pos.size() / 4; }
+inline size_t NumVertices(Span<const float> clip_pos) { return clip_pos.size() / 4; }
 
-inline void CheckTriangles(std::span<const float> clip_pos, std::span<const int32_t> tris) {
+// Where an op runs (raster.h): the one side all its buffers are on. An empty Span goes with either side; a
+// Memory argument (an output's side) always counts.
+struct Side {
+  Memory where;
+  bool counts;
+};
+template <typename T>
+Side SideOf(const Span<T>& s) {
+  return {s.where(), !s.empty()};
+}
+inline Side SideOf(const RasterBuffer& r) { return {r.where(), r.NumPixels() > 0}; }
+inline Side SideOf(Memory where) { return {where, true}; }
+template <typename... Args>
+Memory CommonMemory(const char* op, const Args&... args) {
+  bool host = false, device = false;
+  for (const Side& s : {SideOf(args)...})
+    if (s.counts) (s.where == Memory::kHost ? host : device) = true;
+  SD_CHECK(!(host && device), << op << ": some buffers are on the host and some on the device");
+  return device ? Memory::kDevice : Memory::kHost;
+}
+
+// Refuses device buffers in a build without CUDA (they cannot have been made; an empty one can).
+inline void CheckDeviceBuild([[maybe_unused]] const char* op) {
+#if !SYNTHDRIVE_WITH_CUDA
+  SD_CHECK(false, << op << ": device buffers in a build without CUDA");
+#endif
+}
+
+inline void CheckTriangles(Span<const float> clip_pos, Span<const int32_t> tris) {
   SD_CHECK(clip_pos.size() % 4 == 0, << "clip_pos holds 4 floats per vertex, got " << clip_pos.size());
   SD_CHECK(tris.size() % 3 == 0, << "tris holds 3 indices per triangle, got " << tris.size());
 }
@@ -41,7 +70,10 @@ inline bool AllWithin(std::span<const int32_t> values, int32_t lo, size_t hi) {
 }
 
 // Every vertex index of `tris` names one of `num_vertices` vertices (the per-pixel code indexes without checks).
-inline void CheckVertexIndices(std::span<const int32_t> tris, size_t num_vertices) {
+// Device buffers are checked by the kernels as they read each index (buffer.h).
+inline void CheckVertexIndices(Span<const int32_t> device_or_host_tris, size_t num_vertices) {
+  if (device_or_host_tris.where() == Memory::kDevice) return;
+  const std::span<const int32_t> tris = device_or_host_tris.host();
   if (AllWithin(tris, 0, num_vertices)) return;
   for (size_t k = 0; k < tris.size(); ++k)
     SD_CHECK(tris[k] >= 0 && static_cast<size_t>(tris[k]) < num_vertices,
@@ -50,8 +82,9 @@ inline void CheckVertexIndices(std::span<const int32_t> tris, size_t num_vertice
 
 // Every pixel's triangle id is -1 or one of `tris`' triangles: a raster buffer of another mesh is refused here
 // instead of reading out of bounds.
-inline void CheckRasterTriangles(const RasterBuffer& rast, std::span<const int32_t> tris) {
+inline void CheckRasterTriangles(const RasterBuffer& rast, Span<const int32_t> tris) {
   const size_t num_triangles = tris.size() / 3;
+  if (rast.where() == Memory::kDevice) return;  // checked by the kernels (buffer.h)
   if (AllWithin(rast.triangle, -1, num_triangles)) return;
   for (size_t p = 0; p < rast.triangle.size(); ++p)
     SD_CHECK(rast.triangle[p] == -1 || (rast.triangle[p] >= 0 && static_cast<size_t>(rast.triangle[p]) < num_triangles),
@@ -66,9 +99,6 @@ inline void CheckRaster(const RasterBuffer& rast) {
            << "RasterBuffer buffers do not match " << rast.width << "x" << rast.height);
 }
 
-inline bool TriangleDrawable(std::span<const float> clip_pos, std::span<const int32_t> tris, size_t t) {
-  return shared::TriangleDrawable(clip_pos.data(), tris.data(), t);
-}
 
 #if SYNTHDRIVE_WITH_CUDA
 // The public inputs as the CUDA side's raw pointers and counts (raster_cuda.h), field for field.

@@ -14,6 +14,7 @@ void CheckInputs(const InterpolateInputs& in) {
   SD_CHECK(in.attr.size() % in.channels == 0,
            << "attr: " << in.attr.size() << " floats for " << in.channels << " channels");
   SD_CHECK(in.tris.size() % 3 == 0);
+  internal::CommonMemory("Interpolate", in.attr, in.tris, in.rast);
   internal::CheckVertexIndices(in.tris, in.attr.size() / in.channels);
   internal::CheckRaster(in.rast);
   internal::CheckRasterTriangles(in.rast, in.tris);
@@ -24,13 +25,21 @@ constexpr size_t kRowsPerTask = 8;
 
 }  // namespace
 
-void Interpolate(const InterpolateInputs& in, std::span<float> out) {
+void Interpolate(const InterpolateInputs& in, Span<float> out_in) {
   CheckInputs(in);
-  const std::span<const float> attr = in.attr;
-  const std::span<const int32_t> tris = in.tris;
   const RasterBuffer& rast = in.rast;
   const size_t C = static_cast<size_t>(in.channels);
-  SD_CHECK(out.size() == C * rast.NumPixels(), << "out: " << out.size());
+  SD_CHECK(out_in.size() == C * rast.NumPixels(), << "out: " << out_in.size());
+  if (internal::CommonMemory("Interpolate", in.attr, in.tris, rast, out_in) == Memory::kDevice) {
+    internal::CheckDeviceBuild("Interpolate");
+#if SYNTHDRIVE_WITH_CUDA
+    cuda::DeviceInterpolate(internal::ToCuda(in), out_in.data());
+#endif
+    return;
+  }
+  const std::span<const float> attr = in.attr.host();
+  const std::span<const int32_t> tris = in.tris.host();
+  const std::span<float> out = out_in.host();
   if (UseCuda()) {
 #if SYNTHDRIVE_WITH_CUDA
     cuda::Interpolate(internal::ToCuda(in), out.data());
@@ -45,17 +54,27 @@ void Interpolate(const InterpolateInputs& in, std::span<float> out) {
   });
 }
 
-void InterpolateBackward(const InterpolateInputs& in, std::span<const float> grad_out, std::span<float> grad_attr,
-                         std::span<float> grad_bary) {
+void InterpolateBackward(const InterpolateInputs& in, Span<const float> grad_out_in, Span<float> grad_attr_in,
+                         Span<float> grad_bary_in) {
   CheckInputs(in);
-  const std::span<const float> attr = in.attr;
-  const std::span<const int32_t> tris = in.tris;
   const RasterBuffer& rast = in.rast;
   const size_t C = static_cast<size_t>(in.channels);
   const size_t num_pixels = rast.NumPixels();
-  SD_CHECK(grad_out.size() == C * num_pixels, << "grad_out: " << grad_out.size());
-  SD_CHECK(grad_attr.size() == attr.size(), << "grad_attr: " << grad_attr.size());
-  SD_CHECK(grad_bary.empty() || grad_bary.size() == 2 * num_pixels, << "grad_bary: " << grad_bary.size());
+  SD_CHECK(grad_out_in.size() == C * num_pixels, << "grad_out: " << grad_out_in.size());
+  SD_CHECK(grad_attr_in.size() == in.attr.size(), << "grad_attr: " << grad_attr_in.size());
+  SD_CHECK(grad_bary_in.empty() || grad_bary_in.size() == 2 * num_pixels, << "grad_bary: " << grad_bary_in.size());
+  if (internal::CommonMemory("InterpolateBackward", in.attr, in.tris, rast, grad_out_in, grad_attr_in,
+                             grad_bary_in) == Memory::kDevice) {
+    internal::CheckDeviceBuild("InterpolateBackward");
+#if SYNTHDRIVE_WITH_CUDA
+    cuda::DeviceInterpolateBackward(internal::ToCuda(in), grad_out_in.data(), grad_attr_in.data(),
+                                    grad_bary_in.empty() ? nullptr : grad_bary_in.data());
+#endif
+    return;
+  }
+  const std::span<const float> attr = in.attr.host(), grad_out = grad_out_in.host();
+  const std::span<const int32_t> tris = in.tris.host();
+  const std::span<float> grad_attr = grad_attr_in.host(), grad_bary = grad_bary_in.host();
 
   std::vector<double> sum(grad_attr.size(), 0.0);
   if (UseCuda()) {

@@ -15,7 +15,7 @@
 #include <vector>
 
 #include "core/error.h"
-#include "raster/normal_mask_loss.h"
+#include "raster/loss.h"
 #include "raster/raster.h"
 #include "raster/test_util.h"
 
@@ -88,7 +88,6 @@ TEST(Device, ParseAndRefusal) {
   EXPECT_STREQ(ToString(Device::kCuda), "cuda");
   SetDevice(Device::kCpu);
   EXPECT_FALSE(UseCuda());
-  EXPECT_THROW(NormalMaskLoss({}), InputError);  // the device-resident loss is for CUDA only
   SetDevice(Device::kCuda);
   if (CudaAvailable()) {
     EXPECT_TRUE(UseCuda());
@@ -211,170 +210,211 @@ TEST(CudaAgreement, EmptyInputsAndDeviceCopyReuse) {
   EXPECT_EQ(ib, cb);
 }
 
-// The device-resident refinement loss against the same two terms evaluated on the CPU with the ops, the way
-// assetgen/refine.cpp does: interpolated normals vs a target normal map, antialiased coverage vs a mask.
-NormalMaskLoss::Terms CpuNormalMaskLoss(const NormalMaskView& v, const std::vector<float>& positions,
-                                        const std::vector<float>& normals, const std::vector<int32_t>& tris,
-                                        const EdgeTopology& topology, std::vector<float>* grad_positions,
-                                        std::vector<float>* grad_normals) {
-  const size_t nv = positions.size() / 3, np = static_cast<size_t>(v.width) * v.height;
-  std::vector<float> clip(4 * nv);
+// Refinement's loss (assetgen/refine.cpp) composed of the ops, on buffers of one side: the normal term
+// (interpolated normals against a target normal map) and the silhouette term (antialiased coverage against a
+// mask), and beside them an antialiased 3-channel colour with its colour gradient. Everything comes back to
+// the host for comparison.
+struct LossTargets {
+  Eigen::Matrix4f clip_from_world;
+  std::vector<float> normals, mask;  // 3 and 1 per pixel; mask < 0: unknown
+};
+struct LossChain {
+  std::vector<int32_t> triangle;
+  std::vector<float> bary, depth, normal_img, aa, color_aa;
+  std::vector<double> sums;  // normal, mask
+  std::vector<float> grad_positions, grad_normals, grad_color, grad_color_clip;
+};
+
+LossChain RunLossChain(Memory where, const LossTargets& v, int size, const std::vector<float>& positions_h,
+                       const std::vector<float>& normals_h, const std::vector<int32_t>& tris_h,
+                       const EdgeTopology& topology_h) {
+  const size_t nv = positions_h.size() / 3, np = static_cast<size_t>(size) * size;
+  std::vector<float> color_upstream(3 * np);
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> unit(-1, 1);
+  for (float& g : color_upstream) g = unit(rng);
+  auto on_side = [&](const auto& host) {
+    Buffer<typename std::decay_t<decltype(host)>::value_type> b(where);
+    b.CopyFrom(host);
+    return b;
+  };
+  const Buffer<float> positions = on_side(positions_h), normals = on_side(normals_h);
+  const Buffer<float> target_normals = on_side(v.normals), target_mask = on_side(v.mask);
+  const Buffer<int32_t> tris = on_side(tris_h);
+  EdgeTopology topology{Buffer<int32_t>(where)};
+  topology.neighbour.CopyFrom(topology_h.neighbour.host());
+  Buffer<float> clip(where, 4 * nv), grad_clip(where), img(where, 3 * np), grad_img(where, 3 * np),
+      grad_bary(where), coverage(where, np), aa(where, np), grad_aa(where, np), grad_positions(where),
+      grad_normals(where), color_aa(where, 3 * np), grad_color(where), grad_color_clip(where);
+  Buffer<double> sums(where);
+  sums.assign(2, 0.0);
+  grad_clip.assign(4 * nv, 0.0f);
+  grad_bary.assign(2 * np, 0.0f);
+  grad_positions.assign(3 * nv, 0.0f);
+  grad_normals.assign(3 * nv, 0.0f);
+  grad_color.assign(3 * np, 0.0f);
+  grad_color_clip.assign(4 * nv, 0.0f);
+  const Span<double> normal_sum(sums.data(), 1, where), mask_sum(sums.data() + 1, 1, where);
+
   TransformToClip(positions, v.clip_from_world, clip);
-  const RasterizeInputs raster_in{clip, tris, v.width, v.height};
-  RasterBuffer rast;
+  const RasterizeInputs raster_in{clip, tris, size, size};
+  RasterBuffer rast(where);
   Rasterize(raster_in, &rast);
-  std::vector<float> grad_clip(4 * nv, 0.0f), grad_bary(2 * np, 0.0f), img(3 * np), grad_img(3 * np, 0.0f);
-  NormalMaskLoss::Terms terms;
-  Interpolate({normals, 3, tris, rast}, img);
-  double sum = 0;
-  for (size_t p = 0; p < np; ++p) {
-    const Eigen::Vector3f t = Eigen::Map<const Eigen::Vector3f>(&v.normals[3 * p]);
-    const Eigen::Vector3f n = Eigen::Map<const Eigen::Vector3f>(&img[3 * p]);
-    const float len = n.norm();
-    if (rast.triangle[p] < 0 || v.mask[p] <= 0.5f || t.squaredNorm() < 0.5f || len < 1e-8f) continue;
-    const Eigen::Vector3f nh = n / len, d = nh - t;
-    sum += d.squaredNorm();
-    const Eigen::Vector3f g = v.normal_grad_scale * 2.0f * (d - nh * nh.dot(d)) / len;
-    for (int c = 0; c < 3; ++c) grad_img[3 * p + c] = g[c];
-  }
-  terms.normal = sum * v.normal_loss_scale;
-  grad_normals->assign(3 * nv, 0.0f);
-  InterpolateBackward({normals, 3, tris, rast}, grad_img, *grad_normals, grad_bary);
+  const InterpolateInputs normals_in{normals, 3, tris, rast};
+  Interpolate(normals_in, img);
+  UnitVectorLoss({img, rast, target_normals, target_mask}, 0.5f / 5000, grad_img, normal_sum);
+  InterpolateBackward(normals_in, grad_img, grad_normals, grad_bary);
   RasterizeBackward(raster_in, rast, grad_bary, {}, grad_clip);
-  std::vector<float> coverage(np), aa(np), grad_aa(np), grad_coverage(np, 0.0f);
-  for (size_t p = 0; p < np; ++p) coverage[p] = rast.triangle[p] >= 0 ? 1.0f : 0.0f;
+  Coverage(rast, coverage);
+  const AntialiasInputs coverage_in{coverage, 1, rast, clip, tris, topology};
   AntialiasRecord record;
-  Antialias({coverage, 1, rast, clip, tris, topology}, aa, &record, /*color_gradient=*/false);
-  sum = 0;
-  for (size_t p = 0; p < np; ++p) {
-    if (v.mask[p] < 0) {  // unknown: past the source image's border
-      grad_aa[p] = 0;
-      continue;
-    }
-    const float d = aa[p] - v.mask[p];
-    sum += d * d;
-    grad_aa[p] = v.mask_grad_scale * 2.0f * d;
-  }
-  terms.mask = sum * v.mask_loss_scale;
-  AntialiasBackward({coverage, 1, rast, clip, tris, topology}, record, grad_aa, grad_coverage, grad_clip);
-  grad_positions->assign(3 * nv, 0.0f);
-  TransformToClipBackward(v.clip_from_world, grad_clip, *grad_positions);
-  return terms;
+  Antialias(coverage_in, aa, &record, /*color_gradient=*/false);
+  SquaredErrorLoss(aa, target_mask, 0.7f / 8000, grad_aa, mask_sum);
+  AntialiasBackward(coverage_in, record, grad_aa, {}, grad_clip);
+  TransformToClipBackward(v.clip_from_world, grad_clip, grad_positions);
+  // The interpolated normals as a colour, antialiased with its colour gradient, from a random upstream gradient.
+  const AntialiasInputs color_in{img, 3, rast, clip, tris, topology};
+  AntialiasRecord color_record;
+  Antialias(color_in, color_aa, &color_record, /*color_gradient=*/true);
+  AntialiasBackward(color_in, color_record, on_side(color_upstream), grad_color, grad_color_clip);
+
+  LossChain out;
+  out.triangle = rast.triangle.ToHost();
+  out.bary = rast.bary.ToHost();
+  out.depth = rast.depth.ToHost();
+  out.normal_img = img.ToHost();
+  out.aa = aa.ToHost();
+  out.color_aa = color_aa.ToHost();
+  out.sums = sums.ToHost();
+  out.grad_positions = grad_positions.ToHost();
+  out.grad_normals = grad_normals.ToHost();
+  out.grad_color = grad_color.ToHost();
+  out.grad_color_clip = grad_color_clip.ToHost();
+  return out;
 }
 
-TEST(CudaAgreement, DeviceResidentRefinementLossMatchesTheOps) {
+// Largest |a - b| over the largest |a|, for two vectors of the same length.
+double MaxRelative(const std::vector<float>& a, const std::vector<float>& b) {
+  EXPECT_EQ(a.size(), b.size());
+  double scale = 0, diff = 0;
+  for (size_t i = 0; i < a.size() && i < b.size(); ++i) {
+    scale = std::max(scale, std::abs(static_cast<double>(a[i])));
+    diff = std::max(diff, std::abs(static_cast<double>(a[i]) - b[i]));
+  }
+  return scale > 0 ? diff / scale : diff;
+}
+
+TEST(DeviceBuffers, TheLossComposedOnTheDeviceMatchesTheHost) {
   SD_REQUIRE_CUDA();
   DeviceScope scope;
+  SetDevice(Device::kCpu);  // host buffers run on the CPU; device buffers on the GPU whatever the switch says
   constexpr int kSize = 200;
-  // Targets: a bumpy sphere's normals and coverage; the mesh evaluated: a smooth sphere of another radius.
+  // Targets: a bumpy sphere's normals and antialiased coverage; the meshes evaluated: other spheres.
   const testing::Mesh target = testing::Sphere(40, 80, 1.0f, 0.08f, 3);
-  const testing::Mesh mesh = testing::Sphere(30, 60, 0.9f);
   const EdgeTopology target_topology = BuildEdgeTopology(target.tris, target.NumVertices());
-  const EdgeTopology topology = BuildEdgeTopology(mesh.tris, mesh.NumVertices());
   auto normals_of = [](const testing::Mesh& m) {  // unit radial directions: a sphere's normals
     std::vector<float> n(m.positions.size());
     for (size_t v = 0; v < n.size() / 3; ++v) {
-      const Eigen::Vector3f p = Eigen::Map<const Eigen::Vector3f>(&m.positions[3 * v]);
       Eigen::Map<Eigen::Vector3f> out(&n[3 * v]);
-      out = p.normalized();
+      out = Eigen::Map<const Eigen::Vector3f>(&m.positions[3 * v]).normalized();
     }
     return n;
   };
-  const std::vector<float> target_normals = normals_of(target), normals = normals_of(mesh);
+  const std::vector<float> target_normals = normals_of(target);
   std::mt19937 rng(8);
-  std::vector<NormalMaskView> views;
-  SetDevice(Device::kCpu);
+  std::vector<LossTargets> views;
   for (int i = 0; i < 3; ++i) {
-    NormalMaskView v;
+    LossTargets v;
     v.clip_from_world = ClipFromWorld(testing::SquareCamera(kSize), testing::LookAtOrigin(rng, 3.0), 0.5f, 6.f);
-    v.width = v.height = kSize;
     const std::vector<float> clip = testing::ToClip(target.positions, v.clip_from_world);
     RasterBuffer rast;
     Rasterize({clip, target.tris, kSize, kSize}, &rast);
     v.normals.resize(3 * rast.NumPixels());
     Interpolate({target_normals, 3, target.tris, rast}, v.normals);
     std::vector<float> coverage(rast.NumPixels());
-    for (size_t p = 0; p < coverage.size(); ++p) coverage[p] = rast.triangle[p] >= 0 ? 1.0f : 0.0f;
+    Coverage(rast, coverage);
     v.mask.resize(coverage.size());
     AntialiasRecord record;
     Antialias({coverage, 1, rast, clip, target.tris, target_topology}, v.mask, &record, false);
-    v.normal_grad_scale = 0.5f / 5000, v.normal_loss_scale = 1.0f / 5000;
-    v.mask_grad_scale = 0.7f / 8000, v.mask_loss_scale = 1.0f / 8000;
     // The last view is cut by an image border: its left third unknown (a negative target, no term).
     if (i == 2)
       for (size_t p = 0; p < v.mask.size(); ++p)
         if (static_cast<int>(p % kSize) < kSize / 3) v.mask[p] = -1.0f;
     views.push_back(std::move(v));
   }
-  SetDevice(Device::kCuda);
-  NormalMaskLoss loss(views);
-  // One evaluation against the CPU: per view its terms, and the gradients summed over the views in view order.
-  auto check = [&](const testing::Mesh& m, const EdgeTopology& m_topology) {
-    const std::vector<float> m_normals = normals_of(m);
-    const size_t nv = m.positions.size() / 3;
-    std::vector<float> cpu_gp(3 * nv, 0.0f), cpu_gn(3 * nv, 0.0f);
-    std::vector<NormalMaskLoss::Terms> cpu_terms;
-    SetDevice(Device::kCpu);
-    for (const NormalMaskView& v : views) {
-      std::vector<float> gp, gn;
-      cpu_terms.push_back(CpuNormalMaskLoss(v, m.positions, m_normals, m.tris, m_topology, &gp, &gn));
-      for (size_t i = 0; i < 3 * nv; ++i) cpu_gp[i] += gp[i], cpu_gn[i] += gn[i];
+  auto check = [&](const testing::Mesh& m) {
+    const EdgeTopology topology = BuildEdgeTopology(m.tris, m.NumVertices());
+    const std::vector<float> normals = normals_of(m);
+    for (size_t vi = 0; vi < views.size(); ++vi) {
+      SCOPED_TRACE(::testing::Message() << "view " << vi);
+      const LossChain host = RunLossChain(Memory::kHost, views[vi], kSize, m.positions, normals, m.tris, topology);
+      const LossChain device = RunLossChain(Memory::kDevice, views[vi], kSize, m.positions, normals, m.tris, topology);
+      // The forward ops run the same shared.h arithmetic: bit for bit.
+      EXPECT_EQ(host.triangle, device.triangle);
+      EXPECT_EQ(host.bary, device.bary);
+      EXPECT_EQ(host.depth, device.depth);
+      EXPECT_EQ(host.normal_img, device.normal_img);
+      // Blends and sums meet in another order on the device (float atomics per pixel, double per vertex).
+      EXPECT_LE(MaxRelative(host.aa, device.aa), 1e-6);
+      EXPECT_LE(MaxRelative(host.color_aa, device.color_aa), 1e-6);
+      ASSERT_EQ(device.sums.size(), 2u);
+      EXPECT_GT(host.sums[0], 0);
+      EXPECT_GT(host.sums[1], 0);
+      EXPECT_NEAR(device.sums[0], host.sums[0], 1e-5 * host.sums[0]);
+      EXPECT_NEAR(device.sums[1], host.sums[1], 1e-5 * host.sums[1]);
+      EXPECT_LE(MaxRelative(host.grad_positions, device.grad_positions), 1e-5);
+      EXPECT_LE(MaxRelative(host.grad_normals, device.grad_normals), 1e-5);
+      EXPECT_LE(MaxRelative(host.grad_color, device.grad_color), 1e-5);
+      EXPECT_LE(MaxRelative(host.grad_color_clip, device.grad_color_clip), 1e-5);
     }
-    SetDevice(Device::kCuda);
-    std::vector<float> gp(3 * nv), gn(3 * nv);
-    const std::vector<NormalMaskLoss::Terms> terms =
-        loss.Evaluate({m.positions, m_normals, m.tris, m_topology}, gp, gn);
-    ASSERT_EQ(terms.size(), views.size());
-    for (size_t v = 0; v < views.size(); ++v) {
-      SCOPED_TRACE(::testing::Message() << "view " << v);
-      EXPECT_GT(cpu_terms[v].normal, 0);
-      EXPECT_GT(cpu_terms[v].mask, 0);
-      EXPECT_NEAR(terms[v].normal, cpu_terms[v].normal, 1e-5 * cpu_terms[v].normal);
-      EXPECT_NEAR(terms[v].mask, cpu_terms[v].mask, 1e-5 * cpu_terms[v].mask);
-    }
-    EXPECT_LE(RelativeError(cpu_gp, gp), 1e-5);
-    EXPECT_LE(RelativeError(cpu_gn, gn), 1e-5);
   };
   {
     SCOPED_TRACE("smooth sphere");
-    check(mesh, topology);
-  }
-  // Another connectivity, as after a remeshing pass: the loss must not evaluate the first mesh's triangles
-  // (it uploads the connectivity only when it changes).
-  const testing::Mesh finer = testing::Sphere(36, 72, 0.95f, 0.02f, 5);
-  {
-    SCOPED_TRACE("finer sphere");
-    check(finer, BuildEdgeTopology(finer.tris, finer.NumVertices()));
+    check(testing::Sphere(30, 60, 0.9f));
   }
   {
-    SCOPED_TRACE("smooth sphere again");
-    check(mesh, topology);
+    SCOPED_TRACE("finer bumpy sphere");  // another connectivity, as after a remeshing pass
+    check(testing::Sphere(36, 72, 0.95f, 0.02f, 5));
   }
 }
 
-// The loss's kernels index positions and normals by tris without checks: a tris array naming a vertex past
-// them stops at the entry with the culprit named.
-TEST(CudaAgreementDeathTest, RefinementLossRefusesIndicesPastTheVertices) {
+// On device buffers the index contracts are kernels: a tris array naming a vertex past the positions, or a
+// raster of another mesh, aborts at the next download with the contract named, and the kernels in between
+// read nothing out of bounds (compute-sanitizer would say).
+TEST(DeviceBuffersDeathTest, IndicesOutsideTheirBuffersAbortAtTheDownload) {
   SD_REQUIRE_CUDA();
   GTEST_FLAG_SET(death_test_style, "threadsafe");
   DeviceScope scope;
   constexpr int kSize = 16;
   const testing::Mesh mesh = testing::Sphere(6, 10, 1.0f);
-  const EdgeTopology topology = BuildEdgeTopology(mesh.tris, mesh.NumVertices());
   std::mt19937 rng(2);
-  NormalMaskView v;
-  v.clip_from_world = ClipFromWorld(testing::SquareCamera(kSize), testing::LookAtOrigin(rng, 3.0), 0.5f, 6.f);
-  v.width = v.height = kSize;
-  v.normals.assign(3 * kSize * kSize, 0.0f);
-  v.mask.assign(kSize * kSize, 0.0f);
-  v.mask_grad_scale = v.mask_loss_scale = 1.0f;
-  SetDevice(Device::kCuda);
-  NormalMaskLoss loss({v});
-  const std::vector<float> too_few(mesh.positions.begin(), mesh.positions.end() - 3);
-  std::vector<float> g(too_few.size());
-  EXPECT_DEATH(loss.Evaluate({too_few, too_few, mesh.tris, topology}, g, g), "names vertex");
-  std::vector<float> gp(mesh.positions.size()), gn(mesh.positions.size());
-  loss.Evaluate({mesh.positions, mesh.positions, mesh.tris, topology}, gp, gn);
+  const Eigen::Matrix4f M = ClipFromWorld(testing::SquareCamera(kSize), testing::LookAtOrigin(rng, 3.0), 0.5f, 6.f);
+  const std::vector<float> clip_h = testing::ToClip(mesh.positions, M);
+  Buffer<float> clip(Memory::kDevice), too_few(Memory::kDevice);
+  clip.CopyFrom(clip_h);
+  too_few.CopyFrom(std::span<const float>(clip_h.data(), clip_h.size() - 4));
+  Buffer<int32_t> tris(Memory::kDevice);
+  tris.CopyFrom(mesh.tris);
+  auto rasterize_past_the_vertices = [&] {
+    RasterBuffer rast(Memory::kDevice);
+    Rasterize({too_few, tris, kSize, kSize}, &rast);
+    rast.triangle.ToHost();
+  };
+  EXPECT_DEATH(rasterize_past_the_vertices(), "naming a vertex past");
+  auto interpolate_another_mesh = [&] {  // a raster of the whole sphere used with only its first triangle
+    RasterBuffer rast(Memory::kDevice);
+    Rasterize({clip, tris, kSize, kSize}, &rast);
+    Buffer<float> attr(Memory::kDevice), out(Memory::kDevice, 3 * rast.NumPixels());
+    attr.CopyFrom(mesh.positions);
+    Interpolate({attr, 3, Span<const int32_t>(tris.data(), 3, Memory::kDevice), rast}, out);
+    out.ToHost();
+  };
+  EXPECT_DEATH(interpolate_another_mesh(), "raster buffer whose triangle ids");
+  // Within the contracts nothing is raised.
+  RasterBuffer rast(Memory::kDevice);
+  Rasterize({clip, tris, kSize, kSize}, &rast);
+  const std::vector<int32_t> triangle = rast.triangle.ToHost();
+  EXPECT_GT(std::count_if(triangle.begin(), triangle.end(), [](int32_t t) { return t >= 0; }), 0);
 }
 
 }  // namespace

@@ -103,12 +103,11 @@ void RasterizeBand(const std::vector<TriangleSetup>& setups, const Bins& bins, c
 }  // namespace
 
 void Rasterize(const RasterizeInputs& in, RasterBuffer* out) {
-  const std::span<const float> clip_pos = in.clip_pos;
-  const std::span<const int32_t> tris = in.tris;
   const int width = in.width, height = in.height;
-  internal::CheckTriangles(clip_pos, tris);
+  internal::CheckTriangles(in.clip_pos, in.tris);
   SD_CHECK(width >= 0 && height >= 0 && out != nullptr);
-  internal::CheckVertexIndices(tris, internal::NumVertices(clip_pos));
+  const Memory where = internal::CommonMemory("Rasterize", in.clip_pos, in.tris, out->where());
+  internal::CheckVertexIndices(in.tris, internal::NumVertices(in.clip_pos));
 
   out->width = width;
   out->height = height;
@@ -116,6 +115,13 @@ void Rasterize(const RasterizeInputs& in, RasterBuffer* out) {
   out->depth.resize(out->NumPixels());
   out->triangle.resize(out->NumPixels());
   if (out->NumPixels() == 0) return;
+  if (where == Memory::kDevice) {
+    internal::CheckDeviceBuild("Rasterize");
+#if SYNTHDRIVE_WITH_CUDA
+    cuda::DeviceRasterize(internal::ToCuda(in), {out->bary.data(), out->depth.data(), out->triangle.data()});
+#endif
+    return;
+  }
   if (UseCuda()) {
 #if SYNTHDRIVE_WITH_CUDA
     cuda::Rasterize(internal::ToCuda(in), {out->bary.data(), out->depth.data(), out->triangle.data()});
@@ -123,6 +129,8 @@ void Rasterize(const RasterizeInputs& in, RasterBuffer* out) {
 #endif
   }
 
+  const std::span<const float> clip_pos = in.clip_pos.host();
+  const std::span<const int32_t> tris = in.tris.host();
   const size_t num_tris = tris.size() / 3;
   std::vector<TriangleSetup> setups(num_tris);
   ParallelForRange(0, num_tris, 256, [&](size_t begin, size_t end) {
@@ -150,22 +158,34 @@ using PixelGrad = std::array<float, 12>;
 
 }  // namespace
 
-void RasterizeBackward(const RasterizeInputs& in, const RasterBuffer& rast, std::span<const float> grad_bary,
-                       std::span<const float> grad_depth, std::span<float> grad_clip) {
-  const std::span<const float> clip_pos = in.clip_pos;
-  const std::span<const int32_t> tris = in.tris;
-  internal::CheckTriangles(clip_pos, tris);
-  internal::CheckVertexIndices(tris, internal::NumVertices(clip_pos));
+void RasterizeBackward(const RasterizeInputs& in, const RasterBuffer& rast, Span<const float> grad_bary_in,
+                       Span<const float> grad_depth_in, Span<float> grad_clip_in) {
+  internal::CheckTriangles(in.clip_pos, in.tris);
+  const Memory where = internal::CommonMemory("RasterizeBackward", in.clip_pos, in.tris, rast, grad_bary_in,
+                                              grad_depth_in, grad_clip_in);
+  internal::CheckVertexIndices(in.tris, internal::NumVertices(in.clip_pos));
   internal::CheckRaster(rast);
   SD_CHECK(rast.width == in.width && rast.height == in.height,
            << "RasterBuffer of " << rast.width << "x" << rast.height << " for inputs of " << in.width << "x"
            << in.height);
-  internal::CheckRasterTriangles(rast, tris);
+  internal::CheckRasterTriangles(rast, in.tris);
   const size_t num_pixels = rast.NumPixels();
-  SD_CHECK(grad_bary.size() == 2 * num_pixels, << "grad_bary: " << grad_bary.size());
-  SD_CHECK(grad_depth.empty() || grad_depth.size() == num_pixels, << "grad_depth: " << grad_depth.size());
-  SD_CHECK(grad_clip.size() == clip_pos.size(), << "grad_clip: " << grad_clip.size());
+  SD_CHECK(grad_bary_in.size() == 2 * num_pixels, << "grad_bary: " << grad_bary_in.size());
+  SD_CHECK(grad_depth_in.empty() || grad_depth_in.size() == num_pixels, << "grad_depth: " << grad_depth_in.size());
+  SD_CHECK(grad_clip_in.size() == in.clip_pos.size(), << "grad_clip: " << grad_clip_in.size());
   if (num_pixels == 0) return;
+  if (where == Memory::kDevice) {
+    internal::CheckDeviceBuild("RasterizeBackward");
+#if SYNTHDRIVE_WITH_CUDA
+    cuda::DeviceRasterizeBackward(internal::ToCuda(in), internal::View(rast), grad_bary_in.data(),
+                                  grad_depth_in.empty() ? nullptr : grad_depth_in.data(), grad_clip_in.data());
+#endif
+    return;
+  }
+  const std::span<const float> clip_pos = in.clip_pos.host(), grad_bary = grad_bary_in.host(),
+                               grad_depth = grad_depth_in.host();
+  const std::span<const int32_t> tris = in.tris.host();
+  const std::span<float> grad_clip = grad_clip_in.host();
   if (UseCuda()) {
 #if SYNTHDRIVE_WITH_CUDA
     std::vector<double> sum(grad_clip.size());

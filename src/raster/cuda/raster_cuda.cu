@@ -91,10 +91,43 @@ thread_local Workspace workspace;
 
 // ---- rasterize ---------------------------------------------------------------------------------------------
 
+// The index contracts of an op on device buffers (raster/buffer.h), checked by the kernels as they read each
+// index: one out of range raises the calling thread's flag and is not used, and once the flag is up the kernels
+// that index do nothing. A null flag: the host-staged path, whose inputs the host checked.
+struct Contract {
+  int32_t* flag = nullptr;
+  size_t num_vertices = 0, num_tris = 0;
+
+  __device__ bool Raised() const { return flag != nullptr && *static_cast<volatile int32_t*>(flag) != 0; }
+  __device__ bool Raise(int32_t violation) const {
+    atomicCAS(flag, 0, violation);
+    return false;
+  }
+  // Triangle t's vertex indices name vertices.
+  __device__ bool VerticesOk(const int32_t* tris, size_t t) const {
+    if (flag == nullptr) return true;
+    for (int k = 0; k < 3; ++k) {
+      const int32_t v = tris[3 * t + k];
+      if (v < 0 || static_cast<size_t>(v) >= num_vertices) return Raise(kVertexIndex);
+    }
+    return true;
+  }
+  // A raster's triangle id t >= 0 names a triangle, whose vertex indices name vertices.
+  __device__ bool TriangleOk(const int32_t* tris, int32_t t) const {
+    if (flag == nullptr) return true;
+    if (static_cast<size_t>(t) >= num_tris) return Raise(kRasterTriangle);
+    return VerticesOk(tris, static_cast<size_t>(t));
+  }
+};
+
 __global__ void SetUpKernel(const float* clip, const int32_t* tris, size_t num_tris, int width, int height,
-                            shared::TriangleSetup* setup, unsigned long long* area) {
+                            shared::TriangleSetup* setup, unsigned long long* area, Contract contract) {
   const size_t t = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
   if (t >= num_tris) return;
+  if (contract.Raised() || !contract.VerticesOk(tris, t)) {  // no pixel reads this triangle's set-up then
+    area[t] = 0;
+    return;
+  }
   const shared::TriangleSetup s = shared::SetUpTriangle(clip, tris, t, width, height);
   setup[t] = s;
   area[t] = s.Empty() ? 0ull : static_cast<unsigned long long>(s.x1 - s.x0 + 1) * (s.y1 - s.y0 + 1);
@@ -176,7 +209,8 @@ DeviceRaster Resident(const RasterView& rast) {
 // prefix sum of the bounding boxes, the depth test by atomicMin over a fixed grid that strides over the
 // summed box areas (no host sync: refinement's loss queues a whole evaluation, every view, before it waits),
 // and the winners' barycentrics.
-DeviceRaster RasterizeOnDevice(const float* d_clip, const int32_t* d_tris, size_t num_tris, int width, int height) {
+DeviceRaster RasterizeOnDevice(const float* d_clip, const int32_t* d_tris, size_t num_tris, int width, int height,
+                               float* bary, float* depth, int32_t* triangle, Contract contract) {
   Workspace& ws = workspace;
   const size_t np = static_cast<size_t>(width) * height;
   unsigned long long* key = ws.key.Get(np);
@@ -184,7 +218,7 @@ DeviceRaster RasterizeOnDevice(const float* d_clip, const int32_t* d_tris, size_
   shared::TriangleSetup* setup = ws.setup.Get(std::max<size_t>(num_tris, 1));
   if (num_tris > 0) {
     unsigned long long* area = ws.area.Get(2 * num_tris);  // [0, n): areas, [n, 2n): inclusive prefix sums
-    SetUpKernel<<<Blocks(num_tris), kThreads>>>(d_clip, d_tris, num_tris, width, height, setup, area);
+    SetUpKernel<<<Blocks(num_tris), kThreads>>>(d_clip, d_tris, num_tris, width, height, setup, area, contract);
     SD_CUDA(cudaGetLastError());
     size_t temp_bytes = 0;
     SD_CUDA(cub::DeviceScan::InclusiveSum(nullptr, temp_bytes, area, area + num_tris, static_cast<int64_t>(num_tris)));
@@ -193,9 +227,6 @@ DeviceRaster RasterizeOnDevice(const float* d_clip, const int32_t* d_tris, size_
     CoverKernel<<<CoverBlocks(), kThreads>>>(setup, area + num_tris, num_tris, width, height, key);
     SD_CUDA(cudaGetLastError());
   }
-  float* bary = ws.r_bary.Get(2 * np);
-  float* depth = ws.r_depth.Get(np);
-  int32_t* triangle = ws.r_triangle.Get(np);
   ResolveKernel<<<Blocks(np), kThreads>>>(setup, key, width, height, bary, depth, triangle);
   SD_CUDA(cudaGetLastError());
   return {bary, depth, triangle};
@@ -205,11 +236,11 @@ DeviceRaster RasterizeOnDevice(const float* d_clip, const int32_t* d_tris, size_
 
 __global__ void RasterizeBackwardKernel(const float* clip, const int32_t* tris, int width, int height,
                                         DeviceRaster rast, const float* grad_bary, const float* grad_depth,
-                                        double* sum) {
+                                        double* sum, Contract contract) {
   const size_t pixel = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
   if (pixel >= static_cast<size_t>(width) * height) return;
   const int32_t t = rast.triangle[pixel];
-  if (t < 0) return;
+  if (t < 0 || contract.Raised() || !contract.TriangleOk(tris, t)) return;
   const float gb0 = grad_bary[2 * pixel], gb1 = grad_bary[2 * pixel + 1];
   const float gd = grad_depth ? grad_depth[pixel] : 0.0f;
   if (gb0 == 0.0f && gb1 == 0.0f && gd == 0.0f) return;
@@ -225,20 +256,23 @@ __global__ void RasterizeBackwardKernel(const float* clip, const int32_t* tris, 
 }
 
 __global__ void InterpolateKernel(const float* attr, int channels, const int32_t* tris, size_t num_pixels,
-                                  DeviceRaster rast, float* out) {
+                                  DeviceRaster rast, float* out, Contract contract) {
   const size_t pixel = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
   if (pixel >= num_pixels) return;
   const size_t C = static_cast<size_t>(channels);
-  shared::InterpolatePixel(attr, C, tris, rast.triangle[pixel], rast.bary[2 * pixel], rast.bary[2 * pixel + 1],
+  int32_t t = rast.triangle[pixel];
+  if (t >= 0 && (contract.Raised() || !contract.TriangleOk(tris, t))) t = -1;  // written as background
+  shared::InterpolatePixel(attr, C, tris, t, rast.bary[2 * pixel], rast.bary[2 * pixel + 1],
                            &out[C * pixel]);
 }
 
 __global__ void InterpolateBackwardKernel(const float* attr, int channels, const int32_t* tris, size_t num_pixels,
-                                          DeviceRaster rast, const float* grad_out, double* sum, float* grad_bary) {
+                                          DeviceRaster rast, const float* grad_out, double* sum, float* grad_bary,
+                                          Contract contract) {
   const size_t pixel = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
   if (pixel >= num_pixels) return;
   const int32_t t = rast.triangle[pixel];
-  if (t < 0) return;
+  if (t < 0 || contract.Raised() || !contract.TriangleOk(tris, t)) return;
   const size_t C = static_cast<size_t>(channels);
   const float* g = &grad_out[C * pixel];
   if (grad_bary) {
@@ -263,23 +297,38 @@ __global__ void ProjectKernel(const float* clip, size_t num_vertices, int width,
   if (v < num_vertices) screen[v] = shared::Project(clip, static_cast<int32_t>(v), width, height);
 }
 
-__global__ void FacingKernel(const float* clip, const int32_t* tris, size_t num_tris, int8_t* facing) {
+__global__ void FacingKernel(const float* clip, const int32_t* tris, size_t num_tris, int8_t* facing,
+                             Contract contract) {
   const size_t t = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
-  if (t < num_tris) facing[t] = static_cast<int8_t>(shared::ScreenFacing(clip, tris, t));
+  if (t >= num_tris) return;
+  // Every triangle's vertices are checked here, before the pair search walks from triangle to triangle.
+  if (contract.Raised() || !contract.VerticesOk(tris, t)) facing[t] = 0;
+  else facing[t] = static_cast<int8_t>(shared::ScreenFacing(clip, tris, t));
 }
 
 // Slot 2 * pixel + 0: the pair with the right neighbour, + 1: with the lower one (the CPU's order).
 __global__ void PairKernel(shared::AntialiasScene sc, const float* color, int channels, bool skip_equal_colors,
-                           int32_t* found, PairRecord* pairs, shared::PairGeometry* geometry) {
+                           int32_t* found, PairRecord* pairs /* nullable */, shared::PairGeometry* geometry,
+                           Contract contract) {
   const size_t a_index = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
   if (a_index >= static_cast<size_t>(sc.width) * sc.height) return;
+  // Both pixels' triangle ids are checked before the search reads their triangles' neighbours.
+  auto id_ok = [&](int32_t pixel) {
+    const int32_t t = sc.triangle[pixel];
+    return contract.flag == nullptr || t < 0 || static_cast<size_t>(t) < contract.num_tris ||
+           contract.Raise(kRasterTriangle);
+  };
+  if (contract.Raised() || !id_ok(static_cast<int32_t>(a_index))) {
+    found[2 * a_index] = found[2 * a_index + 1] = 0;
+    return;
+  }
   const int32_t a = static_cast<int32_t>(a_index);
   const int i = a % sc.width, j = a / sc.width;
   for (int dir = 0; dir < 2; ++dir) {
     const size_t slot = 2 * a_index + dir;
     found[slot] = 0;
     const int32_t b = dir == 0 ? (i + 1 < sc.width ? a + 1 : -1) : (j + 1 < sc.height ? a + sc.width : -1);
-    if (b < 0 || sc.triangle[a] == sc.triangle[b]) continue;
+    if (b < 0 || sc.triangle[a] == sc.triangle[b] || !id_ok(b)) continue;
     if (skip_equal_colors) {
       bool same = true;
       for (int c = 0; c < channels; ++c)
@@ -289,7 +338,7 @@ __global__ void PairKernel(shared::AntialiasScene sc, const float* color, int ch
     shared::PairGeometry g;
     if (!shared::ExaminePair(sc, a, b, &g)) continue;
     found[slot] = 1;
-    pairs[slot] = {a, b, g.triangle, g.edge, shared::BlendOf(g).alpha};
+    if (pairs) pairs[slot] = {a, b, g.triangle, g.edge, shared::BlendOf(g).alpha};
     geometry[slot] = g;
   }
 }
@@ -323,7 +372,7 @@ shared::AntialiasScene DeviceScene(const AntialiasInputs& in) {
   shared::ScreenVertex* screen = ws.screen.Get(num_vertices);
   int8_t* facing = ws.facing.Get(num_tris);
   if (num_vertices) ProjectKernel<<<Blocks(num_vertices), kThreads>>>(d_clip, num_vertices, rast.width, rast.height, screen);
-  if (num_tris) FacingKernel<<<Blocks(num_tris), kThreads>>>(d_clip, d_tris, num_tris, facing);
+  if (num_tris) FacingKernel<<<Blocks(num_tris), kThreads>>>(d_clip, d_tris, num_tris, facing, Contract{});
   SD_CUDA(cudaGetLastError());
   return {rast.width, rast.height, r.triangle, r.depth, d_tris, d_neighbour, screen, facing};
 }
@@ -355,7 +404,8 @@ void Rasterize(const RasterizeInputs& in, RasterOut out) {
   const size_t np = static_cast<size_t>(in.width) * in.height;
   if (np == 0) return;
   const DeviceRaster r = RasterizeOnDevice(ws.clip.Upload(in.clip, 4 * in.num_vertices),
-                                           ws.tris.Upload(in.tris, 3 * in.num_tris), in.num_tris, in.width, in.height);
+                                           ws.tris.Upload(in.tris, 3 * in.num_tris), in.num_tris, in.width, in.height,
+                                           ws.r_bary.Get(2 * np), ws.r_depth.Get(np), ws.r_triangle.Get(np), Contract{});
   Download(out.bary, r.bary, 2 * np);
   Download(out.depth, r.depth, np);
   Download(out.triangle, r.triangle, np);
@@ -374,7 +424,7 @@ void RasterizeBackward(const RasterizeInputs& in, const RasterView& rast, const 
   SD_CUDA(cudaMemset(sum, 0, 4 * num_vertices * sizeof(double)));
   if (np) {
     RasterizeBackwardKernel<<<Blocks(np), kThreads>>>(d_clip, d_tris, rast.width, rast.height, r, d_grad_bary,
-                                                      d_grad_depth, sum);
+                                                      d_grad_depth, sum, Contract{});
     SD_CUDA(cudaGetLastError());
   }
   Download(grad_clip_sum, sum, 4 * num_vertices);
@@ -388,7 +438,7 @@ void Interpolate(const InterpolateInputs& in, float* out) {
   const float* d_attr = ws.attr.Upload(in.attr, C * in.num_attr_vertices);
   const int32_t* d_tris = ws.tris.Upload(in.tris, 3 * in.num_tris);
   float* d_out = ws.out.Get(C * np);
-  InterpolateKernel<<<Blocks(np), kThreads>>>(d_attr, in.channels, d_tris, np, r, d_out);
+  InterpolateKernel<<<Blocks(np), kThreads>>>(d_attr, in.channels, d_tris, np, r, d_out, Contract{});
   SD_CUDA(cudaGetLastError());
   Download(out, d_out, C * np);
 }
@@ -406,7 +456,7 @@ void InterpolateBackward(const InterpolateInputs& in, const float* grad_out, dou
   SD_CUDA(cudaMemset(sum, 0, C * num_attr_vertices * sizeof(double)));
   if (np) {
     InterpolateBackwardKernel<<<Blocks(np), kThreads>>>(d_attr, in.channels, d_tris, np, r, d_grad_out, sum,
-                                                        d_grad_bary);
+                                                        d_grad_bary, Contract{});
     SD_CUDA(cudaGetLastError());
   }
   Download(grad_attr_sum, sum, C * num_attr_vertices);
@@ -426,7 +476,8 @@ void FindAntialiasPairs(const AntialiasInputs& in, bool skip_equal_colors, std::
   int32_t* offset = found + slots;
   PairRecord* slot_pairs = ws.pairs.Get(slots);
   shared::PairGeometry* slot_geometry = ws.geometry.Get(slots);
-  PairKernel<<<Blocks(np), kThreads>>>(sc, d_color, in.channels, skip_equal_colors, found, slot_pairs, slot_geometry);
+  PairKernel<<<Blocks(np), kThreads>>>(sc, d_color, in.channels, skip_equal_colors, found, slot_pairs, slot_geometry,
+                                       Contract{});
   SD_CUDA(cudaGetLastError());
   size_t temp_bytes = 0;
   SD_CUDA(cub::DeviceScan::ExclusiveSum(nullptr, temp_bytes, found, offset, static_cast<int64_t>(slots)));
@@ -467,91 +518,98 @@ bool RecordedPairGeometry(const AntialiasInputs& in, const PairRecord* pairs, si
 
 }  // namespace sd::raster::cuda
 
-// ---- the refinement loss, device-resident ------------------------------------------------------------------
+// ---- device-resident buffers and the ops on them -----------------------------------------------------------
 namespace sd::raster::cuda {
 namespace {
 
-__global__ void ToClipKernel(const float* positions, size_t num_vertices, const float* M, float* clip) {
+// The calling thread's contract flag (raster/buffer.h), zeroed when first made.
+int32_t* ContractFlag() {
+  thread_local Scratch<int32_t> flag;
+  thread_local bool zeroed = false;
+  int32_t* d = flag.Get(1);
+  if (!zeroed) {
+    SD_CUDA(cudaMemset(d, 0, sizeof(int32_t)));
+    zeroed = true;
+  }
+  return d;
+}
+
+struct Matrix4 {  // row-major, passed by value to the kernels
+  float m[16];
+};
+Matrix4 ToMatrix4(const float M[16]) {
+  Matrix4 out;
+  std::copy(M, M + 16, out.m);
+  return out;
+}
+
+__global__ void Fill32Kernel(uint32_t* out, uint32_t pattern, size_t n) {
+  const size_t i = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  if (i < n) out[i] = pattern;
+}
+__global__ void Fill64Kernel(unsigned long long* out, unsigned long long pattern, size_t n) {
+  const size_t i = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  if (i < n) out[i] = pattern;
+}
+
+// clip = M (p, 1), as clip.cpp's Eigen product rounds it (one product and sum per row, in column order).
+__global__ void ToClipKernel(const float* positions, size_t num_vertices, Matrix4 M, float* clip) {
   const size_t v = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
   if (v >= num_vertices) return;
   const float x = positions[3 * v], y = positions[3 * v + 1], z = positions[3 * v + 2];
-  for (int r = 0; r < 4; ++r) clip[4 * v + r] = M[4 * r] * x + M[4 * r + 1] * y + M[4 * r + 2] * z + M[4 * r + 3];
+  for (int r = 0; r < 4; ++r)
+    clip[4 * v + r] = M.m[4 * r] * x + M.m[4 * r + 1] * y + M.m[4 * r + 2] * z + M.m[4 * r + 3] * 1.0f;
 }
 
-// grad_positions += M^T grad_clip (the first three columns), per vertex, rounded to float before the sum:
-// the views' shares are added in view order (one stream), as the CPU sums them.
-__global__ void ToClipBackwardKernel(const double* grad_clip, size_t num_vertices, const float* M, float* grad_positions) {
+// grad_positions += M[:, 0:3]^T grad_clip per vertex.
+__global__ void ToClipBackwardKernel(const float* grad_clip, size_t num_vertices, Matrix4 M, float* grad_positions) {
   const size_t v = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
   if (v >= num_vertices) return;
-  for (int k = 0; k < 3; ++k) {
-    double g = 0;
-    for (int r = 0; r < 4; ++r) g += static_cast<double>(M[4 * r + k]) * grad_clip[4 * v + r];
-    grad_positions[3 * v + k] += static_cast<float>(g);
-  }
+  const float* g = &grad_clip[4 * v];
+  for (int k = 0; k < 3; ++k)
+    grad_positions[3 * v + k] += M.m[k] * g[0] + M.m[4 + k] * g[1] + M.m[8 + k] * g[2] + M.m[12 + k] * g[3];
 }
 
-// The normal term per pixel (assetgen/refine.cpp): |n/|n| - t|^2 where the pixel is covered, inside the mask
-// and has a target; its gradient with respect to the interpolated (unnormalised) normal.
-__global__ void NormalLossKernel(const float* normal_img, const int32_t* triangle, const float* target,
-                                 const float* mask, size_t num_pixels, float grad_scale, float* grad_img,
-                                 double* loss_sum) {
-  const size_t p = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
-  double local = 0;
-  if (p < num_pixels) {
-    grad_img[3 * p] = grad_img[3 * p + 1] = grad_img[3 * p + 2] = 0.0f;
-    const float t0 = target[3 * p], t1 = target[3 * p + 1], t2 = target[3 * p + 2];
-    const float n0 = normal_img[3 * p], n1 = normal_img[3 * p + 1], n2 = normal_img[3 * p + 2];
-    const float len = sqrtf(n0 * n0 + n1 * n1 + n2 * n2);
-    if (triangle[p] >= 0 && mask[p] > 0.5f && t0 * t0 + t1 * t1 + t2 * t2 >= 0.5f && len >= 1e-8f) {
-      const float h0 = n0 / len, h1 = n1 / len, h2 = n2 / len;
-      const float d0 = h0 - t0, d1 = h1 - t1, d2 = h2 - t2;
-      local = d0 * d0 + d1 * d1 + d2 * d2;
-      const float hd = h0 * d0 + h1 * d1 + h2 * d2;
-      grad_img[3 * p] = grad_scale * 2.0f * (d0 - h0 * hd) / len;
-      grad_img[3 * p + 1] = grad_scale * 2.0f * (d1 - h1 * hd) / len;
-      grad_img[3 * p + 2] = grad_scale * 2.0f * (d2 - h2 * hd) / len;
-    }
-  }
-  // One atomic per warp, not per pixel.
-  for (int offset = 16; offset > 0; offset /= 2) local += __shfl_down_sync(0xffffffffu, local, offset);
-  if ((threadIdx.x & 31) == 0 && local != 0) atomicAdd(loss_sum, local);
+__global__ void AddAsFloatKernel(const double* in, size_t n, float* out) {
+  const size_t i = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  if (i < n) out[i] += static_cast<float>(in[i]);
 }
 
-__global__ void CoverageKernel(const int32_t* triangle, size_t num_pixels, float* coverage, float* aa) {
-  const size_t p = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
-  if (p >= num_pixels) return;
-  coverage[p] = aa[p] = triangle[p] >= 0 ? 1.0f : 0.0f;
+__global__ void AddKernel(const float* in, size_t n, float* out) {
+  const size_t i = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  if (i < n) out[i] += in[i];
 }
 
+// out_r += alpha (c_s - c_r) for every found pair; out starts as a copy of the colours, which are only read.
 __global__ void BlendKernel(const int32_t* found, const shared::PairGeometry* geometry, size_t num_slots,
-                            const float* coverage, float* aa) {
+                            const float* color, int channels, float* out) {
   const size_t slot = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
   if (slot >= num_slots || !found[slot]) return;
   const shared::Blend b = shared::BlendOf(geometry[slot]);
-  atomicAdd(&aa[b.receiver], b.alpha * (coverage[b.source] - coverage[b.receiver]));
+  const size_t C = static_cast<size_t>(channels);
+  for (size_t c = 0; c < C; ++c)
+    atomicAdd(&out[C * b.receiver + c], b.alpha * (color[C * b.source + c] - color[C * b.receiver + c]));
 }
 
-__global__ void MaskLossKernel(const float* aa, const float* target, size_t num_pixels, float grad_scale,
-                               float* grad_aa, double* loss_sum) {
-  const size_t p = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
-  double local = 0;
-  if (p < num_pixels) {
-    // A negative target marks a pixel the camera did not see (normal_mask_loss.h): no term.
-    const float d = target[p] < 0 ? 0.0f : aa[p] - target[p];
-    local = d * d;
-    grad_aa[p] = grad_scale * 2.0f * d;
-  }
-  for (int offset = 16; offset > 0; offset /= 2) local += __shfl_down_sync(0xffffffffu, local, offset);
-  if ((threadIdx.x & 31) == 0 && local != 0) atomicAdd(loss_sum, local);
-}
-
+// antialias.cpp's backward per pair: the colour gradient of the blend, and the edge's gradient to the clip
+// positions of its end vertices (summed in double).
 __global__ void AntialiasBackwardKernel(const int32_t* found, const shared::PairGeometry* geometry, size_t num_slots,
-                                        const float* coverage, const float* grad_aa, int width, double* grad_clip) {
+                                        const float* color, int channels, const float* grad_out, int width,
+                                        float* grad_color, double* grad_clip) {
   const size_t slot = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
   if (slot >= num_slots || !found[slot]) return;
   const shared::PairGeometry& g = geometry[slot];
   const shared::Blend b = shared::BlendOf(g);
-  const double dL_dalpha = static_cast<double>(grad_aa[b.receiver]) * (coverage[b.source] - coverage[b.receiver]);
+  const size_t C = static_cast<size_t>(channels);
+  double dL_dalpha = 0;
+  for (size_t c = 0; c < C; ++c) {
+    const float g_r = grad_out[C * b.receiver + c];
+    dL_dalpha += static_cast<double>(g_r) * (color[C * b.source + c] - color[C * b.receiver + c]);
+    if (grad_color) {
+      atomicAdd(&grad_color[C * b.source + c], b.alpha * g_r);
+      atomicAdd(&grad_color[C * b.receiver + c], -(b.alpha * g_r));
+    }
+  }
   const double dL_dt = dL_dalpha * b.dalpha_dt;
   if (dL_dt == 0) return;
   double d[2][3];
@@ -564,128 +622,221 @@ __global__ void AntialiasBackwardKernel(const int32_t* found, const shared::Pair
   }
 }
 
-__global__ void AddAsFloatKernel(const double* in, size_t n, float* out) {
-  const size_t i = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
-  if (i < n) out[i] += static_cast<float>(in[i]);
+__global__ void CoverageKernel(const int32_t* triangle, size_t num_pixels, float* coverage) {
+  const size_t p = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  if (p < num_pixels) coverage[p] = triangle[p] >= 0 ? 1.0f : 0.0f;
+}
+
+// Sums a block's per-thread terms with one atomic per warp, not per pixel.
+__device__ __forceinline__ void AddToSum(double local, double* sum) {
+  for (int offset = 16; offset > 0; offset /= 2) local += __shfl_down_sync(0xffffffffu, local, offset);
+  if ((threadIdx.x & 31) == 0 && local != 0) atomicAdd(sum, local);
+}
+
+// loss.cpp's UnitVectorLoss per pixel.
+__global__ void UnitVectorLossKernel(const float* prediction, const int32_t* triangle, const float* target,
+                                     const float* mask, size_t num_pixels, float grad_scale, float* grad,
+                                     double* loss_sum) {
+  const size_t p = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  double local = 0;
+  if (p < num_pixels) {
+    grad[3 * p] = grad[3 * p + 1] = grad[3 * p + 2] = 0.0f;
+    const float t0 = target[3 * p], t1 = target[3 * p + 1], t2 = target[3 * p + 2];
+    const float n0 = prediction[3 * p], n1 = prediction[3 * p + 1], n2 = prediction[3 * p + 2];
+    const float len = sqrtf(n0 * n0 + n1 * n1 + n2 * n2);
+    if (triangle[p] >= 0 && mask[p] > 0.5f && t0 * t0 + t1 * t1 + t2 * t2 >= 0.5f && len >= 1e-8f) {
+      const float h0 = n0 / len, h1 = n1 / len, h2 = n2 / len;
+      const float d0 = h0 - t0, d1 = h1 - t1, d2 = h2 - t2;
+      local = d0 * d0 + d1 * d1 + d2 * d2;
+      const float hd = h0 * d0 + h1 * d1 + h2 * d2;
+      grad[3 * p] = grad_scale * 2.0f * (d0 - h0 * hd) / len;
+      grad[3 * p + 1] = grad_scale * 2.0f * (d1 - h1 * hd) / len;
+      grad[3 * p + 2] = grad_scale * 2.0f * (d2 - h2 * hd) / len;
+    }
+  }
+  AddToSum(local, loss_sum);
+}
+
+// loss.cpp's SquaredErrorLoss per pixel: a negative target has no term.
+__global__ void SquaredErrorLossKernel(const float* prediction, const float* target, size_t num_pixels,
+                                       float grad_scale, float* grad, double* loss_sum) {
+  const size_t p = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  double local = 0;
+  if (p < num_pixels) {
+    const float d = target[p] < 0 ? 0.0f : prediction[p] - target[p];
+    local = d * d;
+    grad[p] = grad_scale * 2.0f * d;
+  }
+  AddToSum(local, loss_sum);
+}
+
+// A zeroed double accumulator of n values in the thread's scratch.
+double* ZeroedSum(size_t n) {
+  double* sum = workspace.sum.Get(std::max<size_t>(n, 1));
+  SD_CUDA(cudaMemsetAsync(sum, 0, n * sizeof(double), cudaStreamPerThread));
+  return sum;
+}
+
+void AddSumAsFloat(const double* sum, size_t n, float* out) {
+  if (n == 0) return;
+  AddAsFloatKernel<<<Blocks(n), kThreads>>>(sum, n, out);
+  SD_CUDA(cudaGetLastError());
+}
+
+DeviceRaster AsDevice(const RasterView& rast) { return {rast.bary, rast.depth, rast.triangle}; }
+
+// The antialias scene of device inputs: projected vertices and facings in the thread's scratch.
+shared::AntialiasScene DeviceResidentScene(const AntialiasInputs& in, Contract contract) {
+  Workspace& ws = workspace;
+  const int width = in.rast.width, height = in.rast.height;
+  shared::ScreenVertex* screen = ws.screen.Get(std::max<size_t>(in.num_vertices, 1));
+  int8_t* facing = ws.facing.Get(std::max<size_t>(in.num_tris, 1));
+  if (in.num_vertices) ProjectKernel<<<Blocks(in.num_vertices), kThreads>>>(in.clip, in.num_vertices, width, height, screen);
+  if (in.num_tris) FacingKernel<<<Blocks(in.num_tris), kThreads>>>(in.clip, in.tris, in.num_tris, facing, contract);
+  SD_CUDA(cudaGetLastError());
+  return {width, height, in.rast.triangle, in.rast.depth, in.tris, in.neighbour, screen, facing};
 }
 
 }  // namespace
 
-class LossTargets {
- public:
-  struct View {
-    LossViewHost host;  // scales and size; the pointers are not used after the upload
-    float* M = nullptr;
-    float* normals = nullptr;
-    float* mask = nullptr;
-  };
-  std::vector<View> views;
-  // The connectivity last uploaded: refinement changes it once per remeshing pass, not per evaluation.
-  std::vector<int32_t> tris, neighbour;
-  Scratch<int32_t> d_tris, d_neighbour;
-  ~LossTargets() {
-    for (View& v : views) cudaFree(v.M), cudaFree(v.normals), cudaFree(v.mask);
-  }
-};
-
-LossTargets* UploadLossTargets(const LossViewHost* views, size_t num_views) {
-  auto targets = std::make_unique<LossTargets>();
-  for (size_t i = 0; i < num_views; ++i) {
-    LossTargets::View v;
-    v.host = views[i];
-    const size_t np = static_cast<size_t>(v.host.width) * v.host.height;
-    targets->views.push_back(v);
-    LossTargets::View& d = targets->views.back();
-    SD_CUDA(cudaMalloc(&d.M, 16 * sizeof(float)));
-    SD_CUDA(cudaMalloc(&d.normals, 3 * np * sizeof(float)));
-    SD_CUDA(cudaMalloc(&d.mask, np * sizeof(float)));
-    SD_CUDA(cudaMemcpy(d.M, views[i].clip_from_world, 16 * sizeof(float), cudaMemcpyHostToDevice));
-    SD_CUDA(cudaMemcpy(d.normals, views[i].normals, 3 * np * sizeof(float), cudaMemcpyHostToDevice));
-    SD_CUDA(cudaMemcpy(d.mask, views[i].mask, np * sizeof(float), cudaMemcpyHostToDevice));
-  }
-  return targets.release();
+void* Allocate(size_t bytes) {
+  void* ptr = nullptr;
+  if (bytes) SD_CUDA(cudaMalloc(&ptr, bytes));
+  return ptr;
 }
 
-void FreeLossTargets(LossTargets* targets) { delete targets; }
+void Free(void* ptr) {
+  if (ptr) cudaFree(ptr);  // may run after the context is gone at exit: nothing to report then
+}
 
-void EvaluateLoss(LossTargets& targets, const NormalMaskInputs& in, double* losses, float* grad_positions,
-                  float* grad_normals) {
-  Workspace& ws = workspace;
-  const size_t nv = in.num_vertices, nt = in.num_tris, num_views = targets.views.size();
-  const int32_t *tris = in.tris, *neighbour = in.neighbour;
-  const float* d_positions = ws.attr.Upload(in.positions, 3 * nv);
-  const float* d_normals = ws.color.Upload(in.normals, 3 * nv);
-  if (!std::equal(tris, tris + 3 * nt, targets.tris.begin(), targets.tris.end()) ||
-      !std::equal(neighbour, neighbour + 3 * nt, targets.neighbour.begin(), targets.neighbour.end())) {
-    targets.tris.assign(tris, tris + 3 * nt);
-    targets.neighbour.assign(neighbour, neighbour + 3 * nt);
-    targets.d_tris.Upload(tris, 3 * nt);
-    targets.d_neighbour.Upload(neighbour, 3 * nt);
-  }
-  const int32_t* d_tris = targets.d_tris.Get(3 * nt);
-  const int32_t* d_neighbour = targets.d_neighbour.Get(3 * nt);
-  static thread_local Scratch<double> loss_sums, grad_clip, grad_normals_sum;
-  static thread_local Scratch<float> normal_img, grad_img, grad_bary, coverage, aa, grad_aa, out_positions, out_normals;
-  double* d_losses = loss_sums.Get(2 * num_views);
-  SD_CUDA(cudaMemsetAsync(d_losses, 0, 2 * num_views * sizeof(double), cudaStreamPerThread));
-  float* d_out_positions = out_positions.Get(3 * nv);
-  float* d_out_normals = out_normals.Get(3 * nv);
-  SD_CUDA(cudaMemsetAsync(d_out_positions, 0, 3 * nv * sizeof(float), cudaStreamPerThread));
-  SD_CUDA(cudaMemsetAsync(d_out_normals, 0, 3 * nv * sizeof(float), cudaStreamPerThread));
-  float* d_clip = ws.clip.Get(4 * nv);
-  for (size_t vi = 0; vi < num_views; ++vi) {
-    const LossTargets::View& view = targets.views[vi];
-    const int width = view.host.width, height = view.host.height;
-    const size_t np = static_cast<size_t>(width) * height;
-    ToClipKernel<<<Blocks(nv), kThreads>>>(d_positions, nv, view.M, d_clip);
-    const DeviceRaster rast = RasterizeOnDevice(d_clip, d_tris, nt, width, height);
-    const int32_t* triangle = rast.triangle;
-    const float* depth = rast.depth;
+void Copy(void* dst, bool dst_on_device, const void* src, bool src_on_device, size_t bytes) {
+  if (bytes == 0) return;
+  const cudaMemcpyKind kind = dst_on_device ? (src_on_device ? cudaMemcpyDeviceToDevice : cudaMemcpyHostToDevice)
+                                            : (src_on_device ? cudaMemcpyDeviceToHost : cudaMemcpyHostToHost);
+  SD_CUDA(cudaMemcpyAsync(dst, src, bytes, kind, cudaStreamPerThread));
+  // The host's memory is the caller's once this returns: a download must have landed, and an upload from
+  // pageable memory has been staged by then (cudaMemcpyAsync returns after staging it).
+  if (!dst_on_device) SD_CUDA(cudaStreamSynchronize(cudaStreamPerThread));
+}
 
-    double* d_grad_clip = grad_clip.Get(4 * nv);
-    SD_CUDA(cudaMemsetAsync(d_grad_clip, 0, 4 * nv * sizeof(double), cudaStreamPerThread));
-    double* d_grad_normals = grad_normals_sum.Get(3 * nv);
-    SD_CUDA(cudaMemsetAsync(d_grad_normals, 0, 3 * nv * sizeof(double), cudaStreamPerThread));
-    if (view.host.normal_grad_scale > 0) {
-      float* img = normal_img.Get(3 * np);
-      float* gimg = grad_img.Get(3 * np);
-      float* gbary = grad_bary.Get(2 * np);
-      SD_CUDA(cudaMemsetAsync(gbary, 0, 2 * np * sizeof(float), cudaStreamPerThread));
-      InterpolateKernel<<<Blocks(np), kThreads>>>(d_normals, 3, d_tris, np, rast, img);
-      NormalLossKernel<<<Blocks(np), kThreads>>>(img, triangle, view.normals, view.mask, np, view.host.normal_grad_scale,
-                                                 gimg, &d_losses[2 * vi]);
-      InterpolateBackwardKernel<<<Blocks(np), kThreads>>>(d_normals, 3, d_tris, np, rast, gimg, d_grad_normals, gbary);
-      RasterizeBackwardKernel<<<Blocks(np), kThreads>>>(d_clip, d_tris, width, height, rast, gbary, nullptr, d_grad_clip);
-    }
-    if (view.host.mask_grad_scale > 0) {
-      float* cov = coverage.Get(np);
-      float* d_aa = aa.Get(np);
-      float* gaa = grad_aa.Get(np);
-      CoverageKernel<<<Blocks(np), kThreads>>>(triangle, np, cov, d_aa);
-      shared::ScreenVertex* screen = ws.screen.Get(nv);
-      int8_t* facing = ws.facing.Get(std::max<size_t>(nt, 1));
-      ProjectKernel<<<Blocks(nv), kThreads>>>(d_clip, nv, width, height, screen);
-      if (nt) FacingKernel<<<Blocks(nt), kThreads>>>(d_clip, d_tris, nt, facing);
-      const shared::AntialiasScene sc{width, height, triangle, depth, d_tris, d_neighbour, screen, facing};
-      const size_t slots = 2 * np;
-      int32_t* found = ws.pair_offset.Get(slots);
-      shared::PairGeometry* geometry = ws.geometry.Get(slots);
-      PairKernel<<<Blocks(np), kThreads>>>(sc, cov, 1, /*skip_equal_colors=*/true, found, ws.pairs.Get(slots), geometry);
-      BlendKernel<<<Blocks(slots), kThreads>>>(found, geometry, slots, cov, d_aa);
-      MaskLossKernel<<<Blocks(np), kThreads>>>(d_aa, view.mask, np, view.host.mask_grad_scale, gaa, &d_losses[2 * vi + 1]);
-      AntialiasBackwardKernel<<<Blocks(slots), kThreads>>>(found, geometry, slots, cov, gaa, width, d_grad_clip);
-    }
-    ToClipBackwardKernel<<<Blocks(nv), kThreads>>>(d_grad_clip, nv, view.M, d_out_positions);
-    AddAsFloatKernel<<<Blocks(3 * nv), kThreads>>>(d_grad_normals, 3 * nv, d_out_normals);
+void Fill32(void* ptr, uint32_t pattern, size_t count) {
+  if (count == 0) return;
+  Fill32Kernel<<<Blocks(count), kThreads>>>(static_cast<uint32_t*>(ptr), pattern, count);
+  SD_CUDA(cudaGetLastError());
+}
+
+void Fill64(void* ptr, uint64_t pattern, size_t count) {
+  if (count == 0) return;
+  Fill64Kernel<<<Blocks(count), kThreads>>>(static_cast<unsigned long long*>(ptr), pattern, count);
+  SD_CUDA(cudaGetLastError());
+}
+
+int TakeContractViolation() {
+  int32_t* flag = ContractFlag();
+  int32_t host = 0;
+  SD_CUDA(cudaMemcpyAsync(&host, flag, sizeof(int32_t), cudaMemcpyDeviceToHost, cudaStreamPerThread));
+  SD_CUDA(cudaStreamSynchronize(cudaStreamPerThread));
+  if (host != 0) SD_CUDA(cudaMemsetAsync(flag, 0, sizeof(int32_t), cudaStreamPerThread));
+  return host;
+}
+
+void TransformToClip(const float* positions, size_t num_vertices, const float M[16], float* clip) {
+  if (num_vertices == 0) return;
+  ToClipKernel<<<Blocks(num_vertices), kThreads>>>(positions, num_vertices, ToMatrix4(M), clip);
+  SD_CUDA(cudaGetLastError());
+}
+
+void TransformToClipBackward(const float M[16], const float* grad_clip, size_t num_vertices, float* grad_positions) {
+  if (num_vertices == 0) return;
+  ToClipBackwardKernel<<<Blocks(num_vertices), kThreads>>>(grad_clip, num_vertices, ToMatrix4(M), grad_positions);
+  SD_CUDA(cudaGetLastError());
+}
+
+void DeviceRasterize(const RasterizeInputs& in, RasterOut out) {
+  if (static_cast<size_t>(in.width) * in.height == 0) return;
+  RasterizeOnDevice(in.clip, in.tris, in.num_tris, in.width, in.height, out.bary, out.depth, out.triangle,
+                    {ContractFlag(), in.num_vertices, in.num_tris});
+}
+
+void DeviceRasterizeBackward(const RasterizeInputs& in, const RasterView& rast, const float* grad_bary,
+                             const float* grad_depth, float* grad_clip) {
+  const size_t np = static_cast<size_t>(rast.width) * rast.height;
+  if (np == 0) return;
+  double* sum = ZeroedSum(4 * in.num_vertices);
+  RasterizeBackwardKernel<<<Blocks(np), kThreads>>>(in.clip, in.tris, rast.width, rast.height, AsDevice(rast),
+                                                    grad_bary, grad_depth, sum,
+                                                    {ContractFlag(), in.num_vertices, in.num_tris});
+  SD_CUDA(cudaGetLastError());
+  AddSumAsFloat(sum, 4 * in.num_vertices, grad_clip);
+}
+
+void DeviceInterpolate(const InterpolateInputs& in, float* out) {
+  const size_t np = static_cast<size_t>(in.rast.width) * in.rast.height;
+  if (np == 0) return;
+  InterpolateKernel<<<Blocks(np), kThreads>>>(in.attr, in.channels, in.tris, np, AsDevice(in.rast), out,
+                                              {ContractFlag(), in.num_attr_vertices, in.num_tris});
+  SD_CUDA(cudaGetLastError());
+}
+
+void DeviceInterpolateBackward(const InterpolateInputs& in, const float* grad_out, float* grad_attr, float* grad_bary) {
+  const size_t np = static_cast<size_t>(in.rast.width) * in.rast.height;
+  if (np == 0) return;
+  const size_t n = static_cast<size_t>(in.channels) * in.num_attr_vertices;
+  double* sum = ZeroedSum(n);
+  InterpolateBackwardKernel<<<Blocks(np), kThreads>>>(in.attr, in.channels, in.tris, np, AsDevice(in.rast), grad_out,
+                                                      sum, grad_bary,
+                                                      {ContractFlag(), in.num_attr_vertices, in.num_tris});
+  SD_CUDA(cudaGetLastError());
+  AddSumAsFloat(sum, n, grad_attr);
+}
+
+void DeviceAntialias(const AntialiasInputs& in, bool skip_equal_colors, float* out, int32_t* found,
+                     shared::PairGeometry* geometry) {
+  const size_t np = static_cast<size_t>(in.rast.width) * in.rast.height, C = static_cast<size_t>(in.channels);
+  if (np == 0) return;
+  SD_CUDA(cudaMemcpyAsync(out, in.color, C * np * sizeof(float), cudaMemcpyDeviceToDevice, cudaStreamPerThread));
+  const Contract contract{ContractFlag(), in.num_vertices, in.num_tris};
+  const shared::AntialiasScene sc = DeviceResidentScene(in, contract);
+  PairKernel<<<Blocks(np), kThreads>>>(sc, in.color, in.channels, skip_equal_colors, found, nullptr, geometry, contract);
+  BlendKernel<<<Blocks(2 * np), kThreads>>>(found, geometry, 2 * np, in.color, in.channels, out);
+  SD_CUDA(cudaGetLastError());
+}
+
+void DeviceAntialiasBackward(const AntialiasInputs& in, const int32_t* found, const shared::PairGeometry* geometry,
+                             const float* grad_out, float* grad_color, float* grad_clip) {
+  const size_t np = static_cast<size_t>(in.rast.width) * in.rast.height, C = static_cast<size_t>(in.channels);
+  if (np == 0) return;
+  if (grad_color) {  // out = color + the blends
+    AddKernel<<<Blocks(C * np), kThreads>>>(grad_out, C * np, grad_color);
     SD_CUDA(cudaGetLastError());
   }
-  Download(losses, d_losses, 2 * num_views);
-  for (size_t vi = 0; vi < num_views; ++vi) {
-    losses[2 * vi] *= targets.views[vi].host.normal_loss_scale;
-    losses[2 * vi + 1] *= targets.views[vi].host.mask_loss_scale;
-  }
-  Download(grad_positions, d_out_positions, 3 * nv);
-  Download(grad_normals, d_out_normals, 3 * nv);
+  double* sum = ZeroedSum(4 * in.num_vertices);
+  AntialiasBackwardKernel<<<Blocks(2 * np), kThreads>>>(found, geometry, 2 * np, in.color, in.channels, grad_out,
+                                                        in.rast.width, grad_color, sum);
+  SD_CUDA(cudaGetLastError());
+  AddSumAsFloat(sum, 4 * in.num_vertices, grad_clip);
+}
+
+void Coverage(const int32_t* triangle, size_t num_pixels, float* coverage) {
+  if (num_pixels == 0) return;
+  CoverageKernel<<<Blocks(num_pixels), kThreads>>>(triangle, num_pixels, coverage);
+  SD_CUDA(cudaGetLastError());
+}
+
+void UnitVectorLoss(const float* prediction, const int32_t* triangle, const float* target, const float* mask,
+                    size_t num_pixels, float grad_scale, float* grad_prediction, double* loss_sum) {
+  if (num_pixels == 0) return;
+  UnitVectorLossKernel<<<Blocks(num_pixels), kThreads>>>(prediction, triangle, target, mask, num_pixels, grad_scale,
+                                                         grad_prediction, loss_sum);
+  SD_CUDA(cudaGetLastError());
+}
+
+void SquaredErrorLoss(const float* prediction, const float* target, size_t num_pixels, float grad_scale,
+                      float* grad_prediction, double* loss_sum) {
+  if (num_pixels == 0) return;
+  SquaredErrorLossKernel<<<Blocks(num_pixels), kThreads>>>(prediction, target, num_pixels, grad_scale,
+                                                           grad_prediction, loss_sum);
+  SD_CUDA(cudaGetLastError());
 }
 
 }  // namespace sd::raster::cuda

@@ -11,12 +11,14 @@
 //    winner's barycentrics.
 //  - Gradient scatters to vertices use double atomics (the CPU sums in pixel order): the float results agree
 //    with the CPU's to the last bit almost everywhere, not bit for bit everywhere (raster_cuda_test.cpp).
-//  - Antialias: the pair search (the expensive, per-pixel part) runs on the GPU; the blend of the pairs it
-//    found, and the backward pass's per-pair arithmetic, run on the host in pair order from the geometry the
-//    GPU returns, so they are the CPU's own loops.
-// Every op uploads what it reads: a RasterBuffer is a plain host value that callers may copy and change (the
-// finite-difference tests do), so a device copy kept between calls could silently go stale. Device memory is
-// kept per host thread and only grows.
+//  - Antialias on host buffers: the pair search (the expensive, per-pixel part) runs on the GPU; the blend of
+//    the pairs it found, and the backward pass's per-pair arithmetic, run on the host in pair order from the
+//    geometry the GPU returns, so they are the CPU's own loops. On device buffers the blend and the backward
+//    run on the GPU too, with float atomics per pixel (the order of a pixel's few blends may differ).
+// The functions that take host pointers upload what they read and download what they write (the ops given
+// host buffers while the device is CUDA); the Device* functions below take device pointers and chain without
+// a transfer (the ops given device buffers, raster/buffer.h). Scratch memory is kept per host thread and only
+// grows.
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -95,31 +97,42 @@ bool RecordedPairGeometry(const AntialiasInputs& in, const PairRecord* pairs, si
 
 namespace sd::raster::cuda {
 
-// The refinement loss of a set of views evaluated on the device in one pass per view (normal_mask_loss.h):
-// the targets are uploaded once, each evaluation uploads positions and vertex normals and downloads the
-// gradients, and everything between stays on the device.
-struct LossViewHost {
-  float clip_from_world[16];  // row-major
-  int width = 0, height = 0;
-  const float* normals = nullptr;  // 3 per pixel
-  const float* mask = nullptr;     // 1 per pixel
-  float normal_grad_scale = 0, normal_loss_scale = 0, mask_grad_scale = 0, mask_loss_scale = 0;
-};
-class LossTargets;
-LossTargets* UploadLossTargets(const LossViewHost* views, size_t num_views);
-void FreeLossTargets(LossTargets* targets);
-struct NormalMaskInputs {  // normal_mask_loss.h's
-  const float* positions = nullptr;  // 3 per vertex
-  const float* normals = nullptr;    // 3 per vertex
-  size_t num_vertices = 0;
-  const int32_t* tris = nullptr;
-  size_t num_tris = 0;
-  const int32_t* neighbour = nullptr;  // 3 per triangle
-};
-// losses: 2 per view (normal, mask); grad_positions / grad_normals: 3 per vertex, the views' shares summed in
-// view order, overwritten. The whole evaluation is queued on the calling thread's stream before the one wait
-// for its results.
-void EvaluateLoss(LossTargets& targets, const NormalMaskInputs& in, double* losses, float* grad_positions,
-                  float* grad_normals);
+// ---- device memory (raster/buffer.h's backend) ----------------------------------------------------------------
+void* Allocate(size_t bytes);
+void Free(void* ptr);
+// Between any two sides on the calling thread's stream; a copy to the host waits for it.
+void Copy(void* dst, bool dst_on_device, const void* src, bool src_on_device, size_t bytes);
+void Fill32(void* ptr, uint32_t pattern, size_t count);
+void Fill64(void* ptr, uint64_t pattern, size_t count);
+// The calling thread's contract flag (0: none; else a ContractViolation), read and cleared; waits.
+int TakeContractViolation();
+enum ContractViolation { kVertexIndex = 1, kRasterTriangle = 2 };
+
+// ---- the ops on device-resident buffers ------------------------------------------------------------------------
+// Every pointer below is device memory (the inputs structs above then hold device pointers); the work is
+// queued on the calling thread's stream and nothing waits. Sizes were checked on the host; the kernels check
+// each index as they read it (a vertex of `tris` within the vertices, a raster's triangle id within `tris`),
+// raise the thread's flag on one out of range and do not use it, and do nothing once the flag is up.
+// Gradients are ACCUMULATED into float outputs (the scatters sum in double first), as the host ops do.
+void TransformToClip(const float* positions, size_t num_vertices, const float M[16], float* clip);
+void TransformToClipBackward(const float M[16], const float* grad_clip, size_t num_vertices, float* grad_positions);
+void DeviceRasterize(const RasterizeInputs& in, RasterOut out);
+void DeviceRasterizeBackward(const RasterizeInputs& in, const RasterView& rast, const float* grad_bary,
+                             const float* grad_depth /* nullable */, float* grad_clip);
+void DeviceInterpolate(const InterpolateInputs& in, float* out);
+void DeviceInterpolateBackward(const InterpolateInputs& in, const float* grad_out, float* grad_attr,
+                               float* grad_bary /* nullable */);
+// The pairs stay uncompacted, one slot per pixel and direction (2 per pixel: right, lower neighbour), so that
+// no count is read back: found[slot] says whether the slot holds a silhouette pair, geometry[slot] its geometry.
+void DeviceAntialias(const AntialiasInputs& in, bool skip_equal_colors, float* out, int32_t* found,
+                     shared::PairGeometry* geometry);
+void DeviceAntialiasBackward(const AntialiasInputs& in, const int32_t* found, const shared::PairGeometry* geometry,
+                             const float* grad_out, float* grad_color, float* grad_clip);
+// The loss ops of raster/loss.h; loss_sum (1 double) is accumulated.
+void Coverage(const int32_t* triangle, size_t num_pixels, float* coverage);
+void UnitVectorLoss(const float* prediction, const int32_t* triangle, const float* target, const float* mask,
+                    size_t num_pixels, float grad_scale, float* grad_prediction, double* loss_sum);
+void SquaredErrorLoss(const float* prediction, const float* target, size_t num_pixels, float grad_scale,
+                      float* grad_prediction, double* loss_sum);
 
 }  // namespace sd::raster::cuda

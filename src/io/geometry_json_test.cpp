@@ -10,21 +10,14 @@
 #include <string>
 
 #include "core/error.h"
+#include "testing/input_error.h"
 
 namespace sd {
 namespace {
 
 using nlohmann::json;
 
-template <typename Fn>
-std::string InputErrorOf(Fn fn) {
-  try {
-    fn();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "";
-}
+using testing::InputErrorOf;
 
 // Bit equality: == would let -0.0 stand for 0.0.
 bool SameBits(const Eigen::Vector4d& a, const Eigen::Vector4d& b) { return std::memcmp(a.data(), b.data(), sizeof(double) * 4) == 0; }

@@ -6,6 +6,7 @@
 #include <string>
 
 #include "core/error.h"
+#include "testing/input_error.h"
 
 namespace sd {
 namespace {
@@ -13,15 +14,7 @@ namespace {
 using nlohmann::json;
 
 // The InputError message of `fn`, or "" when it did not throw one.
-template <typename Fn>
-std::string InputErrorOf(Fn fn) {
-  try {
-    fn();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "";
-}
+using testing::InputErrorOf;
 
 TEST(Json, AByteOrderMarkIsNamedNotMisread) {
   const std::string message = InputErrorOf([] { ParseJsonText("\xEF\xBB\xBF{\"data_list\": []}", "info.json"); });

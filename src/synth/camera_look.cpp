@@ -9,6 +9,7 @@
 #include "core/error.h"
 #include "core/log.h"
 #include "io/image_io.h"
+#include "render/camera_render.h"
 
 namespace sd {
 namespace {
@@ -264,12 +265,14 @@ double ExtraBlurSigma(double from_px, double to_px) {
   return std::sqrt(s_to * s_to - s_from * s_from);
 }
 
+int GaussianBlurReach(double sigma) { return sigma < 0.05 ? 0 : std::max(1, static_cast<int>(std::ceil(3 * sigma))); }
+
 void GaussianBlurRegion(ImageF* image, double sigma, int x0, int y0, int x1, int y1) {
-  if (sigma < 0.05) return;
+  const int r = GaussianBlurReach(sigma);
+  if (r == 0) return;
   const int w = image->width(), h = image->height(), ch = image->channels();
   x0 = std::max(0, x0), y0 = std::max(0, y0), x1 = std::min(w, x1), y1 = std::min(h, y1);
   if (x1 <= x0 || y1 <= y0) return;
-  const int r = std::max(1, static_cast<int>(std::ceil(3 * sigma)));
   std::vector<double> k(static_cast<size_t>(2 * r + 1));
   double sum = 0;
   for (int i = -r; i <= r; ++i) sum += k[static_cast<size_t>(i + r)] = std::exp(-0.5 * i * i / (sigma * sigma));
@@ -311,10 +314,24 @@ void GaussianBlurRegion(ImageF* image, double sigma, int x0, int y0, int x1, int
 }
 
 void ApplySensorToInserts(ImageU8* image, const ImageF& alpha, const ImageF* shadow_noise, int x0, int y0, int x1, int y1,
-                          const CameraLook& look, const CameraLookOptions& options, uint64_t seed) {
+                          const std::vector<std::array<int, 4>>& parts, const CameraLook& look,
+                          const CameraLookOptions& options, uint64_t seed) {
   const int w = image->width(), h = image->height();
   x0 = std::max(0, x0), y0 = std::max(0, y0), x1 = std::min(w, x1), y1 = std::min(h, y1);
   if (x1 <= x0 || y1 <= y0) return;
+  std::vector<std::array<int, 4>> rects;
+  for (const auto& p : parts)
+    if (std::max(x0, p[0]) < std::min(x1, p[2]) && std::max(y0, p[1]) < std::min(y1, p[3]))
+      rects.push_back({std::max(x0, p[0]), std::max(y0, p[1]), std::min(x1, p[2]), std::min(y1, p[3])});
+  if (parts.empty()) rects.push_back({x0, y0, x1, y1});
+  const auto [ry0, ry1] = RowRange(rects, h);
+  // The pixels of the parts in scan order, as a scan of the whole rectangle meets them: the noise streams see
+  // the same pixels in the same order.
+  const auto for_each_pixel = [&](const auto& f) {
+    for (int y = ry0; y < ry1; ++y)
+      for (const auto& [sx0, sx1] : RowSpans(rects, y, w))
+        for (int x = sx0; x < sx1; ++x) f(x, y);
+  };
   const ImageU8 before = *image;
   const bool jpeg = options.jpeg && look.jpeg_quality > 0;
   if (options.noise && look.noise.blocks > 0) {
@@ -323,48 +340,83 @@ void ApplySensorToInserts(ImageU8* image, const ImageF& alpha, const ImageF* sha
     const double gain = jpeg ? PreCompressionGain(look.jpeg_quality, look.noise.Sigma(1, 128)) : 1.0;
     std::mt19937_64 rng(seed);
     std::normal_distribution<double> unit(0.0, 1.0);
-    for (int y = y0; y < y1; ++y)
-      for (int x = x0; x < x1; ++x) {
-        const float a = alpha.at(x, y);
-        if (a <= 0) continue;
-        for (int c = 0; c < std::min(3, image->channels()); ++c) {
-          const double v = image->at(x, y, c);
-          const double n = unit(rng) * look.noise.Sigma(c, v) * gain;
-          image->at(x, y, c) = static_cast<uint8_t>(std::clamp(std::lround(v + a * n), 0L, 255L));
-        }
+    for_each_pixel([&](int x, int y) {
+      const float a = alpha.at(x, y);
+      if (a <= 0) return;
+      for (int c = 0; c < std::min(3, image->channels()); ++c) {
+        const double v = image->at(x, y, c);
+        const double n = unit(rng) * look.noise.Sigma(c, v) * gain;
+        image->at(x, y, c) = static_cast<uint8_t>(std::clamp(std::lround(v + a * n), 0L, 255L));
       }
+    });
   }
   if (jpeg) {
     // On the image's own 8x8 grid (16 x 16 with chroma subsampling), so the blocks fall where the camera's did.
     const int bx0 = (x0 / 16) * 16, by0 = (y0 / 16) * 16;
     const int bx1 = std::min(w, ((x1 + 15) / 16) * 16), by1 = std::min(h, ((y1 + 15) / 16) * 16);
-    ImageU8 crop(bx1 - bx0, by1 - by0, 3);
-    for (int y = by0; y < by1; ++y)
-      for (int x = bx0; x < bx1; ++x)
-        for (int c = 0; c < 3; ++c) crop.at(x - bx0, y - by0, c) = image->at(x, y, c);
-    const ImageU8 round_trip = DecodeImage(EncodeImage(crop, "jpg", look.jpeg_quality), "inserted pixels", 3);
-    for (int y = y0; y < y1; ++y)
-      for (int x = x0; x < x1; ++x) {
-        const float a = alpha.at(x, y);
-        if (a <= 0) continue;
-        for (int c = 0; c < 3; ++c) {
-          const double v = a * round_trip.at(x - bx0, y - by0, c) + (1 - a) * before.at(x, y, c);
-          image->at(x, y, c) = static_cast<uint8_t>(std::clamp(std::lround(v), 0L, 255L));
-        }
+    // One round trip per band of block rows and run of blocks along it that holds pixels of the parts, with one
+    // block of context all round (within the grid above): blocks are coded independently, and all a block's
+    // decoded pixels read of its neighbours is their chroma (the decoder's upsampling), so each inserted pixel
+    // comes back as one round trip of the whole grid gives it. Every crop is taken before any pixel is blended
+    // back: one's context may be another's pixels.
+    constexpr int kBand = 128;  // rows; the context above and below costs a quarter of it
+    struct RoundTrip {
+      std::array<int, 4> own, crop;  // the pixels it blends back; the crop it is coded from
+      ImageU8 image;
+    };
+    std::vector<RoundTrip> trips;
+    long long coded = 0;
+    for (int band = by0; band < by1; band += kBand) {
+      const int band_end = std::min(by1, band + kBand);
+      std::vector<std::pair<int, int>> runs;
+      for (const auto& r : rects)
+        if (r[1] < band_end && r[3] > band)
+          runs.emplace_back(std::max(bx0, (r[0] / 16 - 1) * 16), std::min(bx1, ((r[2] + 15) / 16 + 1) * 16));
+      std::sort(runs.begin(), runs.end());
+      std::vector<std::pair<int, int>> merged;
+      for (const auto& run : runs) {
+        if (merged.empty() || run.first > merged.back().second) merged.push_back(run);
+        else merged.back().second = std::max(merged.back().second, run.second);
       }
+      for (const auto& [rx0, rx1] : merged) {
+        const int cy0 = std::max(by0, band - 16), cy1 = std::min(by1, band_end + 16);
+        trips.push_back({{rx0, band, rx1, band_end}, {rx0, cy0, rx1, cy1}, {}});
+        coded += static_cast<long long>(rx1 - rx0) * (cy1 - cy0);
+      }
+    }
+    // Parts that fill most of the grid cost more with their context than the grid in one.
+    if (coded >= static_cast<long long>(bx1 - bx0) * (by1 - by0)) trips = {{{bx0, by0, bx1, by1}, {bx0, by0, bx1, by1}, {}}};
+    for (RoundTrip& t : trips) {
+      ImageU8 crop(t.crop[2] - t.crop[0], t.crop[3] - t.crop[1], 3);
+      for (int y = t.crop[1]; y < t.crop[3]; ++y)
+        for (int x = t.crop[0]; x < t.crop[2]; ++x)
+          for (int c = 0; c < 3; ++c) crop.at(x - t.crop[0], y - t.crop[1], c) = image->at(x, y, c);
+      t.image = DecodeImage(EncodeImage(crop, "jpg", look.jpeg_quality), "inserted pixels", 3);
+    }
+    for (const RoundTrip& t : trips)
+      for (int y = t.own[1]; y < t.own[3]; ++y)
+        for (const auto& [sx0, sx1] : RowSpans(rects, y, w))
+          for (int x = std::max(sx0, t.own[0]); x < std::min(sx1, t.own[2]); ++x) {
+            const float a = alpha.at(x, y);
+            if (a <= 0) continue;
+            for (int c = 0; c < 3; ++c) {
+              const double v = a * t.image.at(x - t.crop[0], y - t.crop[1], c) + (1 - a) * before.at(x, y, c);
+              image->at(x, y, c) = static_cast<uint8_t>(std::clamp(std::lround(v), 0L, 255L));
+            }
+          }
   }
   if (options.noise && shadow_noise && look.noise.blocks > 0) {
     std::mt19937_64 rng(seed ^ 0x5DEECE66Dull);
     std::normal_distribution<double> unit(0.0, 1.0);
-    for (int y = y0; y < y1; ++y)
-      for (int x = x0; x < x1; ++x) {
-        const float w = shadow_noise->at(x, y);
-        if (w <= 0) continue;
-        for (int c = 0; c < std::min(3, image->channels()); ++c) {
-          const double v = image->at(x, y, c);
-          image->at(x, y, c) = static_cast<uint8_t>(std::clamp(std::lround(v + w * unit(rng) * look.noise.Sigma(c, v)), 0L, 255L));
-        }
+    for_each_pixel([&](int x, int y) {
+      const float s = shadow_noise->at(x, y);
+      if (s <= 0) return;
+      for (int c = 0; c < std::min(3, image->channels()); ++c) {
+        const double v = image->at(x, y, c);
+        const double n = s * unit(rng) * look.noise.Sigma(c, v);
+        image->at(x, y, c) = static_cast<uint8_t>(std::clamp(std::lround(v + n), 0L, 255L));
       }
+    });
   }
 }
 

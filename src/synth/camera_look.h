@@ -88,6 +88,9 @@ double ExtraBlurSigma(double from_px, double to_px);
 // Blurs `image` (any channel count) inside [x0, x1) x [y0, y1) by a separable Gaussian of `sigma`, reading
 // clamped pixels outside it.
 void GaussianBlurRegion(ImageF* image, double sigma, int x0, int y0, int x1, int y1);
+// How far (pixels, each axis) GaussianBlurRegion of `sigma` reads and spreads a pixel: its kernel's half-width,
+// ceil(3 sigma) and at least 1; 0 for a sigma it leaves the image alone at (< 0.05).
+int GaussianBlurReach(double sigma);
 
 // An object's saturation (synth/realism.h and the cap below): the 90th percentile of the HSV saturation of the
 // sRGB-encoded pixels inside its projected box outline: its most colourful surfaces, whatever share of the box
@@ -136,7 +139,13 @@ SaturationCap CapSaturation(ImageF* linear, const std::vector<OutlinePixel>& pix
 // rectangle [x0, x1) x [y0, y1) bounds it. `shadow_noise` (optional, same size): real pixels an inserted shadow
 // darkened lost that share of their noise (sqrt(1 - shade^2)); it is given back, after the compression (their
 // own is in the image already). `seed`: the noise stream (FrameSeeds::sensor).
+// `parts` ({x0, y0, x1, y1}, within the rectangle; empty: the rectangle itself) must hold every pixel with alpha or
+// shadow noise. Only they are visited, and the result is the whole rectangle's, byte for byte: the noise streams
+// meet the pixels in scan order either way, and the JPEG codes only the blocks around the parts (unless that is
+// most of the grid), with one 16-pixel block of context all round: blocks are coded independently, and all a
+// block's decoded pixels read of their neighbours is chroma (the decoder's upsampling).
 void ApplySensorToInserts(ImageU8* image, const ImageF& alpha, const ImageF* shadow_noise, int x0, int y0, int x1, int y1,
-                          const CameraLook& look, const CameraLookOptions& options, uint64_t seed);
+                          const std::vector<std::array<int, 4>>& parts, const CameraLook& look,
+                          const CameraLookOptions& options, uint64_t seed);
 
 }  // namespace sd

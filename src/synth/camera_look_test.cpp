@@ -134,7 +134,7 @@ TEST(CameraLook, InsertedPixelsGetTheImagesNoiseThroughItsCompression) {
       alpha.at(x, y) = 1;
     }
   ImageU8 out = composite;
-  ApplySensorToInserts(&out, alpha, nullptr, 96, 64, 224, 160, look, CameraLookOptions{}, 3);
+  ApplySensorToInserts(&out, alpha, nullptr, 96, 64, 224, 160, {}, look, CameraLookOptions{}, 3);
   for (int y = 0; y < 240; ++y)
     for (int x = 0; x < 320; ++x)
       if (alpha.at(x, y) == 0) {
@@ -155,8 +155,59 @@ TEST(CameraLook, InsertedPixelsGetTheImagesNoiseThroughItsCompression) {
   EXPECT_LT(inserted / real, 1.4) << inserted << " vs " << real;
   // Off: nothing changes.
   ImageU8 untouched = composite;
-  ApplySensorToInserts(&untouched, alpha, nullptr, 96, 64, 224, 160, look, CameraLookOptions{false, false, false, false}, 3);
+  ApplySensorToInserts(&untouched, alpha, nullptr, 96, 64, 224, 160, {}, look, CameraLookOptions{false, false, false, false},
+                       3);
   EXPECT_EQ(untouched.vector(), composite.vector());
+}
+
+TEST(CameraLook, SensorStepsOnPartsGiveTheWholeRectanglesBytes) {
+  const ImageU8 raw = NoisyRamp(320, 240, 2.0, 0.03, 5);
+  const std::string jpeg = EncodeImage(raw, "jpg", 80);  // chroma subsampled: blocks read their neighbours' chroma
+  const ImageU8 photo = DecodeImage(jpeg, "photo", 3);
+  const CameraLook look = EstimateCameraLook(photo, EstimateJpegQuality(jpeg));
+  ASSERT_GT(look.jpeg_quality, 0);
+  // Two coloured inserts with soft edges, far apart, and a shadow beside the second; the parts are their
+  // rectangles, off the 16-pixel grid.
+  ImageU8 composite = photo;
+  ImageF alpha(320, 240, 1, 0.0f), shadow_noise(320, 240, 1, 0.0f);
+  const std::vector<std::array<int, 4>> parts = {{37, 29, 93, 71}, {197, 147, 263, 229}};
+  const auto paint = [&](const std::array<int, 4>& r, uint8_t red) {
+    for (int y = r[1] + 2; y < r[3] - 2; ++y)
+      for (int x = r[0] + 2; x < r[2] - 2; ++x) {
+        const bool edge = x == r[0] + 2 || y == r[1] + 2 || x == r[2] - 3 || y == r[3] - 3;
+        // Colour changing along both axes, so that the chroma a block reads of its neighbours differs.
+        composite.at(x, y, 0) = red;
+        composite.at(x, y, 1) = static_cast<uint8_t>(x);
+        composite.at(x, y, 2) = static_cast<uint8_t>(5 * y);
+        alpha.at(x, y) = edge ? 0.5f : 1.0f;
+      }
+  };
+  paint(parts[0], 230);
+  paint(parts[1], 20);
+  for (int y = 210; y < 226; ++y)
+    for (int x = 200; x < 260; ++x) shadow_noise.at(x, y) = 0.6f;
+  ImageU8 whole = composite, on_parts = composite;
+  ApplySensorToInserts(&whole, alpha, &shadow_noise, 37, 29, 263, 229, {}, look, CameraLookOptions{}, 9);
+  ApplySensorToInserts(&on_parts, alpha, &shadow_noise, 37, 29, 263, 229, parts, look, CameraLookOptions{}, 9);
+  EXPECT_EQ(on_parts.vector(), whole.vector());
+  EXPECT_FALSE(whole.vector() == composite.vector());
+  // The compression alone against its definition: one round trip of the rectangle's 16-pixel grid (x 32..272,
+  // y 16..240), blended by alpha.
+  const CameraLookOptions jpeg_only{false, false, true, false};
+  ImageU8 expected = composite;
+  ImageU8 crop(272 - 32, 240 - 16, 3);
+  for (int y = 16; y < 240; ++y)
+    for (int x = 32; x < 272; ++x)
+      for (int c = 0; c < 3; ++c) crop.at(x - 32, y - 16, c) = composite.at(x, y, c);
+  const ImageU8 round_trip = DecodeImage(EncodeImage(crop, "jpg", look.jpeg_quality), "crop", 3);
+  for (int y = 0; y < 240; ++y)
+    for (int x = 0; x < 320; ++x)
+      if (const float a = alpha.at(x, y); a > 0)
+        for (int c = 0; c < 3; ++c)
+          expected.at(x, y, c) = Clamp8(a * round_trip.at(x - 32, y - 16, c) + (1 - a) * composite.at(x, y, c));
+  on_parts = composite;
+  ApplySensorToInserts(&on_parts, alpha, nullptr, 37, 29, 263, 229, parts, look, jpeg_only, 9);
+  EXPECT_EQ(on_parts.vector(), expected.vector());
 }
 
 TEST(CameraLook, TheRepoKeyframeIsAQuality80JpegWithSoftEdges) {

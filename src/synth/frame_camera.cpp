@@ -45,6 +45,40 @@ struct PixelRects {
   std::vector<std::array<int, 4>> boxes, with_shadows;
 };
 
+// Side of the square tiles, on the image's grid, that the stages after the render visit (pixels): small enough to
+// follow the objects' outlines, large enough that a blur's reach around a row of tiles adds little.
+constexpr int kTile = 32;
+
+// Runs of kTile tiles along each row of tiles, clipped to `bounds`: disjoint rectangles {x0, y0, x1, y1} holding
+// every pixel of `bounds` within `reach` (on each axis) of a pixel of `bounds` where `inside(x, y)`. A stage whose
+// input is constant away from those pixels, and which reads no further than `reach`, needs to visit these alone:
+// the objects' own pixels, not the rectangle of all of them.
+template <typename Inside>
+std::vector<std::array<int, 4>> TileRunsAround(const Rect& bounds, int reach, const Inside& inside) {
+  std::vector<std::array<int, 4>> runs;
+  if (bounds.x0 >= bounds.x1 || bounds.y0 >= bounds.y1) return runs;
+  const int tx0 = bounds.x0 / kTile, ty0 = bounds.y0 / kTile;
+  const int tw = (bounds.x1 - 1) / kTile - tx0 + 1, th = (bounds.y1 - 1) / kTile - ty0 + 1;
+  std::vector<char> marked(static_cast<size_t>(tw) * th, 0);
+  for (int y = bounds.y0; y < bounds.y1; ++y)
+    for (int x = bounds.x0; x < bounds.x1; ++x) {
+      if (!inside(x, y)) continue;
+      const int ax = std::max(bounds.x0, x - reach) / kTile - tx0, bx = std::min(tw - 1, (x + reach) / kTile - tx0);
+      const int ay = std::max(bounds.y0, y - reach) / kTile - ty0, by = std::min(th - 1, (y + reach) / kTile - ty0);
+      for (int ty = ay; ty <= by; ++ty)
+        for (int tx = ax; tx <= bx; ++tx) marked[static_cast<size_t>(ty) * tw + tx] = 1;
+    }
+  for (int ty = 0; ty < th; ++ty)
+    for (int tx = 0; tx < tw; ++tx) {
+      if (!marked[static_cast<size_t>(ty) * tw + tx]) continue;
+      const int start = tx;
+      while (tx + 1 < tw && marked[static_cast<size_t>(ty) * tw + tx + 1]) ++tx;
+      runs.push_back({std::max(bounds.x0, (tx0 + start) * kTile), std::max(bounds.y0, (ty0 + ty) * kTile),
+                      std::min(bounds.x1, (tx0 + tx + 1) * kTile), std::min(bounds.y1, (ty0 + ty + 1) * kTile)});
+    }
+  return runs;
+}
+
 // The light at the objects in one camera. With the environment map, each object under its own sun verdict,
 // its level from its road in this view, else from all objects' road; without, one calibration from the road.
 struct CameraLight {
@@ -121,19 +155,23 @@ ObjectRender RenderObjects(const CameraStageInput& st, const CameraSensor& cam, 
 }
 
 // The camera depth of the road under the shadows (the ground plane), so the real scene can hide it too: the
-// ground under a shadow must not be hidden by a real object, nor shown through one.
-ImageF ReceiverDepth(const CameraSensor& cam, const GroundPlane& plane, const ObjectRender& r, const Rect& rect) {
+// ground under a shadow must not be hidden by a real object, nor shown through one. Only the shadows' rectangles
+// are visited: elsewhere the shadow is 1 (RenderCamera, ReceiverShadowImage).
+ImageF ReceiverDepth(const CameraSensor& cam, const GroundPlane& plane, const ObjectRender& r,
+                     const std::vector<std::array<int, 4>>& with_shadows) {
   ImageF depth(r.render.depth.width(), r.render.depth.height(), 1, std::numeric_limits<float>::infinity());
-  for (int y = rect.y0; y < rect.y1; ++y)
-    for (int x = rect.x0; x < rect.x1; ++x) {
-      if (r.shadow.at(x, y) >= 0.999f) continue;
-      const Eigen::Vector3d d_cam = cam.intrinsics.RayDirection(Eigen::Vector2d(x + 0.5, y + 0.5));
-      const Eigen::Vector3d o = cam.T_ego_cam.translation, d = cam.T_ego_cam.rotation * d_cam;
-      const double denom = plane.normal.dot(d);
-      if (std::abs(denom) < 1e-6) continue;
-      const double t = -(plane.normal.dot(o) + plane.d) / denom;
-      if (t > 0) depth.at(x, y) = static_cast<float>(t * d_cam.z());
-    }
+  const auto [y0, y1] = RowRange(with_shadows, depth.height());
+  for (int y = y0; y < y1; ++y)
+    for (const auto& [x0, x1] : RowSpans(with_shadows, y, depth.width()))
+      for (int x = x0; x < x1; ++x) {
+        if (r.shadow.at(x, y) >= 0.999f) continue;
+        const Eigen::Vector3d d_cam = cam.intrinsics.RayDirection(Eigen::Vector2d(x + 0.5, y + 0.5));
+        const Eigen::Vector3d o = cam.T_ego_cam.translation, d = cam.T_ego_cam.rotation * d_cam;
+        const double denom = plane.normal.dot(d);
+        if (std::abs(denom) < 1e-6) continue;
+        const double t = -(plane.normal.dot(o) + plane.d) / denom;
+        if (t > 0) depth.at(x, y) = static_cast<float>(t * d_cam.z());
+      }
   return depth;
 }
 
@@ -157,10 +195,15 @@ OcclusionMasks OccludeByScene(const CameraStageInput& st, const CameraSensor& ca
   DepthPriors priors;
   priors.boxes_ego = in.real_boxes;
   priors.surface = &ground_plane;  // ego frame: T_world_ego stays identity
-  // Only where objects or their shadows are, plus the band the visibility mattes from (guide radius 2).
+  // Only where objects or their shadows are, plus the band the visibility mattes from (guide radius 2): the
+  // visibility reads the scene depth nowhere else.
   DenseDepthOptions dopt;
-  dopt.x0 = rect.x0 - kDepthMargin, dopt.y0 = rect.y0 - kDepthMargin;
-  dopt.x1 = rect.x1 + kDepthMargin, dopt.y1 = rect.y1 + kDepthMargin;
+  const Rect around{std::max(0, rect.x0 - kDepthMargin), std::max(0, rect.y0 - kDepthMargin),
+                    std::min(cam.intrinsics.width, rect.x1 + kDepthMargin),
+                    std::min(cam.intrinsics.height, rect.y1 + kDepthMargin)};
+  dopt.rects = TileRunsAround(around, kDepthMargin, [&](int x, int y) {
+    return std::isfinite(r.render.depth.at(x, y)) || std::isfinite(receiver_depth.at(x, y));
+  });
   const DepthMap scene_depth = DenseDepth(projected, original, cam.intrinsics, T_cam_ego, priors, dopt);
   m.objects = DenseVisibility(scene_depth, original, r.render.depth);
   m.receiver = DenseVisibility(scene_depth, original, receiver_depth);
@@ -178,30 +221,34 @@ struct Composite {
   ImageF shadow_noise;      // the share of a darkened real pixel's noise its shadow took: sqrt(1 - shade^2)
   std::vector<double> rendered, visible;
   std::vector<Box2> boxes;
+  // Disjoint rectangles {x0, y0, x1, y1} holding every pixel the composite changed (TileRunsAround the objects'
+  // and their shadows' pixels, by the blur's reach): the later stages visit these alone.
+  std::vector<std::array<int, 4>> regions;
 };
-Composite CompositeObjects(const ObjectRender& r, const OcclusionMasks& occ, size_t n_objects, const Rect& rect,
-                           double blur_sigma, ImageF* linear) {
-  Composite c;
-  c.object_alpha = ImageF(linear->width(), linear->height(), 1, 0.0f);
-  c.shadow_only_loss = ImageF(linear->width(), linear->height(), 3, 0.0f);
-  c.shadow_noise = ImageF(linear->width(), linear->height(), 1, 0.0f);
-  c.rendered.assign(n_objects, 0);
-  c.visible.assign(n_objects, 0);
-  c.boxes.assign(n_objects, Box2{1e9, 1e9, -1e9, -1e9});
-  ImageF layer(rect.x1 - rect.x0, rect.y1 - rect.y0, 4, 0.0f);  // premultiplied colour, alpha; rect coordinates
-  for (int y = rect.y0; y < rect.y1; ++y)
-    for (int x = rect.x0; x < rect.x1; ++x) {
+
+// At least kShadeBlurSigma takes the grain of the 8 sun rays and the sky rays out of a shade map wherever the look
+// blurs at all: a shade map is smooth but for its penumbra.
+double ShadeBlurSigma(double blur_sigma) { return blur_sigma > 0 ? std::max(blur_sigma, kShadeBlurSigma) : 0.0; }
+
+// CompositeObjects within one of its regions, `region`, blurred from the pixels of `context` around it.
+void CompositeRegion(const ObjectRender& r, const OcclusionMasks& occ, size_t n_objects, const Rect& region,
+                     const Rect& context, double blur_sigma, ImageF* linear, Composite* c) {
+  // Premultiplied colour and alpha, in `context`'s coordinates.
+  ImageF layer(context.x1 - context.x0, context.y1 - context.y0, 4, 0.0f);
+  for (int y = context.y0; y < context.y1; ++y)
+    for (int x = context.x0; x < context.x1; ++x) {
       const float a = r.render.coverage.at(x, y);
       if (a <= 0) continue;
       const float vis = occ.objects.at(x, y);
-      for (int ch = 0; ch < 3; ++ch) layer.at(x - rect.x0, y - rect.y0, ch) = r.render.color.at(x, y, ch) * vis;
-      layer.at(x - rect.x0, y - rect.y0, 3) = a * vis;
+      for (int ch = 0; ch < 3; ++ch) layer.at(x - context.x0, y - context.y0, ch) = r.render.color.at(x, y, ch) * vis;
+      layer.at(x - context.x0, y - context.y0, 3) = a * vis;
       const int id = r.render.object.at(x, y);
-      if (id >= 0 && id < static_cast<int>(n_objects) && a >= 0.5f) {
-        c.rendered[id] += 1;
+      const bool own = x >= region.x0 && x < region.x1 && y >= region.y0 && y < region.y1;  // counted once
+      if (own && id >= 0 && id < static_cast<int>(n_objects) && a >= 0.5f) {
+        c->rendered[id] += 1;
         if (vis > 0.5f) {
-          c.visible[id] += 1;
-          Box2& b = c.boxes[id];
+          c->visible[id] += 1;
+          Box2& b = c->boxes[id];
           b.x1 = std::min<double>(b.x1, x);
           b.y1 = std::min<double>(b.y1, y);
           b.x2 = std::max<double>(b.x2, x + 1);
@@ -211,30 +258,55 @@ Composite CompositeObjects(const ObjectRender& r, const OcclusionMasks& occ, siz
     }
   // The shade on the real road the camera sees, blurred alike: the camera's optics soften shadow edges too, and
   // the blur takes the sampling grain of the soft-shadow rays with it.
-  ImageF shade(rect.x1 - rect.x0, rect.y1 - rect.y0, 1, 1.0f);
-  for (int y = rect.y0; y < rect.y1; ++y)
-    for (int x = rect.x0; x < rect.x1; ++x)
-      if (occ.receiver.at(x, y) > 0.5f) shade.at(x - rect.x0, y - rect.y0) = r.shadow.at(x, y);
-  GaussianBlurRegion(&layer, blur_sigma, 0, 0, layer.width(), layer.height());
-  // A shade map is smooth but for its penumbra: at least kShadeBlurSigma takes the grain of the 8 sun rays and
-  // the sky rays out of it wherever the look blurs at all.
-  GaussianBlurRegion(&shade, blur_sigma > 0 ? std::max(blur_sigma, kShadeBlurSigma) : 0.0, 0, 0, shade.width(), shade.height());
-  for (int y = rect.y0; y < rect.y1; ++y)
-    for (int x = rect.x0; x < rect.x1; ++x) {
-      const float* l = layer.pixel(x - rect.x0, y - rect.y0);
+  ImageF shade(context.x1 - context.x0, context.y1 - context.y0, 1, 1.0f);
+  for (int y = context.y0; y < context.y1; ++y)
+    for (int x = context.x0; x < context.x1; ++x)
+      if (occ.receiver.at(x, y) > 0.5f) shade.at(x - context.x0, y - context.y0) = r.shadow.at(x, y);
+  const int bx0 = region.x0 - context.x0, by0 = region.y0 - context.y0;
+  const int bx1 = region.x1 - context.x0, by1 = region.y1 - context.y0;
+  GaussianBlurRegion(&layer, blur_sigma, bx0, by0, bx1, by1);
+  GaussianBlurRegion(&shade, ShadeBlurSigma(blur_sigma), bx0, by0, bx1, by1);
+  for (int y = region.y0; y < region.y1; ++y)
+    for (int x = region.x0; x < region.x1; ++x) {
+      const float* l = layer.pixel(x - context.x0, y - context.y0);
       const float av = l[3];
-      const float shade_here = std::min(1.0f, shade.at(x - rect.x0, y - rect.y0));
+      const float shade_here = std::min(1.0f, shade.at(x - context.x0, y - context.y0));
       // A camera whose objects are all hidden still counts as drawn (changed): its image is written, unchanged.
       if (av <= 0 && r.render.coverage.at(x, y) <= 0 && shade_here >= 1.0f) continue;
-      c.object_alpha.at(x, y) = av;
+      c->object_alpha.at(x, y) = av;
       float* px = linear->pixel(x, y);
       for (int ch = 0; ch < 3; ++ch) {
-        c.shadow_only_loss.at(x, y, ch) = px[ch] * (1 - av) * (1 - shade_here);
+        c->shadow_only_loss.at(x, y, ch) = px[ch] * (1 - av) * (1 - shade_here);
         px[ch] = l[ch] + px[ch] * (1 - av);  // shadows are taken away below
       }
-      c.changed = true;
-      if (shade_here < 1.0f) c.shadow_noise.at(x, y) = (1 - av) * std::sqrt(std::max(0.0f, 1 - shade_here * shade_here));
+      c->changed = true;
+      if (shade_here < 1.0f) c->shadow_noise.at(x, y) = (1 - av) * std::sqrt(std::max(0.0f, 1 - shade_here * shade_here));
     }
+}
+
+// `bounds`: the rectangle that holds all objects and their shadows.
+Composite CompositeObjects(const ObjectRender& r, const OcclusionMasks& occ, size_t n_objects, const Rect& bounds,
+                           double blur_sigma, ImageF* linear) {
+  Composite c;
+  c.object_alpha = ImageF(linear->width(), linear->height(), 1, 0.0f);
+  c.shadow_only_loss = ImageF(linear->width(), linear->height(), 3, 0.0f);
+  c.shadow_noise = ImageF(linear->width(), linear->height(), 1, 0.0f);
+  c.rendered.assign(n_objects, 0);
+  c.visible.assign(n_objects, 0);
+  c.boxes.assign(n_objects, Box2{1e9, 1e9, -1e9, -1e9});
+  // Only around the pixels an object covers or its shadow darkens: beyond the blur's reach of them the layer is 0
+  // and the shade 1, which the blur keeps exactly, so nothing changes there. Each region is blurred from its own
+  // surroundings out to that reach, clamped where `bounds` ends: what one blur over `bounds` gives, bit for bit.
+  const int reach = std::max(GaussianBlurReach(blur_sigma), GaussianBlurReach(ShadeBlurSigma(blur_sigma)));
+  c.regions = TileRunsAround(bounds, reach, [&](int x, int y) {
+    return r.render.coverage.at(x, y) > 0 || (occ.receiver.at(x, y) > 0.5f && r.shadow.at(x, y) != 1.0f);
+  });
+  for (const auto& g : c.regions) {
+    const Rect region{g[0], g[1], g[2], g[3]};
+    const Rect context{std::max(bounds.x0, g[0] - reach), std::max(bounds.y0, g[1] - reach),
+                       std::min(bounds.x1, g[2] + reach), std::min(bounds.y1, g[3] + reach)};
+    CompositeRegion(r, occ, n_objects, region, context, blur_sigma, linear, &c);
+  }
   return c;
 }
 
@@ -252,16 +324,17 @@ double RenderEdgeRise(const ObjectRender& r, const Rect& rect) {
 // Harmonisation sees the objects over the unshadowed photo (their own shadow would otherwise count as the
 // surroundings they are matched to), one object at a time. Returns how many objects it harmonised.
 int HarmonizeObjects(const models::Harmonizer& harmonizer, const ObjectRender& r, const Composite& c, size_t n_objects,
-                     const Rect& rect, ImageF* linear) {
+                     ImageF* linear) {
   // Each object's pixel bounds in the render.
   std::vector<Rect> bounds(n_objects, Rect{linear->width(), linear->height(), -1, -1});
-  for (int y = rect.y0; y < rect.y1; ++y)
-    for (int x = rect.x0; x < rect.x1; ++x) {
-      const int id = r.render.object.at(x, y);
-      if (id < 0 || id >= static_cast<int>(n_objects)) continue;
-      Rect& b = bounds[static_cast<size_t>(id)];
-      b.x0 = std::min(b.x0, x), b.y0 = std::min(b.y0, y), b.x1 = std::max(b.x1, x + 1), b.y1 = std::max(b.y1, y + 1);
-    }
+  for (const auto& g : c.regions)
+    for (int y = g[1]; y < g[3]; ++y)
+      for (int x = g[0]; x < g[2]; ++x) {
+        const int id = r.render.object.at(x, y);
+        if (id < 0 || id >= static_cast<int>(n_objects)) continue;
+        Rect& b = bounds[static_cast<size_t>(id)];
+        b.x0 = std::min(b.x0, x), b.y0 = std::min(b.y0, y), b.x1 = std::max(b.x1, x + 1), b.y1 = std::max(b.y1, y + 1);
+      }
   int harmonized = 0;
   for (size_t k = 0; k < n_objects; ++k) {
     const Rect& b = bounds[k];
@@ -384,7 +457,7 @@ std::optional<CameraOutcome> SynthesizeCamera(const CameraStageInput& st, size_t
   light_stage.Stop();
   const ObjectRender r = RenderObjects(st, cam, cl, rects);
   ScopedStage occlusion_stage(st.times, "camera occlusion");
-  const ImageF receiver_depth = ReceiverDepth(cam, st.in->ground->seed_plane(), r, rect);
+  const ImageF receiver_depth = ReceiverDepth(cam, st.in->ground->seed_plane(), r, rects.with_shadows);
   const OcclusionMasks occ = OccludeByScene(st, cam, original, r, receiver_depth, rect);
   occlusion_stage.Stop();
   const CameraLookOptions& look_options = st.options->camera_look;
@@ -409,13 +482,15 @@ std::optional<CameraOutcome> SynthesizeCamera(const CameraStageInput& st, size_t
   std::string harmonized;
   if (st.harmonizer) {
     ScopedStage harmonize_stage(st.times, "camera harmonise");
-    const int n = HarmonizeObjects(*st.harmonizer, r, c, placed.size(), rect, &linear);
+    const int n = HarmonizeObjects(*st.harmonizer, r, c, placed.size(), &linear);
     harmonized = Msg() << "; harmonised: " << n << " object(s) (" << (st.harmonizer->learned() ? "learned" : "classical") << ")";
   }
   ScopedStage colour_stage(st.times, "camera colour");
-  for (int y = rect.y0; y < rect.y1; ++y)
-    for (int x = rect.x0; x < rect.x1; ++x)
-      for (int ch = 0; ch < 3; ++ch) linear.at(x, y, ch) = std::max(0.0f, linear.at(x, y, ch) - c.shadow_only_loss.at(x, y, ch));
+  for (const auto& g : c.regions)  // no shadow reaches beyond them
+    for (int y = g[1]; y < g[3]; ++y)
+      for (int x = g[0]; x < g[2]; ++x)
+        for (int ch = 0; ch < 3; ++ch)
+          linear.at(x, y, ch) = std::max(0.0f, linear.at(x, y, ch) - c.shadow_only_loss.at(x, y, ch));
 
   const nlohmann::json colour = st.colour_reference ? CapInsertSaturation(st, cam, original, r, c, rect, &linear) : nlohmann::json();
   colour_stage.Stop();
@@ -424,13 +499,14 @@ std::optional<CameraOutcome> SynthesizeCamera(const CameraStageInput& st, size_t
   CameraOutcome co;
   co.channel = cam.channel;
   co.before = original;
-  // Only the redrawn rectangle is converted back: every other pixel stays the photograph's own byte.
+  // Only the redrawn regions are converted back: every other pixel keeps the photograph's own byte, which is also
+  // what converting it back would give (the sRGB round trip of each of the 256 values is exact).
   co.after = original;
-  ToSrgb8Region(linear, rect.x0, rect.y0, rect.x1, rect.y1, &co.after);
+  for (const auto& g : c.regions) ToSrgb8Region(linear, g[0], g[1], g[2], g[3], &co.after);
   // The sensor's last steps, on the inserted pixels only: its noise, then its compression.
   const uint64_t sensor_seed = st.in->seeds.sensor ^ (0x9E3779B97F4A7C15ull * (cam_index + 1));
-  ApplySensorToInserts(&co.after, c.object_alpha, &c.shadow_noise, rect.x0, rect.y0, rect.x1, rect.y1, look, look_options,
-                       sensor_seed);
+  ApplySensorToInserts(&co.after, c.object_alpha, &c.shadow_noise, rect.x0, rect.y0, rect.x1, rect.y1, c.regions, look,
+                       look_options, sensor_seed);
   sensor_stage.Stop();
   co.light = DescribeCameraLight(cl, c, *st.light) + harmonized;
   if (any_look) {

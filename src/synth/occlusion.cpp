@@ -7,6 +7,7 @@
 
 #include "core/error.h"
 #include "core/parallel.h"
+#include "render/camera_render.h"
 
 namespace sd {
 
@@ -199,9 +200,19 @@ DepthMap DenseDepth(const std::vector<ProjectedPoint>& points, const ImageU8& im
                                << image.channels() << " but the camera is " << W << "x" << H << " RGB");
   if (options.max_fill_px < 1 || !(options.sigma_space_px > 0) || !(options.sigma_color > 0) || !(options.cluster_rel > 0))
     throw InputError({}, "dense depth: max_fill_px, sigma_space_px, sigma_color and cluster_rel must be positive");
-  const bool whole = options.x0 == 0 && options.y0 == 0 && options.x1 == 0 && options.y1 == 0;
-  const int rx0 = whole ? 0 : std::clamp(options.x0, 0, W), rx1 = whole ? W : std::clamp(options.x1, 0, W);
-  const int ry0 = whole ? 0 : std::clamp(options.y0, 0, H), ry1 = whole ? H : std::clamp(options.y1, 0, H);
+  const bool whole = options.rects.empty() && options.x0 == 0 && options.y0 == 0 && options.x1 == 0 && options.y1 == 0;
+  std::vector<std::array<int, 4>> rects;  // clamped to the image, none empty
+  if (whole) rects.push_back({0, 0, W, H});
+  else if (options.rects.empty()) rects.push_back({options.x0, options.y0, options.x1, options.y1});
+  else rects = options.rects;
+  for (auto& r : rects) r = {std::clamp(r[0], 0, W), std::clamp(r[1], 0, H), std::clamp(r[2], 0, W), std::clamp(r[3], 0, H)};
+  const auto empty = [](const std::array<int, 4>& r) { return r[0] >= r[2] || r[1] >= r[3]; };
+  rects.erase(std::remove_if(rects.begin(), rects.end(), empty), rects.end());
+  // Their bounds: the candidates are gathered for these, so that a pixel's candidates, and their order, are its own
+  // whatever else is filled.
+  int rx0 = rects.empty() ? 0 : W, ry0 = rects.empty() ? 0 : H, rx1 = 0, ry1 = 0;
+  for (const auto& r : rects)
+    rx0 = std::min(rx0, r[0]), ry0 = std::min(ry0, r[1]), rx1 = std::max(rx1, r[2]), ry1 = std::max(ry1, r[3]);
 
   // Points reach the pixels within max_fill_px of them: only those projecting into the region grown by that much
   // (and a pixel) can be candidates, so the hidden-point filter and the per-pixel map cover that box alone.
@@ -241,7 +252,7 @@ DepthMap DenseDepth(const std::vector<ProjectedPoint>& points, const ImageU8& im
     const float pv = y + 0.5f;
     std::vector<Vote> votes;
     const int cy0 = std::max(0, static_cast<int>((pv - R) / kCell)), cy1 = std::min(gh - 1, static_cast<int>((pv + R) / kCell));
-    for (int x = rx0; x < rx1; ++x) {
+    for (const auto& [sx0, sx1] : RowSpans(rects, y, W)) for (int x = sx0; x < sx1; ++x) {
       const float pu = x + 0.5f;
       const int cx0 = std::max(0, static_cast<int>((pu - R) / kCell)), cx1 = std::min(gw - 1, static_cast<int>((pu + R) / kCell));
       votes.clear();
@@ -316,7 +327,7 @@ DepthMap DenseDepth(const std::vector<ProjectedPoint>& points, const ImageU8& im
   for (const auto& b : priors.boxes_ego) boxes.push_back({(T_cam_ego * b.T_frame_box).Inverse(), 0.5 * b.size});
   ParallelFor(static_cast<size_t>(ry0), static_cast<size_t>(ry1), [&](size_t yi) {
     const int y = static_cast<int>(yi);
-    for (int x = rx0; x < rx1; ++x) {
+    for (const auto& [sx0, sx1] : RowSpans(rects, y, W)) for (int x = sx0; x < sx1; ++x) {
       if (out.confidence.at(x, y) > 0) continue;
       const Eigen::Vector3d dir = camera.RayDirection(Eigen::Vector2d(x + 0.5, y + 0.5));
       float d = kInf;

@@ -26,6 +26,7 @@
 //     the background's colour nearby (two-colour matting). The edge of a real occluder across a pixel thus
 //     gives a fractional, antialiased visibility, and a boundary the depth map put one pixel off is moved to
 //     where the photograph has it.
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -79,6 +80,9 @@ struct DenseDepthOptions {
   // Pixel rectangle [x0, x1) x [y0, y1) to fill (all zero: the whole image); outside it depth is +inf and
   // confidence 0. Points outside it still count for the pixels inside (the result inside is the same).
   int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+  // When not empty, instead of x0..y1: the union of these rectangles ({x0, y0, x1, y1}), the same inside it as
+  // their bounding rectangle would give; for objects far apart, what lies between them costs nothing.
+  std::vector<std::array<int, 4>> rects;
   double box_confidence = 0.5;      // of depth from the annotated boxes' faces
   double surface_confidence = 0.35; // of depth from the road surface
 };

@@ -137,6 +137,36 @@ TEST(DenseDepth, ARectangleGivesTheWholeImagesValuesInsideIt) {
     }
 }
 
+TEST(DenseDepth, RectanglesGiveTheWholeImagesValuesInTheirUnion) {
+  EdgeScene s = MakeEdgeScene();
+  for (auto& p : s.points) p.ground = p.v > 40;
+  const PinholeCamera cam = SmallCamera(120, 80);
+  DepthPriors priors;
+  const PlaneSurface road(Eigen::Vector3d(0, -1, 0), 3);
+  priors.surface = &road;
+  DenseDepthOptions o;
+  const DepthMap whole = DenseDepth(s.points, s.image, cam, Rigid3d(), priors, o);
+  // Two apart, two overlapping, one partly off the image.
+  o.rects = {{5, 5, 20, 25}, {50, 30, 75, 60}, {60, 50, 90, 70}, {110, 70, 140, 95}};
+  const DepthMap part = DenseDepth(s.points, s.image, cam, Rigid3d(), priors, o);
+  const auto in = [&](int x, int y) {
+    for (const auto& r : o.rects)
+      if (x >= r[0] && x < r[2] && y >= r[1] && y < r[3]) return true;
+    return false;
+  };
+  for (int y = 0; y < 80; ++y)
+    for (int x = 0; x < 120; ++x) {
+      if (in(x, y)) {
+        ASSERT_EQ(part.depth.at(x, y), whole.depth.at(x, y)) << x << "," << y;
+        ASSERT_EQ(part.confidence.at(x, y), whole.confidence.at(x, y)) << x << "," << y;
+        ASSERT_EQ(part.ground.at(x, y), whole.ground.at(x, y)) << x << "," << y;
+      } else {
+        ASSERT_EQ(part.depth.at(x, y), kInf) << x << "," << y;
+        ASSERT_EQ(part.confidence.at(x, y), 0.0f) << x << "," << y;
+      }
+    }
+}
+
 TEST(DenseDepth, MarksWhereTheDepthIsTheRoads) {
   // Ground points in the lower half, an obstacle's points in the upper half: the map says which is which, from
   // the nearest point and from the winning cluster alike; the road prior counts as road, a box as not.

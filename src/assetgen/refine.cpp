@@ -205,21 +205,14 @@ Losses LossAndGradient(const std::vector<Eigen::Vector3f>& positions, const std:
     sums = device->loss_sums.ToHost();
   } else {
     const LossMesh mesh{Floats(positions), Floats(vertex_normals), tris, cache.edges};
-    std::vector<std::exception_ptr> errors(views.size());
-    ParallelFor(0, views.size(), [&](size_t vi) {
-      try {
-        ViewState& s = state[vi];
-        s.grad_positions.assign(3 * nv, 0.0f);
-        s.grad_normals.assign(3 * nv, 0.0f);
-        const PinholeCamera& c = views[vi].view.camera;
-        ViewLossAndGradient(mesh, c.width, c.height, s, s.grad_positions, s.grad_normals,
-                            std::span<double>(&sums[2 * vi], 2));
-      } catch (...) {
-        errors[vi] = std::current_exception();
-      }
+    ParallelForRethrow(0, views.size(), [&](size_t vi) {
+      ViewState& s = state[vi];
+      s.grad_positions.assign(3 * nv, 0.0f);
+      s.grad_normals.assign(3 * nv, 0.0f);
+      const PinholeCamera& c = views[vi].view.camera;
+      ViewLossAndGradient(mesh, c.width, c.height, s, s.grad_positions, s.grad_normals,
+                          std::span<double>(&sums[2 * vi], 2));
     });
-    for (const std::exception_ptr& e : errors)
-      if (e) std::rethrow_exception(e);
     for (const ViewState& s : state)
       for (size_t v = 0; v < nv; ++v) {
         (*grad)[v] += Eigen::Vector3f(&s.grad_positions[3 * v]);

@@ -1,7 +1,9 @@
 #pragma once
 // The one place that picks the threading library (TBB). Kernels call ParallelFor and never see TBB.
 #include <cstddef>
+#include <exception>
 #include <functional>
+#include <vector>
 
 namespace sd {
 
@@ -14,6 +16,27 @@ void ParallelFor(size_t begin, size_t end, F&& body, size_t grain = 1) {
   ParallelForRange(begin, end, grain, [&](size_t b, size_t e) {
     for (size_t i = b; i < e; ++i) body(i);
   });
+}
+
+// ParallelFor for a body that may throw (ParallelFor's must not): every index still runs, each index's exception
+// is caught, and once all are done the exception of the lowest index that threw is rethrown, the one a serial
+// loop would have met first.
+template <typename F>
+void ParallelForRethrow(size_t begin, size_t end, F&& body, size_t grain = 1) {
+  if (end <= begin) return;
+  std::vector<std::exception_ptr> errors(end - begin);
+  ParallelFor(
+      begin, end,
+      [&](size_t i) {
+        try {
+          body(i);
+        } catch (...) {
+          errors[i - begin] = std::current_exception();
+        }
+      },
+      grain);
+  for (const std::exception_ptr& e : errors)
+    if (e) std::rethrow_exception(e);
 }
 
 // Limits worker threads for the life of the process (0 = library default: all cores).

@@ -412,36 +412,29 @@ ChunkOutput BuildChunk(const SourceState& s, const Chunk& chunk, const IndexBuil
   out.descriptors.assign(crops.size() * D, 0.f);
   fs::create_directories(dir / "crops");
   fs::create_directories(dir / "masks");
-  std::vector<std::exception_ptr> errors(crops.size());
-  ParallelFor(0, crops.size(), [&](size_t i) {
-    try {
-      ObjectCrop& c = crops[i];
-      MinedItem& item = c.item;
-      item.source = s.source.path.string();
-      // A mask with no object pixels (a sliver lost to downscaling) describes nothing: use the whole crop.
-      const bool has_mask = !c.mask.empty() && std::any_of(c.mask.vector().begin(), c.mask.vector().end(),
-                                                           [](uint8_t v) { return v > 127; });
-      if (!has_mask) {
-        c.mask = ImageU8();
-        item.mask_source.clear();
-      }
-      const ImageU8* mask = has_mask ? &c.mask : nullptr;
-      item.sharpness = Sharpness(c.image, mask);
-      item.phash = PerceptualHash(c.image);
-      const std::vector<float> d = ImageDescriptor(c.image, mask);
-      std::copy(d.begin(), d.end(), out.descriptors.begin() + i * D);
-      item.crop_file = "crops/" + item.id + ".jpg";
-      WriteImage(dir / item.crop_file, c.image, options.jpeg_quality);
-      if (mask) {
-        item.mask_file = "masks/" + item.id + ".png";
-        WriteImage(dir / item.mask_file, c.mask);
-      }
-    } catch (...) {
-      errors[i] = std::current_exception();  // ParallelFor bodies must not throw: rethrown below
+  ParallelForRethrow(0, crops.size(), [&](size_t i) {
+    ObjectCrop& c = crops[i];
+    MinedItem& item = c.item;
+    item.source = s.source.path.string();
+    // A mask with no object pixels (a sliver lost to downscaling) describes nothing: use the whole crop.
+    const bool has_mask = !c.mask.empty() && std::any_of(c.mask.vector().begin(), c.mask.vector().end(),
+                                                         [](uint8_t v) { return v > 127; });
+    if (!has_mask) {
+      c.mask = ImageU8();
+      item.mask_source.clear();
+    }
+    const ImageU8* mask = has_mask ? &c.mask : nullptr;
+    item.sharpness = Sharpness(c.image, mask);
+    item.phash = PerceptualHash(c.image);
+    const std::vector<float> d = ImageDescriptor(c.image, mask);
+    std::copy(d.begin(), d.end(), out.descriptors.begin() + i * D);
+    item.crop_file = "crops/" + item.id + ".jpg";
+    WriteImage(dir / item.crop_file, c.image, options.jpeg_quality);
+    if (mask) {
+      item.mask_file = "masks/" + item.id + ".png";
+      WriteImage(dir / item.mask_file, c.mask);
     }
   });
-  for (const std::exception_ptr& e : errors)
-    if (e) std::rethrow_exception(e);
   out.crop_seconds = Seconds(t0);
   if (options.clip && !crops.empty()) {
     t0 = std::chrono::steady_clock::now();
@@ -655,16 +648,7 @@ MiningIndex MiningIndex::Open(const fs::path& index_dir) {
                                     << " vectors: the shard is corrupt (delete it and run `mine index` again)");
     out = std::move(shard);
   };
-  std::vector<std::exception_ptr> errors(dirs.size());
-  ParallelFor(0, dirs.size(), [&](size_t s) {
-    try {
-      load_shard(dirs[s], shards[s]);
-    } catch (...) {
-      errors[s] = std::current_exception();  // ParallelFor bodies must not throw: rethrown below, first shard first
-    }
-  });
-  for (const std::exception_ptr& e : errors)
-    if (e) std::rethrow_exception(e);
+  ParallelForRethrow(0, dirs.size(), [&](size_t s) { load_shard(dirs[s], shards[s]); });  // first shard's error first
   for (size_t s = 0; s < dirs.size(); ++s) {
     shards[s]->first_row = index.rows_;
     index.rows_ += shards[s]->rows;

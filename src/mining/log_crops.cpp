@@ -353,19 +353,9 @@ std::vector<ObjectCrop> CropFrameObjects(const Frame& frame, const std::vector<E
     for (const std::string& name : options.cameras)
       if (const CameraSensor* c = frame.FindCamera(name)) cams.push_back(c);
   }
-  // Cameras are independent (own image, own z-buffer): one task each. ParallelFor bodies must not throw, so
-  // the first error is carried out and rethrown.
+  // Cameras are independent (own image, own z-buffer): one task each; the first camera's error is rethrown.
   std::vector<std::vector<ObjectCrop>> per_camera(cams.size());
-  std::vector<std::exception_ptr> errors(cams.size());
-  ParallelFor(0, cams.size(), [&](size_t i) {
-    try {
-      per_camera[i] = CropCamera(frame, *cams[i], sweep_ego, options);
-    } catch (...) {
-      errors[i] = std::current_exception();
-    }
-  });
-  for (const std::exception_ptr& e : errors)
-    if (e) std::rethrow_exception(e);
+  ParallelForRethrow(0, cams.size(), [&](size_t i) { per_camera[i] = CropCamera(frame, *cams[i], sweep_ego, options); });
   std::vector<ObjectCrop> out;
   for (auto& v : per_camera)
     for (ObjectCrop& c : v) out.push_back(std::move(c));

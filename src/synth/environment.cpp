@@ -303,18 +303,11 @@ EnvironmentMap BuildEnvironmentMap(const Frame& frame, const std::vector<ImageU8
 
   // Per-camera layers on the map.
   std::vector<Layer> layers(nc);
-  std::vector<std::exception_ptr> errors(nc);
-  ParallelFor(0, nc, [&](size_t k) {
-    try {
-      const auto& cam = frame.cameras[k];
-      const int factor = std::max(1, static_cast<int>(std::lround(cam.intrinsics.fx * 2 * M_PI / W)));
-      layers[k] = ProjectCamera(cam, Downsample(images[k], factor, options.saturated_level), W, H);
-    } catch (...) {
-      errors[k] = std::current_exception();
-    }
+  ParallelForRethrow(0, nc, [&](size_t k) {
+    const auto& cam = frame.cameras[k];
+    const int factor = std::max(1, static_cast<int>(std::lround(cam.intrinsics.fx * 2 * M_PI / W)));
+    layers[k] = ProjectCamera(cam, Downsample(images[k], factor, options.saturated_level), W, H);
   });
-  for (auto& e : errors)
-    if (e) std::rethrow_exception(e);
 
   // Overlaps -> relative gains.
   std::vector<PairStats> pairs;
@@ -738,16 +731,8 @@ Image<uint8_t> DilateSquare(const Image<uint8_t>& marked, int r) {
 // Runs `body(row)` for rows [y0, y1) in parallel and rethrows the first row's error, if any, once all are done.
 template <typename Body>
 void ParallelRows(int y0, int y1, const Body& body) {
-  std::vector<std::exception_ptr> errors(static_cast<size_t>(std::max(0, y1 - y0)));
-  ParallelFor(static_cast<size_t>(y0), static_cast<size_t>(y1), [&](size_t yy) {
-    try {
-      body(static_cast<int>(yy));
-    } catch (...) {
-      errors[yy - static_cast<size_t>(y0)] = std::current_exception();
-    }
-  });
-  for (auto& e : errors)
-    if (e) std::rethrow_exception(e);
+  if (y1 <= y0) return;
+  ParallelForRethrow(static_cast<size_t>(y0), static_cast<size_t>(y1), [&](size_t y) { body(static_cast<int>(y)); });
 }
 
 // ReceiverShadowImage for any rule giving a hit face its light, in three passes over the rectangles' pixels:

@@ -105,33 +105,26 @@ RoadSurface RoadSurface::Build(const std::vector<SweepInWorld>& sweeps, const Ro
   std::vector<std::vector<KeptPoint>> kept(sweeps.size());
   {
     Progress progress("road surface: filtering sweeps", sweeps.size());
-    std::vector<std::exception_ptr> errors(sweeps.size());
-    ParallelFor(0, sweeps.size(), [&](size_t k) {
-      try {
-        const SweepInWorld& sw = sweeps[k];
-        const Eigen::Vector2d sensor = sw.sensor_origin.head<2>();
-        std::vector<double> reach(sw.objects.size());
-        for (size_t b = 0; b < sw.objects.size(); ++b)
-          reach[b] = 0.5 * sw.objects[b].size.head<2>().norm() + o.box_margin;
-        for (size_t i = 0; i < sw.points.size(); ++i) {
-          const Eigen::Vector3d& p = sw.points[i];
-          const double r = (p.head<2>() - sensor).norm();
-          if (r < o.min_range || r > o.max_range || !p.allFinite()) continue;
-          bool in_object = false;
-          for (size_t b = 0; b < sw.objects.size() && !in_object; ++b)
-            in_object = (p.head<2>() - sw.objects[b].center().head<2>()).norm() <= reach[b] &&
-                        sw.objects[b].Contains(p, o.box_margin);
-          if (in_object) continue;
-          kept[k].push_back({static_cast<float>(p.x() - ref.x()), static_cast<float>(p.y() - ref.y()),
-                             static_cast<float>(p.z()), static_cast<int32_t>(k), static_cast<int32_t>(i)});
-        }
-      } catch (...) {
-        errors[k] = std::current_exception();
+    ParallelForRethrow(0, sweeps.size(), [&](size_t k) {
+      const SweepInWorld& sw = sweeps[k];
+      const Eigen::Vector2d sensor = sw.sensor_origin.head<2>();
+      std::vector<double> reach(sw.objects.size());
+      for (size_t b = 0; b < sw.objects.size(); ++b)
+        reach[b] = 0.5 * sw.objects[b].size.head<2>().norm() + o.box_margin;
+      for (size_t i = 0; i < sw.points.size(); ++i) {
+        const Eigen::Vector3d& p = sw.points[i];
+        const double r = (p.head<2>() - sensor).norm();
+        if (r < o.min_range || r > o.max_range || !p.allFinite()) continue;
+        bool in_object = false;
+        for (size_t b = 0; b < sw.objects.size() && !in_object; ++b)
+          in_object = (p.head<2>() - sw.objects[b].center().head<2>()).norm() <= reach[b] &&
+                      sw.objects[b].Contains(p, o.box_margin);
+        if (in_object) continue;
+        kept[k].push_back({static_cast<float>(p.x() - ref.x()), static_cast<float>(p.y() - ref.y()),
+                           static_cast<float>(p.z()), static_cast<int32_t>(k), static_cast<int32_t>(i)});
       }
       progress.Advance();
     });
-    for (const auto& e : errors)
-      if (e) std::rethrow_exception(e);
   }
 
   // Grid extent: the kept points and the ego positions (whose footprint gets filled).

@@ -113,6 +113,22 @@ TEST(DenseDepth, BoxAndRoadPriorsFillWhereTheLidarIsSilent) {
   EXPECT_EQ(d.confidence.at(20, 10), 0.0f);
 }
 
+// `part` (a DenseDepth over a region) equals `whole` (over the image) where `inside`, and is empty elsewhere.
+template <typename Inside>
+void ExpectWholeInsideEmptyOutside(const DepthMap& part, const DepthMap& whole, const Inside& inside) {
+  for (int y = 0; y < whole.depth.height(); ++y)
+    for (int x = 0; x < whole.depth.width(); ++x) {
+      if (inside(x, y)) {
+        ASSERT_EQ(part.depth.at(x, y), whole.depth.at(x, y)) << x << "," << y;
+        ASSERT_EQ(part.confidence.at(x, y), whole.confidence.at(x, y)) << x << "," << y;
+        ASSERT_EQ(part.ground.at(x, y), whole.ground.at(x, y)) << x << "," << y;
+      } else {
+        ASSERT_EQ(part.depth.at(x, y), kInf) << x << "," << y;
+        ASSERT_EQ(part.confidence.at(x, y), 0.0f) << x << "," << y;
+      }
+    }
+}
+
 TEST(DenseDepth, ARectangleGivesTheWholeImagesValuesInsideIt) {
   EdgeScene s = MakeEdgeScene();
   for (auto& p : s.points) p.ground = p.v > 40;
@@ -124,17 +140,7 @@ TEST(DenseDepth, ARectangleGivesTheWholeImagesValuesInsideIt) {
   const DepthMap whole = DenseDepth(s.points, s.image, cam, Rigid3d(), priors, o);
   o.x0 = 50, o.y0 = 30, o.x1 = 75, o.y1 = 80;
   const DepthMap part = DenseDepth(s.points, s.image, cam, Rigid3d(), priors, o);
-  for (int y = 0; y < 80; ++y)
-    for (int x = 0; x < 120; ++x) {
-      if (x >= 50 && x < 75 && y >= 30) {
-        ASSERT_EQ(part.depth.at(x, y), whole.depth.at(x, y)) << x << "," << y;
-        ASSERT_EQ(part.confidence.at(x, y), whole.confidence.at(x, y)) << x << "," << y;
-        ASSERT_EQ(part.ground.at(x, y), whole.ground.at(x, y)) << x << "," << y;
-      } else {
-        ASSERT_EQ(part.depth.at(x, y), kInf) << x << "," << y;
-        ASSERT_EQ(part.confidence.at(x, y), 0.0f) << x << "," << y;
-      }
-    }
+  ExpectWholeInsideEmptyOutside(part, whole, [](int x, int y) { return x >= 50 && x < 75 && y >= 30; });
 }
 
 TEST(DenseDepth, RectanglesGiveTheWholeImagesValuesInTheirUnion) {
@@ -154,17 +160,7 @@ TEST(DenseDepth, RectanglesGiveTheWholeImagesValuesInTheirUnion) {
       if (x >= r[0] && x < r[2] && y >= r[1] && y < r[3]) return true;
     return false;
   };
-  for (int y = 0; y < 80; ++y)
-    for (int x = 0; x < 120; ++x) {
-      if (in(x, y)) {
-        ASSERT_EQ(part.depth.at(x, y), whole.depth.at(x, y)) << x << "," << y;
-        ASSERT_EQ(part.confidence.at(x, y), whole.confidence.at(x, y)) << x << "," << y;
-        ASSERT_EQ(part.ground.at(x, y), whole.ground.at(x, y)) << x << "," << y;
-      } else {
-        ASSERT_EQ(part.depth.at(x, y), kInf) << x << "," << y;
-        ASSERT_EQ(part.confidence.at(x, y), 0.0f) << x << "," << y;
-      }
-    }
+  ExpectWholeInsideEmptyOutside(part, whole, in);
 }
 
 TEST(DenseDepth, MarksWhereTheDepthIsTheRoads) {

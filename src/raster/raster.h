@@ -1,8 +1,8 @@
 #pragma once
 // Differentiable triangle rasterizer: the forward ops and their hand-written backward passes.
 //
-// The ops follow one pattern (one file per op: rasterize.cpp, interpolate.cpp, antialias.cpp, clip.cpp; after
-// nvdiffrast's per-op params structs): an op with more than a handful of inputs takes them as one plain
+// The ops follow one pattern (one file per op: rasterize.cpp, interpolate.cpp, antialias.cpp, clip.cpp, and the
+// per-pixel loss terms of loss.h; after nvdiffrast's per-op params structs): an op with more than a handful of inputs takes them as one plain
 // `OpInputs` struct of views (Spans and references, nothing owned; the caller keeps them alive for the call).
 // `Op(inputs, outputs)` computes; `OpBackward(the same inputs, forward outputs, grad_outputs, grad_inputs)`
 // ACCUMULATES (+=) into the gradients it is given, so callers can sum several views into one buffer.
@@ -29,8 +29,9 @@
 //  - Contracts (SD_CHECK, abort with the culprit named): buffer sizes, every index of `tris` within the vertices
 //    of clip_pos / attr, every triangle id of a RasterBuffer within `tris` (a buffer of another mesh) and its
 //    resolution the one it is used with. Each op checks its own inputs on every call: one pass over `tris` and
-//    one over the raster's triangle ids (~40 us at 512x512 on one core). On device buffers the kernels check each
-//    index as they read it, and a failure aborts at the next download (buffer.h). Non-finite clip positions are not drawn.
+//    one over the raster's triangle ids (~40 us at 512x512 on one core). On device buffers the kernels check
+//    each index as they read it, and a failure aborts at the next download (buffer.h). Non-finite clip
+//    positions are not drawn.
 #include <cstdint>
 #include <span>
 #include <string>

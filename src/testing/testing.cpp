@@ -15,9 +15,11 @@
 namespace sd::testing {
 namespace fs = std::filesystem;
 
+// $SYNTHDRIVE_SOURCE_DIR (CTest sets it; so does a run on another machine), else the checkout these tests were
+// built from.
 static fs::path RepoRoot() {
   const char* env = std::getenv("SYNTHDRIVE_SOURCE_DIR");
-  return env ? fs::path(env) : fs::current_path();
+  return env && *env ? fs::path(env) : fs::path(SYNTHDRIVE_SOURCE_DIR_DEFAULT);
 }
 
 fs::path RepoData(const std::string& rel) { return RepoRoot() / "data" / rel; }

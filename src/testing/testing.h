@@ -8,7 +8,8 @@
 
 namespace sd::testing {
 
-// <repo>/data/<rel>. The repo root comes from $SYNTHDRIVE_SOURCE_DIR (set by CTest).
+// <repo>/data/<rel>. The repo root comes from $SYNTHDRIVE_SOURCE_DIR (set by CTest), else it is the checkout the
+// tests were built from.
 std::filesystem::path RepoData(const std::string& rel);
 // <repo>/../shared/data/<rel>, or an empty path when ../shared is absent (tests then GTEST_SKIP).
 std::filesystem::path SharedData(const std::string& rel);

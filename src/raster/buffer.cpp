@@ -11,8 +11,6 @@
 
 namespace sd::raster {
 
-const char* ToString(Memory where) { return where == Memory::kHost ? "host" : "device"; }
-
 namespace detail {
 
 void* DeviceAllocate(size_t bytes) {

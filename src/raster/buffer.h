@@ -33,7 +33,6 @@
 namespace sd::raster {
 
 enum class Memory { kHost, kDevice };
-const char* ToString(Memory where);
 
 namespace detail {
 // Device memory and copies (buffer.cpp; CUDA in raster_cuda.cu). Without CUDA, device allocation is an

@@ -293,17 +293,6 @@ LossChain RunLossChain(Memory where, const LossTargets& v, int size, const std::
   return out;
 }
 
-// Largest |a - b| over the largest |a|, for two vectors of the same length.
-double MaxRelative(const std::vector<float>& a, const std::vector<float>& b) {
-  EXPECT_EQ(a.size(), b.size());
-  double scale = 0, diff = 0;
-  for (size_t i = 0; i < a.size() && i < b.size(); ++i) {
-    scale = std::max(scale, std::abs(static_cast<double>(a[i])));
-    diff = std::max(diff, std::abs(static_cast<double>(a[i]) - b[i]));
-  }
-  return scale > 0 ? diff / scale : diff;
-}
-
 TEST(DeviceBuffers, TheLossComposedOnTheDeviceMatchesTheHost) {
   SD_REQUIRE_CUDA();
   DeviceScope scope;
@@ -355,17 +344,17 @@ TEST(DeviceBuffers, TheLossComposedOnTheDeviceMatchesTheHost) {
       EXPECT_EQ(host.depth, device.depth);
       EXPECT_EQ(host.normal_img, device.normal_img);
       // Blends and sums meet in another order on the device (float atomics per pixel, double per vertex).
-      EXPECT_LE(MaxRelative(host.aa, device.aa), 1e-6);
-      EXPECT_LE(MaxRelative(host.color_aa, device.color_aa), 1e-6);
+      EXPECT_LE(RelativeError(host.aa, device.aa), 1e-6);
+      EXPECT_LE(RelativeError(host.color_aa, device.color_aa), 1e-6);
       ASSERT_EQ(device.sums.size(), 2u);
       EXPECT_GT(host.sums[0], 0);
       EXPECT_GT(host.sums[1], 0);
       EXPECT_NEAR(device.sums[0], host.sums[0], 1e-5 * host.sums[0]);
       EXPECT_NEAR(device.sums[1], host.sums[1], 1e-5 * host.sums[1]);
-      EXPECT_LE(MaxRelative(host.grad_positions, device.grad_positions), 1e-5);
-      EXPECT_LE(MaxRelative(host.grad_normals, device.grad_normals), 1e-5);
-      EXPECT_LE(MaxRelative(host.grad_color, device.grad_color), 1e-5);
-      EXPECT_LE(MaxRelative(host.grad_color_clip, device.grad_color_clip), 1e-5);
+      EXPECT_LE(RelativeError(host.grad_positions, device.grad_positions), 1e-5);
+      EXPECT_LE(RelativeError(host.grad_normals, device.grad_normals), 1e-5);
+      EXPECT_LE(RelativeError(host.grad_color, device.grad_color), 1e-5);
+      EXPECT_LE(RelativeError(host.grad_color_clip, device.grad_color_clip), 1e-5);
     }
   };
   {

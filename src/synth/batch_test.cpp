@@ -23,6 +23,7 @@
 #include "synth/batch.h"
 #include "synth/report.h"
 #include "synth/test_assets.h"
+#include "testing/input_error.h"
 #include "testing/testing.h"
 
 namespace sd {
@@ -88,15 +89,7 @@ size_t Lines(const std::string& text) {
   return n;
 }
 
-template <typename F>
-std::string InputErrorOf(F&& f) {
-  try {
-    f();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "(no InputError)";
-}
+using testing::InputErrorOf;
 
 class SynthBatchTest : public ::testing::Test {
  protected:

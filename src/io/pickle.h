@@ -136,10 +136,10 @@ class Value {
   // dtype, shape, scalar flag and elements in C order (memory order does not matter).
   friend bool operator==(const Value& a, const Value& b);
 
-  struct Node;  // defined in pickle.cpp
+  struct Node;  // defined in pickle_internal.h
 
  private:
-  friend struct Access;  // pickle.cpp: the loader's in-place construction
+  friend struct Access;  // pickle_internal.h: the loader's in-place construction
   explicit Value(Kind kind) : kind_(kind) {}
   Node& MutableNode();   // copy on write
 

@@ -167,27 +167,25 @@ ImageF Harmonizer::HarmonizeClassical(const ImageF& composite, const ImageF& mas
                        ? options_.ring_px
                        : std::max(4, static_cast<int>(std::lround(0.25 * std::sqrt(static_cast<double>(fg_count)))));
   // The ring: background pixels within `ring` (Chebyshev) of a foreground pixel — a square dilation as two
-  // separable running maxima over the object's box grown by the ring.
+  // separable passes over the object's box grown by the ring, each a window sum of a running count (constant
+  // work per pixel whatever the ring's width; the ring grows with the object, to ~125 px for a close car).
   const int bx0 = std::max(0, x0 - ring), by0 = std::max(0, y0 - ring);
   const int bx1 = std::min(w - 1, x1 + ring), by1 = std::min(h - 1, y1 + ring);
   const int bw = bx1 - bx0 + 1, bh = by1 - by0 + 1;
   std::vector<uint8_t> fg(static_cast<size_t>(bw) * bh), row_dilated(fg.size()), dilated(fg.size());
   for (int y = 0; y < bh; ++y)
     for (int x = 0; x < bw; ++x) fg[static_cast<size_t>(y) * bw + x] = Foreground(mask.at(bx0 + x, by0 + y));
-  for (int y = 0; y < bh; ++y)
-    for (int x = 0; x < bw; ++x) {
-      uint8_t any = 0;
-      for (int k = std::max(0, x - ring); k <= std::min(bw - 1, x + ring) && !any; ++k)
-        any = fg[static_cast<size_t>(y) * bw + k];
-      row_dilated[static_cast<size_t>(y) * bw + x] = any;
-    }
-  for (int y = 0; y < bh; ++y)
-    for (int x = 0; x < bw; ++x) {
-      uint8_t any = 0;
-      for (int k = std::max(0, y - ring); k <= std::min(bh - 1, y + ring) && !any; ++k)
-        any = row_dilated[static_cast<size_t>(k) * bw + x];
-      dilated[static_cast<size_t>(y) * bw + x] = any;
-    }
+  // count[i + 1] = set entries among the first i + 1 of a line; the window [a, b] holds one iff
+  // count[b + 1] > count[a].
+  std::vector<int> count(static_cast<size_t>(std::max(bw, bh)) + 1);
+  const auto dilate_line = [&](const uint8_t* in, uint8_t* out, int n, size_t stride) {
+    count[0] = 0;
+    for (int i = 0; i < n; ++i) count[static_cast<size_t>(i) + 1] = count[static_cast<size_t>(i)] + in[i * stride];
+    for (int i = 0; i < n; ++i)
+      out[i * stride] = count[static_cast<size_t>(std::min(n - 1, i + ring)) + 1] > count[static_cast<size_t>(std::max(0, i - ring))];
+  };
+  for (int y = 0; y < bh; ++y) dilate_line(&fg[static_cast<size_t>(y) * bw], &row_dilated[static_cast<size_t>(y) * bw], bw, 1);
+  for (int x = 0; x < bw; ++x) dilate_line(&row_dilated[static_cast<size_t>(x)], &dilated[static_cast<size_t>(x)], bh, bw);
   std::vector<std::array<float, 3>> fg_lab, ring_lab;
   const auto rgb_at = [&](int x, int y) {
     return std::array<float, 3>{composite.at(x, y, 0), composite.at(x, y, 1), composite.at(x, y, 2)};

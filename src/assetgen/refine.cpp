@@ -17,6 +17,7 @@
 #include "geometry/topology.h"
 #include "geometry/visual_hull.h"
 #include "raster/loss.h"
+#include "raster/normals.h"
 #include "raster/raster.h"
 
 namespace sd {
@@ -119,11 +120,14 @@ struct TopologyCache {
   // On the device: the connectivity, uploaded once per pass.
   Buffer<int32_t> device_tris{Memory::kDevice};
   raster::EdgeTopology device_edges{Buffer<int32_t>(Memory::kDevice)};
+  raster::VertexFaces device_vertex_faces{Buffer<int32_t>(Memory::kDevice), Buffer<int32_t>(Memory::kDevice)};
 };
 
-// The views' loss on the GPU: the mesh's per-evaluation inputs and the summed outputs, device-resident.
+// The views' loss on the GPU: the mesh's per-evaluation inputs and the summed outputs, device-resident. Only
+// the positions go up and their gradient comes down: the vertex normals and their backward run there too.
 struct DeviceLoss {
   Buffer<float> positions{Memory::kDevice}, vertex_normals{Memory::kDevice};
+  Buffer<double> normal_sums{Memory::kDevice};
   Buffer<float> grad_positions{Memory::kDevice}, grad_normals{Memory::kDevice};
   Buffer<double> loss_sums{Memory::kDevice};  // 2 per view: normal, mask (unscaled sums)
 };
@@ -174,22 +178,28 @@ void ViewLossAndGradient(const LossMesh& mesh, int width, int height, ViewState&
 // One evaluation of the loss and its gradient with respect to the vertex positions. On the host the views are
 // evaluated in parallel and their shares summed in view order, so the result does not depend on the threads.
 // On the GPU (`device` set) they are queued one after another on this thread's stream, summing into one
-// gradient in view order, and the evaluation waits once, for the download of the gradients and the terms.
+// gradient in view order, between the vertex normals and their backward, and the evaluation waits once, for
+// the download of the position gradient and the terms.
 Losses LossAndGradient(const std::vector<Eigen::Vector3f>& positions, const std::vector<Eigen::Vector3i>& faces,
                        const TopologyCache& cache, const MultiViewSet& views, std::vector<ViewState>& state,
                        const RefineOptions& o, float lap_scale, DeviceLoss* device,
                        const std::vector<Eigen::Vector3f>& points, float radius, std::vector<Eigen::Vector3f>* grad,
                        double* views_seconds) {
   const size_t nv = positions.size();
-  const std::vector<Eigen::Vector3f> vertex_normals = geometry::VertexNormals(positions, faces);
   const std::span<const int32_t> tris(reinterpret_cast<const int32_t*>(faces.data()), 3 * faces.size());
+  // On the host the vertex normals and their backward run on either side of the views; on the device they
+  // are part of the views' chain there (and of its time).
+  std::vector<Eigen::Vector3f> vertex_normals, grad_vn;
+  if (device == nullptr) vertex_normals = geometry::VertexNormals(positions, faces);
   const auto views_start = std::chrono::steady_clock::now();
-  grad->assign(nv, Eigen::Vector3f::Zero());
-  std::vector<Eigen::Vector3f> grad_vn(nv, Eigen::Vector3f::Zero());
+  grad->resize(nv);
   std::vector<double> sums(2 * views.size(), 0.0);
   if (device != nullptr) {
     device->positions.CopyFrom(Floats(positions));
-    device->vertex_normals.CopyFrom(Floats(vertex_normals));
+    device->vertex_normals.resize(3 * nv);
+    device->normal_sums.resize(3 * nv);
+    raster::VertexNormals(device->positions, cache.device_tris, cache.device_vertex_faces, device->vertex_normals,
+                          device->normal_sums);
     device->grad_positions.assign(3 * nv, 0.0f);
     device->grad_normals.assign(3 * nv, 0.0f);
     device->loss_sums.assign(2 * views.size(), 0.0);
@@ -199,9 +209,9 @@ Losses LossAndGradient(const std::vector<Eigen::Vector3f>& positions, const std:
       ViewLossAndGradient(mesh, c.width, c.height, state[vi], device->grad_positions, device->grad_normals,
                           Span<double>(device->loss_sums.data() + 2 * vi, 2, Memory::kDevice));
     }
-    const std::vector<float> g = device->grad_positions.ToHost(), gn = device->grad_normals.ToHost();
-    std::copy(g.begin(), g.end(), MutableFloats(*grad).begin());
-    std::copy(gn.begin(), gn.end(), MutableFloats(grad_vn).begin());
+    raster::VertexNormalsBackward(device->positions, cache.device_tris, cache.device_vertex_faces,
+                                  device->normal_sums, device->grad_normals, device->grad_positions);
+    device->grad_positions.CopyTo(MutableFloats(*grad));
     sums = device->loss_sums.ToHost();
   } else {
     const LossMesh mesh{Floats(positions), Floats(vertex_normals), tris, cache.edges};
@@ -213,6 +223,8 @@ Losses LossAndGradient(const std::vector<Eigen::Vector3f>& positions, const std:
       ViewLossAndGradient(mesh, c.width, c.height, s, s.grad_positions, s.grad_normals,
                           std::span<double>(&sums[2 * vi], 2));
     });
+    grad->assign(nv, Eigen::Vector3f::Zero());
+    grad_vn.assign(nv, Eigen::Vector3f::Zero());
     for (const ViewState& s : state)
       for (size_t v = 0; v < nv; ++v) {
         (*grad)[v] += Eigen::Vector3f(&s.grad_positions[3 * v]);
@@ -220,6 +232,7 @@ Losses LossAndGradient(const std::vector<Eigen::Vector3f>& positions, const std:
       }
   }
   *views_seconds += Seconds(views_start);
+  if (device == nullptr) geometry::VertexNormalsBackward(positions, faces, grad_vn, grad);
   Losses losses;
   const float view_weight = 1.0f / static_cast<float>(views.size());
   for (size_t vi = 0; vi < views.size(); ++vi) {
@@ -227,7 +240,6 @@ Losses LossAndGradient(const std::vector<Eigen::Vector3f>& positions, const std:
       losses.normal += sums[2 * vi] / static_cast<double>(state[vi].valid_normal_pixels) * view_weight;
     if (state[vi].mask_grad_scale > 0) losses.mask += sums[2 * vi + 1] / state[vi].mask_area * view_weight;
   }
-  geometry::VertexNormalsBackward(positions, faces, grad_vn, grad);
   if (o.lambda_lap > 0) {
     losses.lap = geometry::LaplacianLoss(cache.laplacian, positions, o.lambda_lap * lap_scale, grad) / (o.lambda_lap * lap_scale);
   }
@@ -364,6 +376,10 @@ RefineResult RefineMesh(const TriangleMesh& coarse_in, const MultiViewSet& views
     if (device) {
       cache.device_tris.CopyFrom(std::span<const int32_t>(reinterpret_cast<const int32_t*>(faces.data()), 3 * faces.size()));
       cache.device_edges.neighbour.CopyFrom(std::span<const int32_t>(cache.edges.neighbour.host()));
+      const raster::VertexFaces incidence = raster::BuildVertexFaces(
+          {reinterpret_cast<const int32_t*>(faces.data()), 3 * faces.size()}, static_cast<int>(remesher.positions().size()));
+      cache.device_vertex_faces.offset.CopyFrom(std::span<const int32_t>(incidence.offset.host()));
+      cache.device_vertex_faces.corner.CopyFrom(std::span<const int32_t>(incidence.corner.host()));
     }
     RefineStepLog log;
     log.remesh_seconds = Seconds(ts);

@@ -74,6 +74,8 @@ void CheckDeviceContracts() {
                                                "its vertices");
   SD_CHECK(violation != cuda::kRasterTriangle, << "a raster op on the device was given a raster buffer whose "
                                                   "triangle ids lie past its triangles (a buffer of another mesh?)");
+  SD_CHECK(violation != cuda::kVertexFaces, << "a raster op on the device was given a vertex-face incidence that "
+                                               "does not fit its triangles (one of another mesh?)");
 #endif
 }
 

@@ -6,8 +6,8 @@
 //
 //  - Buffer<T>: owns `size()` elements on the host (a std::vector) or on the device (CUDA memory, grown and
 //    never shrunk, so a buffer reused across iterations allocates only when it grows). On the host it reads
-//    like the vector it wraps; a device buffer's elements are reached only through the ops, `ToHost` and
-//    `CopyFrom`. Copies are deep, on the buffer's own side.
+//    like the vector it wraps; a device buffer's elements are reached only through the ops, `ToHost` /
+//    `CopyTo` and `CopyFrom`. Copies are deep, on the buffer's own side.
 //  - Span<T>: a located view of someone else's elements (a Buffer, a std::vector, a std::span), what the ops'
 //    inputs structs hold. Host containers convert implicitly, so host callers did not change.
 //
@@ -138,11 +138,19 @@ class Buffer {
   }
   // The elements on the host: a copy, after the device work queued before it (and CheckDeviceContracts).
   std::vector<T> ToHost() const {
-    if (where_ == Memory::kHost) return host_;
-    std::vector<T> out(size_);
-    if (size_ > 0) detail::Copy(out.data(), Memory::kHost, device_, Memory::kDevice, size_ * sizeof(T));
-    CheckDeviceContracts();
+    std::vector<T> out(size());
+    CopyTo(out);
     return out;
+  }
+  // The same into the caller's memory of size() elements (a gradient downloaded where it is summed).
+  void CopyTo(std::span<T> to) const {
+    SD_CHECK(to.size() == size(), << "a buffer of " << size() << " elements copied into " << to.size());
+    if (where_ == Memory::kHost) {
+      std::copy(host_.begin(), host_.end(), to.begin());
+      return;
+    }
+    if (size_ > 0) detail::Copy(to.data(), Memory::kHost, device_, Memory::kDevice, size_ * sizeof(T));
+    CheckDeviceContracts();
   }
 
   // Host buffers only (SD_CHECK): the wrapped vector and its element access.

@@ -16,6 +16,7 @@
 
 #include "core/error.h"
 #include "raster/loss.h"
+#include "raster/normals.h"
 #include "raster/raster.h"
 #include "raster/test_util.h"
 
@@ -367,6 +368,42 @@ TEST(DeviceBuffers, TheLossComposedOnTheDeviceMatchesTheHost) {
   }
 }
 
+// The vertex normals and their backward gather per vertex in the host's order: the same bits on the device.
+TEST(DeviceBuffers, VertexNormalsAndTheirBackwardMatchTheHostBitForBit) {
+  SD_REQUIRE_CUDA();
+  testing::Mesh m = testing::Sphere(60, 120, 1.0f, 0.1f, 4);
+  m.tris.insert(m.tris.end(), {3, 3, 9});                     // a degenerate face
+  m.positions.insert(m.positions.end(), {2.0f, 0.5f, -0.25f});  // a vertex without faces
+  const size_t nv = m.positions.size() / 3;
+  const VertexFaces host_incidence = BuildVertexFaces(m.tris, m.NumVertices());
+  std::vector<float> normals(3 * nv), grad(3 * nv), grad_normals(3 * nv);
+  std::vector<double> sums(3 * nv);
+  std::mt19937 rng(6);
+  std::uniform_real_distribution<float> unit(-1, 1);
+  for (float& g : grad_normals) g = unit(rng);
+  for (float& g : grad) g = unit(rng);
+  const std::vector<float> start = grad;
+  VertexNormals(m.positions, m.tris, host_incidence, normals, sums);
+  VertexNormalsBackward(m.positions, m.tris, host_incidence, sums, grad_normals, grad);
+
+  Buffer<float> d_positions(Memory::kDevice), d_normals(Memory::kDevice, 3 * nv), d_grad(Memory::kDevice),
+      d_grad_normals(Memory::kDevice);
+  Buffer<double> d_sums(Memory::kDevice, 3 * nv);
+  Buffer<int32_t> d_tris(Memory::kDevice);
+  VertexFaces incidence{Buffer<int32_t>(Memory::kDevice), Buffer<int32_t>(Memory::kDevice)};
+  d_positions.CopyFrom(m.positions);
+  d_grad.CopyFrom(start);
+  d_grad_normals.CopyFrom(grad_normals);
+  d_tris.CopyFrom(m.tris);
+  incidence.offset.CopyFrom(std::span<const int32_t>(host_incidence.offset.host()));
+  incidence.corner.CopyFrom(std::span<const int32_t>(host_incidence.corner.host()));
+  VertexNormals(d_positions, d_tris, incidence, d_normals, d_sums);
+  VertexNormalsBackward(d_positions, d_tris, incidence, d_sums, d_grad_normals, d_grad);
+  EXPECT_EQ(d_normals.ToHost(), normals);
+  EXPECT_EQ(d_sums.ToHost(), sums);
+  EXPECT_EQ(d_grad.ToHost(), grad);
+}
+
 // On device buffers the index contracts are kernels: a tris array naming a vertex past the positions, or a
 // raster of another mesh, aborts at the next download with the contract named, and the kernels in between
 // read nothing out of bounds (compute-sanitizer would say).
@@ -399,6 +436,19 @@ TEST(DeviceBuffersDeathTest, IndicesOutsideTheirBuffersAbortAtTheDownload) {
     out.ToHost();
   };
   EXPECT_DEATH(interpolate_another_mesh(), "raster buffer whose triangle ids");
+  auto normals_of_another_mesh = [&] {  // an incidence whose last corner lies past the triangles
+    VertexFaces host = BuildVertexFaces(mesh.tris, mesh.NumVertices());
+    host.corner.host().back() = static_cast<int32_t>(mesh.tris.size());
+    VertexFaces incidence{Buffer<int32_t>(Memory::kDevice), Buffer<int32_t>(Memory::kDevice)};
+    incidence.offset.CopyFrom(std::span<const int32_t>(host.offset.host()));
+    incidence.corner.CopyFrom(std::span<const int32_t>(host.corner.host()));
+    Buffer<float> positions(Memory::kDevice), normals(Memory::kDevice, mesh.positions.size());
+    Buffer<double> sums(Memory::kDevice, mesh.positions.size());
+    positions.CopyFrom(mesh.positions);
+    VertexNormals(positions, tris, incidence, normals, sums);
+    normals.ToHost();
+  };
+  EXPECT_DEATH(normals_of_another_mesh(), "vertex-face incidence that does not fit");
   // Within the contracts nothing is raised.
   RasterBuffer rast(Memory::kDevice);
   Rasterize({clip, tris, kSize, kSize}, &rast);

@@ -10,6 +10,7 @@
 // GPU results agree bit for bit up to the order of the gradient sums (raster_cuda_test.cpp).
 //
 // Everything here works on raw pointers and plain arrays: no std::span / std::array / Eigen in device code.
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 
@@ -41,6 +42,14 @@ SD_HD int MinI(int a, int b) { return b < a ? b : a; }
 SD_HD int MaxI(int a, int b) { return a < b ? b : a; }
 SD_HD double Abs(double a) { return a < 0 ? -a : a; }
 SD_HD double Clamp(double x, double lo, double hi) { return x < lo ? lo : (hi < x ? hi : x); }
+// Correctly rounded on both sides (IEEE), so host and device agree.
+SD_HD double Sqrt(double x) {
+#ifdef __CUDA_ARCH__
+  return ::sqrt(x);
+#else
+  return std::sqrt(x);
+#endif
+}
 // False for NaN and +-infinity (x - x is NaN for both), without <cmath> in device code.
 SD_HD bool Finite(double x) { return x - x == 0.0; }
 // floor / ceil of values already clamped to [-1, size]: exact for the pixel ranges used here.
@@ -468,6 +477,70 @@ SD_HD void CrossingClipGradient(const PairGeometry& g, int width, double dL_dt, 
     out[e][1] = dL_dv * p.dv_dy;
     out[e][2] = dL_du * p.du_dw + dL_dv * p.dv_dw;
   }
+}
+
+// ---- vertex normals: per vertex (normals.h) ---------------------------------------------------------------
+
+// geometry::VertexNormals' arithmetic, gathered per vertex instead of scattered per face: the sum over a
+// vertex's faces, in ascending face order, of the face's (b - a) x (c - a) in double, which is the order in
+// which the face loop adds them, so the sums agree bit for bit. `corners` lists the vertex's faces as
+// 3 * face + k (k its corner), ascending.
+SD_HD Vec3d Vec3dOf(const float* positions, int32_t v) {
+  const float* p = &positions[3 * static_cast<size_t>(v)];
+  return {p[0], p[1], p[2]};
+}
+SD_HD Vec3d Sub(const Vec3d& a, const Vec3d& b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
+SD_HD Vec3d Add(const Vec3d& a, const Vec3d& b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
+
+SD_HD Vec3d VertexNormalSum(const float* positions, const int32_t* tris, const int32_t* corners, int32_t begin,
+                            int32_t end) {
+  Vec3d sum{0, 0, 0};
+  for (int32_t i = begin; i < end; ++i) {
+    const int32_t* t = &tris[3 * static_cast<size_t>(corners[i] / 3)];
+    const Vec3d a = Vec3dOf(positions, t[0]);
+    sum = Add(sum, Cross(Sub(Vec3dOf(positions, t[1]), a), Sub(Vec3dOf(positions, t[2]), a)));
+  }
+  return sum;
+}
+
+// n = s / |s| as floats; the constant 0 where |s| = 0 (no faces, or all degenerate).
+SD_HD void NormalFromSum(const Vec3d& s, float* normal) {
+  const double len = Sqrt(s.x * s.x + s.y * s.y + s.z * s.z);
+  if (len > 0) {
+    normal[0] = static_cast<float>(s.x / len), normal[1] = static_cast<float>(s.y / len);
+    normal[2] = static_cast<float>(s.z / len);
+  } else {
+    normal[0] = normal[1] = normal[2] = 0.0f;
+  }
+}
+
+// dL/ds = (g - n (n . g)) / |s|: only the part of g orthogonal to n moves the normal; 0 where |s| = 0.
+SD_HD Vec3d NormalSumGradient(const Vec3d& s, const float* grad_normal) {
+  const double len = Sqrt(s.x * s.x + s.y * s.y + s.z * s.z);
+  if (!(len > 0)) return {0, 0, 0};
+  const Vec3d n{s.x / len, s.y / len, s.z / len};
+  const Vec3d g{grad_normal[0], grad_normal[1], grad_normal[2]};
+  const double ng = Dot(n, g);
+  return {(g.x - n.x * ng) / len, (g.y - n.y * ng) / len, (g.z - n.z * ng) / len};
+}
+
+// A vertex's dL/dp: each face adds a x b + b x c + c x a to its vertices' sums, so with G the sum of dL/ds
+// over its three vertices, dL/da = (b - c) x G, dL/db = (c - a) x G, dL/dc = (a - b) x G; summed over the
+// vertex's faces in ascending order, as geometry::VertexNormalsBackward's face loop does. ds: 3 per vertex.
+SD_HD Vec3d VertexPositionGradient(const float* positions, const int32_t* tris, const double* ds,
+                                   const int32_t* corners, int32_t begin, int32_t end) {
+  Vec3d sum{0, 0, 0};
+  for (int32_t i = begin; i < end; ++i) {
+    const int32_t* t = &tris[3 * static_cast<size_t>(corners[i] / 3)];
+    const int k = corners[i] % 3;
+    const double* d0 = &ds[3 * static_cast<size_t>(t[0])];
+    const double* d1 = &ds[3 * static_cast<size_t>(t[1])];
+    const double* d2 = &ds[3 * static_cast<size_t>(t[2])];
+    const Vec3d G{d0[0] + d1[0] + d2[0], d0[1] + d1[1] + d2[1], d0[2] + d1[2] + d2[2]};
+    const Vec3d p[3] = {Vec3dOf(positions, t[0]), Vec3dOf(positions, t[1]), Vec3dOf(positions, t[2])};
+    sum = Add(sum, Cross(Sub(p[(k + 1) % 3], p[(k + 2) % 3]), G));
+  }
+  return sum;
 }
 
 }  // namespace sd::raster::shared

@@ -76,7 +76,7 @@ void Download(T* host, const T* device, size_t n) {
 struct Workspace {
   Scratch<float> clip, attr, color, grad_a, grad_b, out;
   Scratch<int32_t> tris, neighbour, pair_offset;
-  Scratch<double> sum;
+  Scratch<double> sum, normal_ds;
   Scratch<shared::TriangleSetup> setup;
   Scratch<unsigned long long> area, key;
   Scratch<uint8_t> scan_temp;
@@ -360,21 +360,29 @@ __global__ void RecordedGeometryKernel(shared::AntialiasScene sc, const PairReco
   if (!shared::RecordedPair(sc, p.pixel_a, p.pixel_b, p.triangle, p.edge, &geometry[n])) atomicExch(mismatch, 1);
 }
 
-// Scene tables on the device: projected vertices and facings, for the pair kernels.
+// The antialias scene of device inputs: projected vertices and facings in the thread's scratch, for the pair
+// kernels.
+shared::AntialiasScene DeviceResidentScene(const AntialiasInputs& in, Contract contract) {
+  Workspace& ws = workspace;
+  const int width = in.rast.width, height = in.rast.height;
+  shared::ScreenVertex* screen = ws.screen.Get(std::max<size_t>(in.num_vertices, 1));
+  int8_t* facing = ws.facing.Get(std::max<size_t>(in.num_tris, 1));
+  if (in.num_vertices) ProjectKernel<<<Blocks(in.num_vertices), kThreads>>>(in.clip, in.num_vertices, width, height, screen);
+  if (in.num_tris) FacingKernel<<<Blocks(in.num_tris), kThreads>>>(in.clip, in.tris, in.num_tris, facing, contract);
+  SD_CUDA(cudaGetLastError());
+  return {width, height, in.rast.triangle, in.rast.depth, in.tris, in.neighbour, screen, facing};
+}
+
+// The same of host inputs, uploaded first (the host checked their indices).
 shared::AntialiasScene DeviceScene(const AntialiasInputs& in) {
   Workspace& ws = workspace;
-  const RasterView& rast = in.rast;
-  const size_t num_vertices = in.num_vertices, num_tris = in.num_tris;
-  const DeviceRaster r = Resident(rast);
-  const float* d_clip = ws.clip.Upload(in.clip, 4 * num_vertices);
-  const int32_t* d_tris = ws.tris.Upload(in.tris, 3 * num_tris);
-  const int32_t* d_neighbour = ws.neighbour.Upload(in.neighbour, 3 * num_tris);
-  shared::ScreenVertex* screen = ws.screen.Get(num_vertices);
-  int8_t* facing = ws.facing.Get(num_tris);
-  if (num_vertices) ProjectKernel<<<Blocks(num_vertices), kThreads>>>(d_clip, num_vertices, rast.width, rast.height, screen);
-  if (num_tris) FacingKernel<<<Blocks(num_tris), kThreads>>>(d_clip, d_tris, num_tris, facing, Contract{});
-  SD_CUDA(cudaGetLastError());
-  return {rast.width, rast.height, r.triangle, r.depth, d_tris, d_neighbour, screen, facing};
+  const DeviceRaster r = Resident(in.rast);
+  AntialiasInputs uploaded = in;
+  uploaded.rast = {in.rast.width, in.rast.height, r.bary, r.depth, r.triangle};
+  uploaded.clip = ws.clip.Upload(in.clip, 4 * in.num_vertices);
+  uploaded.tris = ws.tris.Upload(in.tris, 3 * in.num_tris);
+  uploaded.neighbour = ws.neighbour.Upload(in.neighbour, 3 * in.num_tris);
+  return DeviceResidentScene(uploaded, Contract{});
 }
 
 }  // namespace
@@ -543,13 +551,16 @@ Matrix4 ToMatrix4(const float M[16]) {
   return out;
 }
 
-__global__ void Fill32Kernel(uint32_t* out, uint32_t pattern, size_t n) {
+template <typename Word>
+__global__ void FillKernel(Word* out, Word pattern, size_t n) {
   const size_t i = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
   if (i < n) out[i] = pattern;
 }
-__global__ void Fill64Kernel(unsigned long long* out, unsigned long long pattern, size_t n) {
-  const size_t i = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
-  if (i < n) out[i] = pattern;
+template <typename Word>
+void Fill(void* ptr, Word pattern, size_t count) {
+  if (count == 0) return;
+  FillKernel<<<Blocks(count), kThreads>>>(static_cast<Word*>(ptr), pattern, count);
+  SD_CUDA(cudaGetLastError());
 }
 
 // clip = M (p, 1), as clip.cpp's Eigen product rounds it (one product and sum per row, in column order).
@@ -685,16 +696,49 @@ void AddSumAsFloat(const double* sum, size_t n, float* out) {
 
 DeviceRaster AsDevice(const RasterView& rast) { return {rast.bary, rast.depth, rast.triangle}; }
 
-// The antialias scene of device inputs: projected vertices and facings in the thread's scratch.
-shared::AntialiasScene DeviceResidentScene(const AntialiasInputs& in, Contract contract) {
-  Workspace& ws = workspace;
-  const int width = in.rast.width, height = in.rast.height;
-  shared::ScreenVertex* screen = ws.screen.Get(std::max<size_t>(in.num_vertices, 1));
-  int8_t* facing = ws.facing.Get(std::max<size_t>(in.num_tris, 1));
-  if (in.num_vertices) ProjectKernel<<<Blocks(in.num_vertices), kThreads>>>(in.clip, in.num_vertices, width, height, screen);
-  if (in.num_tris) FacingKernel<<<Blocks(in.num_tris), kThreads>>>(in.clip, in.tris, in.num_tris, facing, contract);
-  SD_CUDA(cudaGetLastError());
-  return {width, height, in.rast.triangle, in.rast.depth, in.tris, in.neighbour, screen, facing};
+// Vertex v's corners [begin, end) in the incidence, each naming a triangle whose vertices name vertices; false
+// (and the flag raised) for an incidence of another mesh. Checked as the gathers read, like the other kernels.
+__device__ bool VertexCornersOk(const VertexNormalsInputs& in, size_t v, Contract contract, int32_t* begin,
+                                int32_t* end) {
+  *begin = in.offset[v];
+  *end = in.offset[v + 1];
+  const size_t num_corners = 3 * in.num_tris;
+  if (*begin < 0 || *end < *begin || static_cast<size_t>(*end) > num_corners) return contract.Raise(kVertexFaces);
+  for (int32_t i = *begin; i < *end; ++i) {
+    const int32_t c = in.corner[i];
+    if (c < 0 || static_cast<size_t>(c) >= num_corners) return contract.Raise(kVertexFaces);
+    if (!contract.VerticesOk(in.tris, static_cast<size_t>(c / 3))) return false;
+  }
+  return true;
+}
+
+__global__ void VertexNormalsKernel(VertexNormalsInputs in, float* normals, double* sums, Contract contract) {
+  const size_t v = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  if (v >= in.num_vertices || contract.Raised()) return;
+  int32_t begin, end;
+  if (!VertexCornersOk(in, v, contract, &begin, &end)) return;
+  const shared::Vec3d s = shared::VertexNormalSum(in.positions, in.tris, in.corner, begin, end);
+  sums[3 * v] = s.x, sums[3 * v + 1] = s.y, sums[3 * v + 2] = s.z;
+  shared::NormalFromSum(s, &normals[3 * v]);
+}
+
+__global__ void NormalSumGradientKernel(const double* sums, const float* grad_normals, size_t num_vertices, double* ds) {
+  const size_t v = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  if (v >= num_vertices) return;
+  const shared::Vec3d d = shared::NormalSumGradient({sums[3 * v], sums[3 * v + 1], sums[3 * v + 2]}, &grad_normals[3 * v]);
+  ds[3 * v] = d.x, ds[3 * v + 1] = d.y, ds[3 * v + 2] = d.z;
+}
+
+__global__ void VertexPositionGradientKernel(VertexNormalsInputs in, const double* ds, float* grad_positions,
+                                             Contract contract) {
+  const size_t v = blockIdx.x * static_cast<size_t>(blockDim.x) + threadIdx.x;
+  if (v >= in.num_vertices || contract.Raised()) return;
+  int32_t begin, end;
+  if (!VertexCornersOk(in, v, contract, &begin, &end)) return;
+  const shared::Vec3d d = shared::VertexPositionGradient(in.positions, in.tris, ds, in.corner, begin, end);
+  grad_positions[3 * v] += static_cast<float>(d.x);
+  grad_positions[3 * v + 1] += static_cast<float>(d.y);
+  grad_positions[3 * v + 2] += static_cast<float>(d.z);
 }
 
 }  // namespace
@@ -719,17 +763,8 @@ void Copy(void* dst, bool dst_on_device, const void* src, bool src_on_device, si
   if (!dst_on_device) SD_CUDA(cudaStreamSynchronize(cudaStreamPerThread));
 }
 
-void Fill32(void* ptr, uint32_t pattern, size_t count) {
-  if (count == 0) return;
-  Fill32Kernel<<<Blocks(count), kThreads>>>(static_cast<uint32_t*>(ptr), pattern, count);
-  SD_CUDA(cudaGetLastError());
-}
-
-void Fill64(void* ptr, uint64_t pattern, size_t count) {
-  if (count == 0) return;
-  Fill64Kernel<<<Blocks(count), kThreads>>>(static_cast<unsigned long long*>(ptr), pattern, count);
-  SD_CUDA(cudaGetLastError());
-}
+void Fill32(void* ptr, uint32_t pattern, size_t count) { Fill<uint32_t>(ptr, pattern, count); }
+void Fill64(void* ptr, uint64_t pattern, size_t count) { Fill<unsigned long long>(ptr, pattern, count); }
 
 int TakeContractViolation() {
   int32_t* flag = ContractFlag();
@@ -836,6 +871,23 @@ void SquaredErrorLoss(const float* prediction, const float* target, size_t num_p
   if (num_pixels == 0) return;
   SquaredErrorLossKernel<<<Blocks(num_pixels), kThreads>>>(prediction, target, num_pixels, grad_scale,
                                                            grad_prediction, loss_sum);
+  SD_CUDA(cudaGetLastError());
+}
+
+void DeviceVertexNormals(const VertexNormalsInputs& in, float* normals, double* sums) {
+  if (in.num_vertices == 0) return;
+  VertexNormalsKernel<<<Blocks(in.num_vertices), kThreads>>>(in, normals, sums,
+                                                             {ContractFlag(), in.num_vertices, in.num_tris});
+  SD_CUDA(cudaGetLastError());
+}
+
+void DeviceVertexNormalsBackward(const VertexNormalsInputs& in, const double* sums, const float* grad_normals,
+                                 float* grad_positions) {
+  if (in.num_vertices == 0) return;
+  double* ds = workspace.normal_ds.Get(3 * in.num_vertices);
+  NormalSumGradientKernel<<<Blocks(in.num_vertices), kThreads>>>(sums, grad_normals, in.num_vertices, ds);
+  VertexPositionGradientKernel<<<Blocks(in.num_vertices), kThreads>>>(in, ds, grad_positions,
+                                                                      {ContractFlag(), in.num_vertices, in.num_tris});
   SD_CUDA(cudaGetLastError());
 }
 

@@ -106,7 +106,7 @@ void Fill32(void* ptr, uint32_t pattern, size_t count);
 void Fill64(void* ptr, uint64_t pattern, size_t count);
 // The calling thread's contract flag (0: none; else a ContractViolation), read and cleared; waits.
 int TakeContractViolation();
-enum ContractViolation { kVertexIndex = 1, kRasterTriangle = 2 };
+enum ContractViolation { kVertexIndex = 1, kRasterTriangle = 2, kVertexFaces = 3 };
 
 // ---- the ops on device-resident buffers ------------------------------------------------------------------------
 // Every pointer below is device memory (the inputs structs above then hold device pointers); the work is
@@ -134,5 +134,17 @@ void UnitVectorLoss(const float* prediction, const int32_t* triangle, const floa
                     size_t num_pixels, float grad_scale, float* grad_prediction, double* loss_sum);
 void SquaredErrorLoss(const float* prediction, const float* target, size_t num_pixels, float grad_scale,
                       float* grad_prediction, double* loss_sum);
+// The vertex normals of raster/normals.h, one thread per vertex; sums and dL/ds: 3 doubles per vertex.
+struct VertexNormalsInputs {
+  const float* positions = nullptr;  // 3 per vertex
+  size_t num_vertices = 0;
+  const int32_t* tris = nullptr;
+  size_t num_tris = 0;
+  const int32_t* offset = nullptr;  // VertexFaces, num_vertices + 1
+  const int32_t* corner = nullptr;  // VertexFaces, 3 per triangle
+};
+void DeviceVertexNormals(const VertexNormalsInputs& in, float* normals, double* sums);
+void DeviceVertexNormalsBackward(const VertexNormalsInputs& in, const double* sums, const float* grad_normals,
+                                 float* grad_positions);
 
 }  // namespace sd::raster::cuda

@@ -8,6 +8,7 @@
 #include "datasets/writers.h"
 #include "io/batch.h"
 #include "io/files.h"
+#include "io/geometry_json.h"
 #include "io/json.h"
 #include "synth/parts.h"
 #include "synth/report.h"
@@ -135,7 +136,8 @@ SynthSummary WriteSynthOutput(const SynthInputs& in, const SynthRequest& request
                                {"category", ob.label.category},
                                {"center_ego_m", {b.center().x(), b.center().y(), b.center().z()}},
                                {"size_m", {b.size.x(), b.size.y(), b.size.z()}},
-                               {"yaw_ego_rad", b.Yaw()},
+                               {"yaw_ego_rad", b.Yaw()},  // the heading; the box tilts with the road
+                               {"box_ego", Box3Json(b)},  // the whole box, rotation included
                                {"ground_height_m", ob.placement.ground_height},
                                {"lidar_points", ob.lidar_points},
                                {"visible_fraction", ob.rendered_pixels > 0 ? ob.visible_pixels / ob.rendered_pixels : 0.0}});

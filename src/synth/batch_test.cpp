@@ -18,6 +18,7 @@
 #include "assetgen/canonical.h"
 #include "datasets/coco.h"
 #include "io/files.h"
+#include "io/geometry_json.h"
 #include "io/json.h"
 #include "io/mesh_io.h"
 #include "synth/batch.h"
@@ -213,6 +214,35 @@ TEST_F(SynthBatchTest, PartsOfAnOlderLayoutAreRefused) {
   EXPECT_FALSE(fs::exists(out));
   err = InputErrorOf([&] { RunSynthShard(KittiRequest(Dir(), out), ShardSpec{1, 2}); });
   EXPECT_NE(err.find("a synth part of version 2"), std::string::npos) << err;
+}
+
+// synth.json records each object's whole box, the tilt the road gave it included, as the part holds it: the
+// heading (yaw_ego_rad) alone would lay a box on a slope flat.
+TEST_F(SynthBatchTest, SynthJsonHoldsEachObjectsWholeBox) {
+  const nlohmann::json j = ReadJsonFile(Dir() / "local" / "synth.json");
+  ASSERT_EQ(j["frames"].size(), 3u);
+  size_t objects = 0;
+  double largest_tilt = 0;
+  for (size_t f = 0; f < j["frames"].size(); ++f) {
+    const nlohmann::json& jf = j["frames"][f];
+    const fs::path part = SynthPartsDir(Dir() / "sharded") /
+                          (std::to_string(f) + "-" + jf["token"].get<std::string>()) / "part.json";
+    const nlohmann::json part_json = ReadJsonFile(part);
+    const JsonReader objects_of_part = JsonReader(part_json, part)["objects"];
+    ASSERT_EQ(jf["objects"].size(), objects_of_part.Size()) << part;
+    for (size_t k = 0; k < jf["objects"].size(); ++k, ++objects) {
+      const Box3 written = ReadBox3(JsonReader(jf["objects"][k], "synth.json")["box_ego"]);
+      const Box3 placed = ReadBox3(objects_of_part[k]["box"]);
+      EXPECT_EQ(written.T_frame_box.translation, placed.T_frame_box.translation);
+      EXPECT_EQ(written.T_frame_box.rotation.coeffs(), placed.T_frame_box.rotation.coeffs());
+      EXPECT_EQ(written.size, placed.size);
+      EXPECT_NEAR(written.Yaw(), jf["objects"][k]["yaw_ego_rad"].get<double>(), 1e-12);
+      const Eigen::Vector3d up = written.T_frame_box.Rotation().col(2);
+      largest_tilt = std::max(largest_tilt, std::acos(std::clamp(up.z(), -1.0, 1.0)));
+    }
+  }
+  EXPECT_GT(objects, 0u);
+  EXPECT_GT(largest_tilt, 1e-4) << "no object tilted with its road: the test shows nothing";
 }
 
 // Realism is the default: each frame's model, fitted from its own HDL-64E sweep (KITTI: record-order lasers,

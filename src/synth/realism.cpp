@@ -10,6 +10,7 @@
 #include "datasets/readers.h"
 #include "geometry/box_projection.h"
 #include "geometry/polygon.h"
+#include "io/geometry_json.h"
 #include "io/image_io.h"
 #include "io/json.h"
 #include "synth/real_shadows.h"
@@ -464,9 +465,13 @@ RealismReport EvaluateRealism(const std::filesystem::path& synth_out) {
     for (size_t k = 0; k < rf["objects"].Size(); ++k) {
       const JsonReader o = rf["objects"][k];
       Box3 b;
-      b.T_frame_box = Rigid3d(Eigen::Quaterniond(Eigen::AngleAxisd(o["yaw_ego_rad"].Number(), Eigen::Vector3d::UnitZ())),
-                              Eigen::Vector3d(o["center_ego_m"][0].Number(), o["center_ego_m"][1].Number(), o["center_ego_m"][2].Number()));
-      b.size = Eigen::Vector3d(o["size_m"][0].Number(), o["size_m"][1].Number(), o["size_m"][2].Number());
+      if (o.Has("box_ego")) {
+        b = ReadBox3(o["box_ego"]);
+      } else {  // written before synth.json held the whole box: the heading alone, level
+        b.T_frame_box = Rigid3d(Eigen::Quaterniond(Eigen::AngleAxisd(o["yaw_ego_rad"].Number(), Eigen::Vector3d::UnitZ())),
+                                Eigen::Vector3d(o["center_ego_m"][0].Number(), o["center_ego_m"][1].Number(), o["center_ego_m"][2].Number()));
+        b.size = Eigen::Vector3d(o["size_m"][0].Number(), o["size_m"][1].Number(), o["size_m"][2].Number());
+      }
       inserted.push_back({o["category"].String(), b});
     }
     // The frame's final images, each read once: a camera synth drew from the output, the others (needed only for

@@ -62,20 +62,28 @@ Downsampled Downsample(const ImageU8& img, int factor, int saturated_level) {
   d.linear = ImageF(w, h, 3, 0.0f);
   d.saturated = ImageF(w, h, 1, 0.0f);
   const float inv = 1.0f / (factor * factor);
+  // SrgbByteToLinear's values, read without a call per byte (26 million of them for a surround rig).
+  static const std::array<float, 256> to_linear = [] {
+    std::array<float, 256> t{};
+    for (int i = 0; i < 256; ++i) t[static_cast<size_t>(i)] = SrgbByteToLinear(static_cast<uint8_t>(i));
+    return t;
+  }();
+  const size_t step = static_cast<size_t>(img.channels());
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       float acc[3] = {0, 0, 0};
       float sat = 0;
-      for (int j = 0; j < factor; ++j)
-        for (int i = 0; i < factor; ++i) {
-          const uint8_t* p = img.pixel(x * factor + i, y * factor + j);
+      for (int j = 0; j < factor; ++j) {
+        const uint8_t* p = img.pixel(x * factor, y * factor + j);
+        for (int i = 0; i < factor; ++i, p += step) {
           bool s = false;
           for (int c = 0; c < 3; ++c) {
-            acc[c] += SrgbByteToLinear(p[c]);
+            acc[c] += to_linear[p[c]];
             s = s || p[c] >= saturated_level;
           }
           sat += s ? 1.0f : 0.0f;
         }
+      }
       for (int c = 0; c < 3; ++c) d.linear.at(x, y, c) = acc[c] * inv;
       d.saturated.at(x, y) = sat * inv;
     }
@@ -87,14 +95,16 @@ struct Layer {
   ImageF color, weight, saturated;
 };
 
-Layer ProjectCamera(const CameraSensor& cam, const Downsampled& d, int W, int H) {
+// directions: LatLongDirection of each map pixel's centre, row by row (the same for every camera).
+Layer ProjectCamera(const CameraSensor& cam, const Downsampled& d, int W, int H,
+                    const std::vector<Eigen::Vector3d>& directions) {
   Layer l{ImageF(W, H, 3, 0.0f), ImageF(W, H, 1, 0.0f), ImageF(W, H, 1, 0.0f)};
   const Eigen::Matrix3d R_cam_ego = cam.T_ego_cam.rotation.conjugate().toRotationMatrix();
   const PinholeCamera& K = cam.intrinsics;
   const bool distorted = !K.distortion.IsZero();
   for (int v = 0; v < H; ++v)
     for (int u = 0; u < W; ++u) {
-      const Eigen::Vector3d dc = R_cam_ego * LatLongDirection(u + 0.5, v + 0.5, W, H);
+      const Eigen::Vector3d dc = R_cam_ego * directions[static_cast<size_t>(v) * W + u];
       if (dc.z() < 0.05) continue;
       const auto uv = K.Project(dc, 1e-6);
       if (!uv || !K.InImage(*uv)) continue;
@@ -302,11 +312,14 @@ EnvironmentMap BuildEnvironmentMap(const Frame& frame, const std::vector<ImageU8
                                                           << frame.cameras[k].intrinsics.height << " RGB");
 
   // Per-camera layers on the map.
+  std::vector<Eigen::Vector3d> directions(static_cast<size_t>(W) * H);
+  for (int v = 0; v < H; ++v)
+    for (int u = 0; u < W; ++u) directions[static_cast<size_t>(v) * W + u] = LatLongDirection(u + 0.5, v + 0.5, W, H);
   std::vector<Layer> layers(nc);
   ParallelForRethrow(0, nc, [&](size_t k) {
     const auto& cam = frame.cameras[k];
     const int factor = std::max(1, static_cast<int>(std::lround(cam.intrinsics.fx * 2 * M_PI / W)));
-    layers[k] = ProjectCamera(cam, Downsample(images[k], factor, options.saturated_level), W, H);
+    layers[k] = ProjectCamera(cam, Downsample(images[k], factor, options.saturated_level), W, H, directions);
   });
 
   // Overlaps -> relative gains.

@@ -10,6 +10,7 @@
 #include <tuple>
 
 #include "core/log.h"
+#include "core/parallel.h"
 #include "core/stats.h"
 #include "datasets/categories.h"
 #include "datasets/readers.h"
@@ -571,16 +572,37 @@ FrameOutcome SynthesizeFrame(const Log& log, size_t frame_index, const std::vect
   const CameraStageInput stage{&in,      &placed, &light, &scene, harmonizer.get(), &options,
                                options.camera_look.colour ? &colour_reference : nullptr,
                                plan != nullptr,  times};
-  for (size_t cam_index = 0; cam_index < in.frame->cameras.size(); ++cam_index) {
-    std::optional<CameraOutcome> camera = SynthesizeCamera(stage, cam_index, &out.objects);
-    if (!camera) continue;
-    out.edit.images[camera->channel] = camera->after;
-    out.cameras.push_back(std::move(*camera));
+  // The cameras and the LiDAR depend on nothing but the stages above, so they run at once: a camera's stages after
+  // its render (occlusion, composite, harmonisation, colour, sensor) and the LiDAR are mostly serial, and overlap
+  // this way with each other and with the other cameras' rendering. Each writes only its own slot (the LiDAR its
+  // fields of `out`); they are gathered in camera order, so the outcome is the one a serial loop gives, and the
+  // error of the lowest camera (then the LiDAR's) is the one thrown.
+  struct CameraSlot {
+    std::optional<CameraOutcome> camera;
+    std::vector<CameraObjectView> views;
+    StageTimes times;
+  };
+  const size_t n_cameras = in.frame->cameras.size();
+  std::vector<CameraSlot> slots(n_cameras);
+  StageTimes lidar_times;
+  ParallelForRethrow(0, n_cameras + 1, [&](size_t i) {
+    if (i == n_cameras) {
+      ScopedStage lidar_stage(&lidar_times, "lidar");
+      SimulateFrameLidar(in, placed, options, &out);
+      return;
+    }
+    CameraStageInput own = stage;
+    own.times = &slots[i].times;
+    slots[i].camera = SynthesizeCamera(own, i, &slots[i].views);
+  });
+  for (CameraSlot& slot : slots) {
+    times->Merge(slot.times);
+    AddCameraViews(slot.views, &out.objects);
+    if (!slot.camera) continue;
+    out.edit.images[slot.camera->channel] = slot.camera->after;
+    out.cameras.push_back(std::move(*slot.camera));
   }
-
-  ScopedStage lidar_stage(times, "lidar");
-  SimulateFrameLidar(in, placed, options, &out);
-  lidar_stage.Stop();
+  times->Merge(lidar_times);
   FinishLabels(&out);
   if (plan) DropUnobserved(&out);
   return out;

@@ -432,9 +432,10 @@ constexpr double kLabelNearM = 0.1;
 
 }  // namespace
 
-std::optional<CameraOutcome> SynthesizeCamera(const CameraStageInput& st, size_t cam_index, std::vector<ObjectOutcome>* objects) {
+std::optional<CameraOutcome> SynthesizeCamera(const CameraStageInput& st, size_t cam_index, std::vector<CameraObjectView>* views) {
   const CameraSensor& cam = st.in->frame->cameras[cam_index];
   const std::vector<PlacedObject>& placed = *st.placed;
+  views->assign(placed.size(), CameraObjectView{});
   const auto projected_rect = ProjectedRect(cam.intrinsics, cam.T_ego_cam.Inverse(), st.scene->extent_points, 2);
   if (!projected_rect) return std::nullopt;
   const Rect rect{(*projected_rect)[0], (*projected_rect)[1], (*projected_rect)[2], (*projected_rect)[3]};
@@ -518,9 +519,9 @@ std::optional<CameraOutcome> SynthesizeCamera(const CameraStageInput& st, size_t
     if (look_options.colour) co.look["colour"] = colour;
   }
   for (size_t k = 0; k < placed.size(); ++k) {
-    ObjectOutcome& oc = (*objects)[k];
-    oc.rendered_pixels += c.rendered[k];
-    oc.visible_pixels += c.visible[k];
+    CameraObjectView& view = (*views)[k];
+    view.rendered_pixels = c.rendered[k];
+    view.visible_pixels = c.visible[k];
     if (c.visible[k] < 4) continue;  // a few pixels are not a labelable object
     CameraBox cb;
     cb.channel = cam.channel;
@@ -528,10 +529,20 @@ std::optional<CameraOutcome> SynthesizeCamera(const CameraStageInput& st, size_t
     cb.visible_fraction = c.rendered[k] > 0 ? c.visible[k] / c.rendered[k] : 0;
     const auto in_image = geometry::ProjectBoxToImage(cam.intrinsics, cam.T_ego_cam.Inverse(), placed[k].box, kLabelNearM);
     cb.truncation = in_image ? in_image->truncation : 1.0;
-    oc.label.camera_boxes.push_back(cb);
+    view.box = cb;
     co.objects.push_back(static_cast<int>(k));
   }
   return co;
+}
+
+void AddCameraViews(const std::vector<CameraObjectView>& views, std::vector<ObjectOutcome>* objects) {
+  SD_CHECK(views.empty() || views.size() == objects->size(), << views.size() << " views of " << objects->size() << " objects");
+  for (size_t k = 0; k < views.size(); ++k) {
+    ObjectOutcome& oc = (*objects)[k];
+    oc.rendered_pixels += views[k].rendered_pixels;
+    oc.visible_pixels += views[k].visible_pixels;
+    if (views[k].box) oc.label.camera_boxes.push_back(*views[k].box);
+  }
 }
 
 }  // namespace frame_stages

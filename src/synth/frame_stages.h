@@ -82,7 +82,7 @@ struct CameraStageInput {
   // The camera look's colour reference (ColourReference); null when the look's colour step is off.
   const std::map<std::string, SaturationReference>* colour_reference = nullptr;
   bool sequence = false;  // that reference is a planned sequence's
-  StageTimes* times = nullptr;  // where the camera stages add their seconds (FrameOutcome::timings)
+  StageTimes* times = nullptr;  // where the camera stages add their seconds (the camera's own: not thread-safe)
 };
 
 // The colour reference of a frame's inserts: per category placed, its most saturated real object (realism.h
@@ -92,10 +92,19 @@ struct CameraStageInput {
 std::map<std::string, SaturationReference> ColourReference(const FrameInputs& in, const std::vector<PlacedObject>& placed,
                                                            const SequencePlan* plan);
 
+// What one camera adds to an object's outcome: its pixels, and its 2D box where it is labelable.
+struct CameraObjectView {
+  double rendered_pixels = 0, visible_pixels = 0;
+  std::optional<CameraBox> box;
+};
+
 // One camera: its light at the objects, the render and the soft shadows, the receiver's depth, occlusion by the
-// real scene, the composite in linear light, harmonisation, and the objects' 2D boxes. Adds the camera's pixels
-// and boxes to `objects`; nullopt when the objects do not touch the camera's image.
-std::optional<CameraOutcome> SynthesizeCamera(const CameraStageInput& stage, size_t cam_index, std::vector<ObjectOutcome>* objects);
+// real scene, the composite in linear light, harmonisation, and the objects' 2D boxes. Fills `views` (one per
+// placed object; they are added to the frame's objects by AddCameraViews, in camera order) and returns nullopt
+// when the objects do not touch the camera's image. Reads only what the frame's earlier stages made, so the
+// cameras of a frame run concurrently; `stage.times` must be the camera's own.
+std::optional<CameraOutcome> SynthesizeCamera(const CameraStageInput& stage, size_t cam_index, std::vector<CameraObjectView>* views);
+void AddCameraViews(const std::vector<CameraObjectView>& views, std::vector<ObjectOutcome>* objects);
 
 // Drivable ground points within `margin_m` of the objects' footprints (their bounding circles).
 std::vector<Eigen::Vector3d> RoadPointsNear(const GroundModel& ground, const std::vector<PlacedObject>& objects, double margin_m = 6.0);

@@ -63,7 +63,8 @@ struct FrameOutcome {
   std::optional<LidarModel> lidar_model_fit;  // the fitted model itself; in memory only (not in parts)
   bool lidar_ego_motion = false;              // rolling shutter from the neighbouring frames' ego poses
   // Seconds per stage of SynthesizeFrame ("read", "light", "camera render", ...; camera stages summed over the
-  // cameras): where the frame's time went. In memory only; benchmarks and --verbose print it.
+  // cameras): where the frame's time went. The cameras and the LiDAR run at once, so their stages may add up to
+  // more than the frame's wall time. In memory only; benchmarks and --verbose print it.
   StageTimes timings;
 };
 

@@ -559,6 +559,12 @@ EnvironmentLight MakeEnvironmentLight(const EnvironmentMap& map) {
   EnvironmentLight l;
   l.sh = MapSh(map);
   l.radiance = &map.radiance;
+  if (!map.radiance.empty()) {
+    auto luminance = std::make_shared<ImageF>(map.radiance.width(), map.radiance.height(), 1);
+    for (int v = 0; v < luminance->height(); ++v)
+      for (int u = 0; u < luminance->width(); ++u) luminance->at(u, v) = Luma(map.radiance.pixel(u, v));
+    l.radiance_luminance = std::move(luminance);
+  }
   l.sun_direction = map.sun_direction;
   l.sun_irradiance = map.sun_irradiance;
   l.sun_angular_radius_rad = map.sun_angular_radius_rad;
@@ -603,6 +609,50 @@ class CosineLobe {
   Eigen::Vector3d n_, t_, b_;
 };
 
+// CosineLobe in single precision, for the road's sky rays (16 per road pixel): the double-precision sine and
+// cosine save and restore the rounding mode on every call, and cost more than tracing the rays.
+class CosineLobeF {
+ public:
+  explicit CosineLobeF(const Eigen::Vector3d& normal) {
+    const Eigen::Vector3d n = normal.normalized();
+    Eigen::Vector3d t, b;
+    Basis(n, &t, &b);
+    n_ = n.cast<float>(), t_ = t.cast<float>(), b_ = b.cast<float>();
+  }
+  Eigen::Vector3f Ray(int k, int count, uint32_t seed) const {
+    const Eigen::Vector2d r = Stratified(k, count, seed, 29);
+    const float rx = static_cast<float>(r.x()), phi = 2.0f * static_cast<float>(M_PI) * static_cast<float>(r.y());
+    const float rr = std::sqrt(rx);
+    return (rr * std::cos(phi) * t_ + rr * std::sin(phi) * b_ + std::sqrt(std::max(0.0f, 1.0f - rx)) * n_).normalized();
+  }
+
+ private:
+  Eigen::Vector3f n_, t_, b_;
+};
+
+// LatLongPixel of a unit direction in single precision (the map is a degree or so per pixel).
+Eigen::Vector2f LatLongPixelF(const Eigen::Vector3f& d, int width, int height) {
+  constexpr float kPiF = static_cast<float>(M_PI);
+  const float phi = std::atan2(d.y(), d.x()), el = std::asin(std::clamp(d.z(), -1.0f, 1.0f));
+  float u = (kPiF - phi) / (2 * kPiF) * static_cast<float>(width);
+  if (u >= static_cast<float>(width)) u -= static_cast<float>(width);
+  return {u, (kPiF / 2 - el) / kPiF * static_cast<float>(height)};
+}
+
+// SampleBilinear of a one-channel image (its addressing: pixel centres at +0.5, clamped at the borders), inline.
+float SampleBilinear1(const ImageF& img, float u, float v) {
+  const float x = std::clamp(u - 0.5f, 0.0f, static_cast<float>(img.width() - 1));
+  const float y = std::clamp(v - 0.5f, 0.0f, static_cast<float>(img.height() - 1));
+  const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+  const int x1 = std::min(x0 + 1, img.width() - 1), y1 = std::min(y0 + 1, img.height() - 1);
+  const float fx = x - static_cast<float>(x0), fy = y - static_cast<float>(y0);
+  const float* row0 = img.pixel(0, y0);
+  const float* row1 = img.pixel(0, y1);
+  const float a = row0[x0] * (1 - fx) + row0[x1] * fx;
+  const float b = row1[x0] * (1 - fx) + row1[x1] * fx;
+  return a * (1 - fy) + b * fy;
+}
+
 }  // namespace
 
 double SunVisibility(const RayScene& scene, const Eigen::Vector3d& p, const Eigen::Vector3d& normal, const EnvironmentLight& light,
@@ -643,15 +693,14 @@ namespace {
 double SkyOpenShare(const RayScene& scene, const Eigen::Vector3f& origin, const Eigen::Vector3d& n,
                     const EnvironmentLight& light, const EnvShadingOptions& o) {
   const int ns = std::max(1, o.sky_rays);
-  const CosineLobe lobe(n);
+  const CosineLobeF lobe(n);
   // Per thread, reused: this runs once per road pixel.
-  thread_local std::vector<Eigen::Vector3d> dirs_d;
   thread_local std::vector<Eigen::Vector3f> dirs;
   thread_local std::vector<char> blocked;
-  dirs_d.clear(), dirs.clear();
+  dirs.clear();
   for (int k = 0; k < ns; ++k) {
-    const Eigen::Vector3d d = lobe.Ray(k, ns, o.seed);
-    if (d.z() > 0) dirs_d.push_back(d), dirs.push_back(d.cast<float>());
+    const Eigen::Vector3f d = lobe.Ray(k, ns, o.seed);
+    if (d.z() > 0) dirs.push_back(d);
   }
   blocked.assign(dirs.size(), 0);
   bool any_blocked = false;
@@ -663,10 +712,14 @@ double SkyOpenShare(const RayScene& scene, const Eigen::Vector3f& origin, const 
   }
   if (!any_blocked) return 1.0;
   double sky_all = 0, sky_open = 0;
+  const ImageF* luminance = light.radiance_luminance.get();
   for (size_t k = 0; k < dirs.size(); ++k) {
     double L = 1.0;
-    if (light.radiance && !light.radiance->empty()) {
-      const Eigen::Vector2d uv = LatLongPixel(dirs_d[k], light.radiance->width(), light.radiance->height());
+    if (luminance && !luminance->empty()) {
+      const Eigen::Vector2f uv = LatLongPixelF(dirs[k], luminance->width(), luminance->height());
+      L = SampleBilinear1(*luminance, uv.x(), uv.y());
+    } else if (light.radiance && !light.radiance->empty()) {
+      const Eigen::Vector2f uv = LatLongPixelF(dirs[k], light.radiance->width(), light.radiance->height());
       float rgb[3];
       SampleBilinear(*light.radiance, uv.x(), uv.y(), rgb);
       L = Luma(rgb);

@@ -29,6 +29,7 @@
 // shadows of annotated objects: lit road / shadowed road = (E_sun sin(el) + E_sky) / (k E_sky) with E_sky the
 // map's sky irradiance on the road and k the sky fraction a shadowed spot still sees; albedo cancels.
 #include <array>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -134,6 +135,9 @@ std::optional<Eigen::Vector3d> DetectSunInImages(const Frame& frame, const std::
 struct EnvironmentLight {
   ShIrradiance sh;
   const ImageF* radiance = nullptr;    // lat-long map for directional sky occlusion on the receiver (may be null)
+  // The luminance of `radiance`, made with it (MakeEnvironmentLight): what the receiver's sky weights read. Null:
+  // they read `radiance` and take its luminance per sample (the same weights, to float rounding).
+  std::shared_ptr<const ImageF> radiance_luminance;
   Eigen::Vector3d sun_direction = Eigen::Vector3d(0, 0, 1);
   Eigen::Vector3f sun_irradiance = Eigen::Vector3f::Zero();
   double sun_angular_radius_rad = 0.0047;

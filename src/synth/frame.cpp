@@ -156,7 +156,8 @@ FrameLight LightFrame(const FrameInputs& in, const Scenario& scenario, const Syn
   light.sun_dir = SunDirectionEgo(frame, scenario.location ? scenario.location : in.log->location, scenario.sun, &sun_source);
   if (options.light == SynthOptions::Light::kEnvironment && !placed.empty()) {
     ScopedStage decode_stage(out ? &out->timings : nullptr, "light: decode");
-    for (size_t k = 0; k < frame.cameras.size(); ++k) in.Image(k);
+    // Each camera's image into its own slot, at once: six JPEG decodes are a tenth of a second in turn.
+    ParallelForRethrow(0, frame.cameras.size(), [&](size_t k) { in.Image(k); });
     decode_stage.Stop();
     ScopedStage map_stage(out ? &out->timings : nullptr, "light: map");
     EnvironmentOptions eo;

@@ -37,7 +37,8 @@ struct FrameInputs {
   std::vector<uint8_t> is_ground;  // parallel to points_ego
   std::vector<Box3> real_boxes;
   std::vector<std::pair<std::string, Box3>> annotated;  // (category, box), for the LiDAR's reference intensities
-  // Camera k's photograph (sRGB), read and checked against its calibration the first time it is asked for.
+  // Camera k's photograph (sRGB), read and checked against its calibration the first time it is asked for. Safe
+  // from several threads for different k only.
   const ImageU8& Image(size_t k) const;
   // Camera k's JPEG quality, from its file's quantisation table; nullopt for other formats.
   std::optional<int> JpegQuality(size_t k) const;

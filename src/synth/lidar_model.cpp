@@ -479,9 +479,10 @@ LidarModel FitLidarModel(const PointCloud& sweep, const LidarFitOptions& options
       for (size_t i = 0; i < n; ++i) {
         if (!valid[i]) continue;
         const Eigen::Vector3d p = sweep.xyz(i).cast<double>();
-        if (!box.Contains(p, 0.05)) continue;
-        // Nearest face of the box: smallest normalised distance to a face.
+        // Box3::Contains(p, 0.05), with the box's inverse pose made once for all points.
         const Eigen::Vector3d q = T_box_frame * p;
+        if (!(q.cwiseAbs().array() <= (0.5 * box.size.array() + 0.05)).all()) continue;
+        // Nearest face of the box: smallest normalised distance to a face.
         int axis = 0;
         double best = 1e9;
         for (int k = 0; k < 3; ++k) {

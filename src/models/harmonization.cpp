@@ -5,6 +5,7 @@
 
 #include "core/error.h"
 #include "core/log.h"
+#include "core/parallel.h"
 #include "models/resample.h"
 
 namespace sd::models {
@@ -186,16 +187,25 @@ ImageF Harmonizer::HarmonizeClassical(const ImageF& composite, const ImageF& mas
   };
   for (int y = 0; y < bh; ++y) dilate_line(&fg[static_cast<size_t>(y) * bw], &row_dilated[static_cast<size_t>(y) * bw], bw, 1);
   for (int x = 0; x < bw; ++x) dilate_line(&row_dilated[static_cast<size_t>(x)], &dilated[static_cast<size_t>(x)], bh, bw);
-  std::vector<std::array<float, 3>> fg_lab, ring_lab;
   const auto rgb_at = [&](int x, int y) {
     return std::array<float, 3>{composite.at(x, y, 0), composite.at(x, y, 1), composite.at(x, y, 2)};
   };
-  for (int y = 0; y < bh; ++y)
-    for (int x = 0; x < bw; ++x) {
-      const size_t i = static_cast<size_t>(y) * bw + x;
-      if (fg[i]) fg_lab.push_back(SrgbToLab(rgb_at(bx0 + x, by0 + y)));
-      else if (dilated[i]) ring_lab.push_back(SrgbToLab(rgb_at(bx0 + x, by0 + y)));
-    }
+  // The object's and the ring's pixels in scan order, then their Lab values in parallel (a cube root and three
+  // powers each), each into its own slot: the statistics below sum them in that order.
+  std::vector<size_t> fg_at, ring_at;
+  for (size_t i = 0; i < fg.size(); ++i) {
+    if (fg[i]) fg_at.push_back(i);
+    else if (dilated[i]) ring_at.push_back(i);
+  }
+  const auto lab_of = [&](const std::vector<size_t>& at) {
+    std::vector<std::array<float, 3>> lab(at.size());
+    ParallelForRange(0, at.size(), 4096, [&](size_t begin, size_t end) {
+      for (size_t j = begin; j < end; ++j)
+        lab[j] = SrgbToLab(rgb_at(bx0 + static_cast<int>(at[j] % bw), by0 + static_cast<int>(at[j] / bw)));
+    });
+    return lab;
+  };
+  const std::vector<std::array<float, 3>> fg_lab = lab_of(fg_at), ring_lab = lab_of(ring_at);
   if (ring_lab.size() < 16) {
     SD_LOG(Warn, "harmonisation: only " << ring_lab.size() << " background pixels around the object; left as is");
     return composite;
@@ -227,7 +237,8 @@ ImageF Harmonizer::HarmonizeClassical(const ImageF& composite, const ImageF& mas
                options_.chroma_strength * ((b.mean[c] - cast_ring[c - 1]) - (f.mean[c] - cast_fg[c - 1]));
   // Every pixel the mask touches (soft edges included) gets the transfer; BlendByMask weighs it by coverage.
   ImageF harmonised = composite;
-  for (int y = by0; y <= by1; ++y)
+  ParallelFor(static_cast<size_t>(by0), static_cast<size_t>(by1) + 1, [&](size_t row) {  // pixel by pixel
+    const int y = static_cast<int>(row);
     for (int x = bx0; x <= bx1; ++x) {
       if (mask.at(x, y) <= 0) continue;
       std::array<float, 3> lab = SrgbToLab(rgb_at(x, y));
@@ -236,6 +247,7 @@ ImageF Harmonizer::HarmonizeClassical(const ImageF& composite, const ImageF& mas
       const std::array<float, 3> rgb = LabToSrgb(lab);
       for (int c = 0; c < 3; ++c) harmonised.at(x, y, c) = rgb[c];
     }
+  });
   return BlendByMask(composite, mask, harmonised);
 }
 

@@ -7,6 +7,7 @@
 #include <string>
 
 #include "core/log.h"
+#include "core/parallel.h"
 #include "datasets/categories.h"
 #include "geometry/box_projection.h"
 #include "models/harmonization.h"
@@ -231,8 +232,10 @@ struct Composite {
 double ShadeBlurSigma(double blur_sigma) { return blur_sigma > 0 ? std::max(blur_sigma, kShadeBlurSigma) : 0.0; }
 
 // CompositeObjects within one of its regions, `region`, blurred from the pixels of `context` around it.
-void CompositeRegion(const ObjectRender& r, const OcclusionMasks& occ, size_t n_objects, const Rect& region,
-                     const Rect& context, double blur_sigma, ImageF* linear, Composite* c) {
+// Writes the region's pixels of `linear` and of `c`'s images; counts its objects' pixels, boxes and whether it
+// changed anything in `counts`.
+void CompositeRegionInto(const ObjectRender& r, const OcclusionMasks& occ, size_t n_objects, const Rect& region,
+                         const Rect& context, double blur_sigma, ImageF* linear, Composite* c, Composite* counts) {
   // Premultiplied colour and alpha, in `context`'s coordinates.
   ImageF layer(context.x1 - context.x0, context.y1 - context.y0, 4, 0.0f);
   for (int y = context.y0; y < context.y1; ++y)
@@ -245,10 +248,10 @@ void CompositeRegion(const ObjectRender& r, const OcclusionMasks& occ, size_t n_
       const int id = r.render.object.at(x, y);
       const bool own = x >= region.x0 && x < region.x1 && y >= region.y0 && y < region.y1;  // counted once
       if (own && id >= 0 && id < static_cast<int>(n_objects) && a >= 0.5f) {
-        c->rendered[id] += 1;
+        counts->rendered[id] += 1;
         if (vis > 0.5f) {
-          c->visible[id] += 1;
-          Box2& b = c->boxes[id];
+          counts->visible[id] += 1;
+          Box2& b = counts->boxes[id];
           b.x1 = std::min<double>(b.x1, x);
           b.y1 = std::min<double>(b.y1, y);
           b.x2 = std::max<double>(b.x2, x + 1);
@@ -279,7 +282,7 @@ void CompositeRegion(const ObjectRender& r, const OcclusionMasks& occ, size_t n_
         c->shadow_only_loss.at(x, y, ch) = px[ch] * (1 - av) * (1 - shade_here);
         px[ch] = l[ch] + px[ch] * (1 - av);  // shadows are taken away below
       }
-      c->changed = true;
+      counts->changed = true;
       if (shade_here < 1.0f) c->shadow_noise.at(x, y) = (1 - av) * std::sqrt(std::max(0.0f, 1 - shade_here * shade_here));
     }
 }
@@ -301,11 +304,29 @@ Composite CompositeObjects(const ObjectRender& r, const OcclusionMasks& occ, siz
   c.regions = TileRunsAround(bounds, reach, [&](int x, int y) {
     return r.render.coverage.at(x, y) > 0 || (occ.receiver.at(x, y) > 0.5f && r.shadow.at(x, y) != 1.0f);
   });
-  for (const auto& g : c.regions) {
+  // The regions are disjoint and each blurs from the untouched photograph's values around it (the layer and the
+  // shade, not `linear`), so they go in parallel; each counts its own objects' pixels, added in region order.
+  std::vector<Composite> parts(c.regions.size());
+  ParallelFor(0, c.regions.size(), [&](size_t i) {
+    const auto& g = c.regions[i];
     const Rect region{g[0], g[1], g[2], g[3]};
     const Rect context{std::max(bounds.x0, g[0] - reach), std::max(bounds.y0, g[1] - reach),
                        std::min(bounds.x1, g[2] + reach), std::min(bounds.y1, g[3] + reach)};
-    CompositeRegion(r, occ, n_objects, region, context, blur_sigma, linear, &c);
+    Composite& part = parts[i];
+    part.rendered.assign(n_objects, 0);
+    part.visible.assign(n_objects, 0);
+    part.boxes.assign(n_objects, Box2{1e9, 1e9, -1e9, -1e9});
+    CompositeRegionInto(r, occ, n_objects, region, context, blur_sigma, linear, &c, &part);
+  });
+  for (const Composite& part : parts) {
+    c.changed = c.changed || part.changed;
+    for (size_t k = 0; k < n_objects; ++k) {
+      c.rendered[k] += part.rendered[k];
+      c.visible[k] += part.visible[k];
+      Box2& b = c.boxes[k];
+      const Box2& pb = part.boxes[k];
+      b.x1 = std::min(b.x1, pb.x1), b.y1 = std::min(b.y1, pb.y1), b.x2 = std::max(b.x2, pb.x2), b.y2 = std::max(b.y2, pb.y2);
+    }
   }
   return c;
 }
@@ -348,19 +369,24 @@ int HarmonizeObjects(const models::Harmonizer& harmonizer, const ObjectRender& r
     const int cx1 = std::min(linear->width(), b.x1 + margin), cy1 = std::min(linear->height(), b.y1 + margin);
     ImageF composite(cx1 - cx0, cy1 - cy0, 3);
     ImageF mask(composite.width(), composite.height(), 1, 0.0f);
-    for (int y = cy0; y < cy1; ++y)
+    // Three sRGB conversions a pixel of a crop that grows with the object: rows in parallel (the same result).
+    ParallelFor(static_cast<size_t>(cy0), static_cast<size_t>(cy1), [&](size_t row) {
+      const int y = static_cast<int>(row);
       for (int x = cx0; x < cx1; ++x) {
         for (int ch = 0; ch < 3; ++ch) composite.at(x - cx0, y - cy0, ch) = LinearToSrgb(std::clamp(linear->at(x, y, ch), 0.0f, 1.0f));
         if (x >= b.x0 && x < b.x1 && y >= b.y0 && y < b.y1 && r.render.object.at(x, y) == static_cast<int>(k))
           mask.at(x - cx0, y - cy0) = c.object_alpha.at(x, y);
       }
+    });
     const ImageF out = harmonizer.Harmonize(composite, mask);
     // Back to linear only where the object is: elsewhere the harmoniser returned the composite bit for bit, and the
     // round trip through sRGB would not be.
-    for (int y = b.y0; y < b.y1; ++y)
+    ParallelFor(static_cast<size_t>(b.y0), static_cast<size_t>(b.y1), [&](size_t row) {
+      const int y = static_cast<int>(row);
       for (int x = b.x0; x < b.x1; ++x)
         if (mask.at(x - cx0, y - cy0) > 0)
           for (int ch = 0; ch < 3; ++ch) linear->at(x, y, ch) = SrgbToLinear(out.at(x - cx0, y - cy0, ch));
+    });
     ++harmonized;
   }
   return harmonized;
@@ -453,26 +479,35 @@ std::optional<CameraOutcome> SynthesizeCamera(const CameraStageInput& st, size_t
   const ImageU8& original = st.in->Image(cam_index);
   ImageF linear = ToLinear(original);
   read_stage.Stop();
-  ScopedStage light_stage(st.times, "camera light");
-  const CameraLight cl = LightOfCamera(st, cam_index, linear);
-  light_stage.Stop();
-  const ObjectRender r = RenderObjects(st, cam, cl, rects);
+  const CameraLookOptions& look_options = st.options->camera_look;
+  const bool any_look = look_options.blur || look_options.noise || look_options.jpeg || look_options.colour;
+  // The camera's look is read from the photograph alone: it is estimated (one thread) while the objects render.
+  CameraLight cl;
+  ObjectRender r;
+  CameraLook look;
+  StageTimes look_times;
+  ParallelForRethrow(0, 2, [&](size_t task) {
+    if (task == 0) {
+      ScopedStage light_stage(st.times, "camera light");
+      cl = LightOfCamera(st, cam_index, linear);
+      light_stage.Stop();
+      r = RenderObjects(st, cam, cl, rects);
+    } else if (any_look) {
+      ScopedStage look_stage(&look_times, "camera look");
+      // The dataset's own objects only: a detected box (synth/detected_tracks.h) is often a tile of a wall.
+      std::vector<Box3> labelled;
+      for (const Annotation& a : st.in->frame->annotations)
+        if (!a.detected) labelled.push_back(a.box);
+      const ImageF real_objects = ObjectOutlinesMask(cam, labelled, kMinRealObjectPixels);
+      look = EstimateCameraLook(original, st.in->JpegQuality(cam_index), &real_objects);
+    }
+  });
   ScopedStage occlusion_stage(st.times, "camera occlusion");
   const ImageF receiver_depth = ReceiverDepth(cam, st.in->ground->seed_plane(), r, rects.with_shadows);
   const OcclusionMasks occ = OccludeByScene(st, cam, original, r, receiver_depth, rect);
   occlusion_stage.Stop();
-  const CameraLookOptions& look_options = st.options->camera_look;
-  const bool any_look = look_options.blur || look_options.noise || look_options.jpeg || look_options.colour;
+  if (st.times) st.times->Merge(look_times);
   ScopedStage look_stage(st.times, "camera look");
-  CameraLook look;
-  if (any_look) {
-    // The dataset's own objects only: a detected box (synth/detected_tracks.h) is often a tile of a wall.
-    std::vector<Box3> labelled;
-    for (const Annotation& a : st.in->frame->annotations)
-      if (!a.detected) labelled.push_back(a.box);
-    const ImageF real_objects = ObjectOutlinesMask(cam, labelled, kMinRealObjectPixels);
-    look = EstimateCameraLook(original, st.in->JpegQuality(cam_index), &real_objects);
-  }
   const double render_rise = look_options.blur ? RenderEdgeRise(r, rect) : 0;
   const double blur = look_options.blur ? ExtraBlurSigma(render_rise, look.TargetEdgeRise()) : 0;
   look_stage.Stop();
@@ -487,11 +522,13 @@ std::optional<CameraOutcome> SynthesizeCamera(const CameraStageInput& st, size_t
     harmonized = Msg() << "; harmonised: " << n << " object(s) (" << (st.harmonizer->learned() ? "learned" : "classical") << ")";
   }
   ScopedStage colour_stage(st.times, "camera colour");
-  for (const auto& g : c.regions)  // no shadow reaches beyond them
+  ParallelFor(0, c.regions.size(), [&](size_t i) {  // no shadow reaches beyond them; they are disjoint
+    const auto& g = c.regions[i];
     for (int y = g[1]; y < g[3]; ++y)
       for (int x = g[0]; x < g[2]; ++x)
         for (int ch = 0; ch < 3; ++ch)
           linear.at(x, y, ch) = std::max(0.0f, linear.at(x, y, ch) - c.shadow_only_loss.at(x, y, ch));
+  });
 
   const nlohmann::json colour = st.colour_reference ? CapInsertSaturation(st, cam, original, r, c, rect, &linear) : nlohmann::json();
   colour_stage.Stop();

@@ -365,11 +365,16 @@ ImageF DenseVisibility(const DepthMap& scene, const ImageU8& image, const ImageF
     if (!options.ground_occludes && !scene.ground.empty() && scene.ground.at(x, y)) return false;
     return scene.confidence.at(x, y) >= options.min_confidence && scene.depth.at(x, y) < d - tol;
   };
-  for (int y = y0; y <= y1; ++y)
+  // Every loop below writes each pixel from its own neighbourhood of the inputs: rows in parallel, the same result.
+  const auto rows = [](int begin, int end, const auto& body) {
+    ParallelFor(static_cast<size_t>(begin), static_cast<size_t>(end), [&](size_t y) { body(static_cast<int>(y)); });
+  };
+  rows(y0, y1 + 1, [&](int y) {
     for (int x = x0; x <= x1; ++x) {
       const float d = object_depth.at(x, y);
       if (std::isfinite(d) && hidden(x, y, d)) vis.at(x, y) = 0.0f;
     }
+  });
   const int r = options.guide_radius;
   if (r <= 0 || image.empty()) return vis;
   SD_CHECK(image.width() == W && image.height() == H && image.channels() >= 3, << "guide image " << image.width() << "x" << image.height());
@@ -384,7 +389,7 @@ ImageF DenseVisibility(const DepthMap& scene, const ImageU8& image, const ImageF
     for (int x = 0; x < bw; ++x) depth[Idx(x, y, bw)] = object_depth.at(bx0 + x, by0 + y);
   for (int pass = 0; pass < 2 * r; ++pass) {
     std::vector<float> next = depth;
-    for (int y = 0; y < bh; ++y)
+    rows(0, bh, [&](int y) {
       for (int x = 0; x < bw; ++x) {
         if (std::isfinite(depth[Idx(x, y, bw)])) continue;
         float m = -kInf;
@@ -393,19 +398,21 @@ ImageF DenseVisibility(const DepthMap& scene, const ImageU8& image, const ImageF
             if (std::isfinite(depth[Idx(xx, yy, bw)])) m = std::max(m, depth[Idx(xx, yy, bw)]);
         if (m > -kInf) next[Idx(x, y, bw)] = m;
       }
+    });
     depth.swap(next);
   }
   std::vector<float> hard(depth.size(), 1.0f);
-  for (int y = 0; y < bh; ++y)
+  rows(0, bh, [&](int y) {
     for (int x = 0; x < bw; ++x) {
       const float d = depth[Idx(x, y, bw)];
       if (std::isfinite(d) && hidden(bx0 + x, by0 + y, d)) hard[Idx(x, y, bw)] = 0.0f;
     }
+  });
   // Two-colour matting on the one-pixel band each side of the hard boundary: the pixel's colour as a mix of the
   // occluder's and the background's (per-channel medians of the hidden and the visible pixels within r),
   // projected on the line between them. Where the two colours are too alike to tell, the hard verdict stays.
-  std::vector<float> c0, c1;
-  for (int y = 0; y < bh; ++y)
+  rows(0, bh, [&](int y) {
+    std::vector<float> c0, c1;
     for (int x = 0; x < bw; ++x) {
       const int gx = bx0 + x, gy = by0 + y;
       if (!std::isfinite(object_depth.at(gx, gy))) continue;
@@ -440,6 +447,7 @@ ImageF DenseVisibility(const DepthMap& scene, const ImageU8& image, const ImageF
       if (den < options.min_contrast * options.min_contrast) continue;
       vis.at(gx, gy) = static_cast<float>(std::clamp(num / den, 0.0, 1.0));
     }
+  });
   return vis;
 }
 

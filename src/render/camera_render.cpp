@@ -433,7 +433,9 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
               // rays' noise into streaks), but a neighbour further along the surface than kGrazing footprints per
               // pixel (a surface seen nearly edge-on, whose sky changes over a few of its pixels) falls off.
               const float px2 = static_cast<float>((xx - x) * (xx - x) + (yy - y) * (yy - y));
-              const float stretch = std::max(0.0f, std::sqrt(d.squaredNorm() / std::max(1.0f, px2)) - kGrazing);
+              // max(0, sqrt(ratio) - kGrazing), without the root where it is 0 (most neighbours: the same bits).
+              const float ratio = d.squaredNorm() / std::max(1.0f, px2);
+              const float stretch = ratio > kGrazing * kGrazing ? std::sqrt(ratio) - kGrazing : 0.0f;
               const float wgt = std::exp(-px2 * inv_2s2 - 0.5f * (off_plane * off_plane + stretch * stretch)) * c4 * c4;
               open += wgt * q.open;
               drawn += wgt * q.drawn;

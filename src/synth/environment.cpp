@@ -23,6 +23,15 @@ constexpr double kDeg = M_PI / 180.0;
 float Luma(const float* rgb) { return LinearLuminance(rgb); }
 float Luma(const Eigen::Vector3f& rgb) { return LinearLuminance(rgb.data()); }
 
+// The luminance of a map's radiance; null for an empty map.
+std::shared_ptr<const ImageF> RadianceLuminance(const ImageF& radiance) {
+  if (radiance.empty()) return nullptr;
+  auto luminance = std::make_shared<ImageF>(radiance.width(), radiance.height(), 1);
+  for (int v = 0; v < luminance->height(); ++v)
+    for (int u = 0; u < luminance->width(); ++u) luminance->at(u, v) = Luma(radiance.pixel(u, v));
+  return luminance;
+}
+
 // Integer hash -> [0, 1): deterministic per (seed, index) sampling, independent of threads.
 double Hash01(uint32_t a, uint32_t b) {
   uint32_t h = a * 0x9E3779B1u ^ (b + 0x7F4A7C15u + (a << 6) + (a >> 2));
@@ -312,9 +321,14 @@ EnvironmentMap BuildEnvironmentMap(const Frame& frame, const std::vector<ImageU8
                                                           << frame.cameras[k].intrinsics.height << " RGB");
 
   // Per-camera layers on the map.
+  // The map's loops below give each of its pixels from that pixel alone: rows in parallel, the same result.
+  const auto map_rows = [&](const auto& body) {
+    ParallelFor(0, static_cast<size_t>(H), [&](size_t v) { body(static_cast<int>(v)); });
+  };
   std::vector<Eigen::Vector3d> directions(static_cast<size_t>(W) * H);
-  for (int v = 0; v < H; ++v)
+  map_rows([&](int v) {
     for (int u = 0; u < W; ++u) directions[static_cast<size_t>(v) * W + u] = LatLongDirection(u + 0.5, v + 0.5, W, H);
+  });
   std::vector<Layer> layers(nc);
   ParallelForRethrow(0, nc, [&](size_t k) {
     const auto& cam = frame.cameras[k];
@@ -384,7 +398,7 @@ EnvironmentMap BuildEnvironmentMap(const Frame& frame, const std::vector<ImageU8
   // Blend.
   map.radiance = ImageF(W, H, 3, 0.0f);
   map.coverage = ImageF(W, H, 1, 0.0f);
-  for (int v = 0; v < H; ++v)
+  map_rows([&](int v) {
     for (int u = 0; u < W; ++u) {
       double acc[3] = {0, 0, 0}, wsum = 0;
       for (size_t k = 0; k < nc; ++k) {
@@ -397,6 +411,7 @@ EnvironmentMap BuildEnvironmentMap(const Frame& frame, const std::vector<ImageU8
       if (wsum > 0)
         for (int c = 0; c < 3; ++c) map.radiance.at(u, v, c) = static_cast<float>(acc[c] / wsum);
     }
+  });
 
   // Sun direction.
   std::string sun_channel;
@@ -477,13 +492,14 @@ EnvironmentMap BuildEnvironmentMap(const Frame& frame, const std::vector<ImageU8
   }
   // Feathered fill: where camera weights are small the model takes over smoothly.
   const float model_weight = 0.05f;
-  for (int v = 0; v < H; ++v)
+  map_rows([&](int v) {
     for (int u = 0; u < W; ++u) {
-      const Eigen::Vector3d d = LatLongDirection(u + 0.5, v + 0.5, W, H);
+      const Eigen::Vector3d& d = directions[static_cast<size_t>(v) * W + u];
       const Eigen::Vector3f fill = d.z() > 0 ? map.sky.Radiance(d) : ground;
       const float w = map.coverage.at(u, v);
       for (int c = 0; c < 3; ++c) map.radiance.at(u, v, c) = (map.radiance.at(u, v, c) * w + fill[c] * model_weight) / (w + model_weight);
     }
+  });
 
   // Sun intensity from the road contrast at real shadows of annotated objects.
   const Eigen::Vector3f E_sky = map.SkyIrradianceUp();
@@ -512,6 +528,7 @@ EnvironmentMap BuildEnvironmentMap(const Frame& frame, const std::vector<ImageU8
   // gains already carry the cameras' white balance) at the sky's luminance scale.
   map.sun_irradiance = Eigen::Vector3f::Constant(static_cast<float>(direct_over_sky * Luma(E_sky) / sin_el));
   map.sh = ProjectToSh(map.radiance);
+  map.luminance = RadianceLuminance(map.radiance);
   return map;
 }
 
@@ -559,12 +576,7 @@ EnvironmentLight MakeEnvironmentLight(const EnvironmentMap& map) {
   EnvironmentLight l;
   l.sh = MapSh(map);
   l.radiance = &map.radiance;
-  if (!map.radiance.empty()) {
-    auto luminance = std::make_shared<ImageF>(map.radiance.width(), map.radiance.height(), 1);
-    for (int v = 0; v < luminance->height(); ++v)
-      for (int u = 0; u < luminance->width(); ++u) luminance->at(u, v) = Luma(map.radiance.pixel(u, v));
-    l.radiance_luminance = std::move(luminance);
-  }
+  l.radiance_luminance = map.luminance ? map.luminance : RadianceLuminance(map.radiance);
   l.sun_direction = map.sun_direction;
   l.sun_irradiance = map.sun_irradiance;
   l.sun_angular_radius_rad = map.sun_angular_radius_rad;

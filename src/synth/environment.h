@@ -108,6 +108,9 @@ struct EnvironmentMap {
   // ProjectToSh(radiance), kept by BuildEnvironmentMap (every light made from the map needs it); empty in a map
   // put together by hand, whose readers then project it themselves (MapSh).
   std::optional<ShIrradiance> sh;
+  // The luminance of `radiance`, kept by BuildEnvironmentMap likewise (the receiver's sky weights read it); empty
+  // in a map put together by hand, whose lights then make their own (MakeEnvironmentLight).
+  std::shared_ptr<const ImageF> luminance;
 
   int width() const { return radiance.width(); }
   int height() const { return radiance.height(); }
@@ -135,8 +138,8 @@ std::optional<Eigen::Vector3d> DetectSunInImages(const Frame& frame, const std::
 struct EnvironmentLight {
   ShIrradiance sh;
   const ImageF* radiance = nullptr;    // lat-long map for directional sky occlusion on the receiver (may be null)
-  // The luminance of `radiance`, made with it (MakeEnvironmentLight): what the receiver's sky weights read. Null:
-  // they read `radiance` and take its luminance per sample (the same weights, to float rounding).
+  // The luminance of `radiance` (EnvironmentMap::luminance, MakeEnvironmentLight): what the receiver's sky weights
+  // read. Null: they read `radiance` and take its luminance per sample (the same weights, to float rounding).
   std::shared_ptr<const ImageF> radiance_luminance;
   Eigen::Vector3d sun_direction = Eigen::Vector3d(0, 0, 1);
   Eigen::Vector3f sun_irradiance = Eigen::Vector3f::Zero();

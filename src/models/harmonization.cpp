@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <mutex>
 
 #include "core/error.h"
 #include "core/log.h"
@@ -264,7 +265,12 @@ ImageF Harmonizer::HarmonizeLearned(const ImageF& composite, const ImageF& mask)
         c_t.values[(static_cast<size_t>(c) * ih + y) * iw + x] = std::clamp(comp_in.at(x, y, c), 0.0f, 1.0f);
       m_t.values[static_cast<size_t>(y) * iw + x] = std::clamp(mask_in.at(x, y), 0.0f, 1.0f);
     }
+  // A frame's cameras harmonise at once (synth/frame.cpp); the model's forward passes take turns, each with the
+  // runtime's whole thread pool, rather than splitting it.
+  static std::mutex one_forward_at_a_time;
+  std::unique_lock<std::mutex> turn(one_forward_at_a_time);
   const Tensor out = model_->Run({c_t, m_t})[0];
+  turn.unlock();
   if (out.shape[0] != 1 || out.shape[2] != ih || out.shape[3] != iw)
     throw InputError(model_->file(), Msg() << "returned " << ModelContract::ShapeString(out.shape) << " for a "
                                            << iw << "x" << ih << " composite");

@@ -304,8 +304,8 @@ Composite CompositeObjects(const ObjectRender& r, const OcclusionMasks& occ, siz
   c.regions = TileRunsAround(bounds, reach, [&](int x, int y) {
     return r.render.coverage.at(x, y) > 0 || (occ.receiver.at(x, y) > 0.5f && r.shadow.at(x, y) != 1.0f);
   });
-  // The regions are disjoint and each blurs from the untouched photograph's values around it (the layer and the
-  // shade, not `linear`), so they go in parallel; each counts its own objects' pixels, added in region order.
+  // The regions are disjoint and each blurs its own layer and shade, made from the render and the occlusion masks
+  // (never from `linear`), so they go in parallel; each counts its own objects' pixels, added in region order.
   std::vector<Composite> parts(c.regions.size());
   ParallelFor(0, c.regions.size(), [&](size_t i) {
     const auto& g = c.regions[i];

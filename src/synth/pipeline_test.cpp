@@ -13,6 +13,7 @@
 #include <gtest/gtest.h>
 
 #include "assetgen/canonical.h"
+#include "core/parallel.h"
 #include "io/files.h"
 #include "io/json.h"
 #include "io/mesh_io.h"
@@ -443,6 +444,38 @@ TEST_F(PipelineTest, SameSeedSameResult) {
   ASSERT_EQ(again.cameras.size(), outcome_->cameras.size());
   for (size_t c = 0; c < again.cameras.size(); ++c)  // soft shadows and AO are seeded per pixel
     EXPECT_EQ(again.cameras[c].after.vector(), outcome_->cameras[c].after.vector()) << again.cameras[c].channel;
+}
+
+// The cameras and the LiDAR of a frame run at once, and stages within a camera split their work over threads; the
+// outcome must not depend on it: one thread gives every image, label and sweep bit for bit as all of them do.
+TEST_F(PipelineTest, OneThreadGivesTheSameOutcome) {
+  if (MaxThreads() < 2) GTEST_SKIP() << "this machine runs one thread: nothing to compare";
+  SetMaxThreads(1);
+  const FrameOutcome serial = SynthesizeFrame(*log_, 0, *assets_, *scenario_, SynthOptions{});
+  SetMaxThreads(0);
+  EXPECT_EQ(serial.edit.points->data, outcome_->edit.points->data);
+  ASSERT_EQ(serial.cameras.size(), outcome_->cameras.size());
+  ASSERT_GE(serial.cameras.size(), 2u);  // at least two cameras ran at once
+  for (size_t c = 0; c < serial.cameras.size(); ++c) {
+    EXPECT_EQ(serial.cameras[c].channel, outcome_->cameras[c].channel);
+    EXPECT_EQ(serial.cameras[c].after.vector(), outcome_->cameras[c].after.vector()) << serial.cameras[c].channel;
+    EXPECT_EQ(serial.cameras[c].light, outcome_->cameras[c].light);
+    EXPECT_EQ(serial.cameras[c].look.dump(), outcome_->cameras[c].look.dump());
+  }
+  ASSERT_EQ(serial.objects.size(), outcome_->objects.size());
+  for (size_t i = 0; i < serial.objects.size(); ++i) {
+    const ObjectOutcome &a = serial.objects[i], &b = outcome_->objects[i];
+    EXPECT_EQ(a.rendered_pixels, b.rendered_pixels);
+    EXPECT_EQ(a.visible_pixels, b.visible_pixels);
+    EXPECT_EQ(a.lidar_points, b.lidar_points);
+    ASSERT_EQ(a.label.camera_boxes.size(), b.label.camera_boxes.size());
+    for (size_t k = 0; k < a.label.camera_boxes.size(); ++k) {
+      EXPECT_EQ(a.label.camera_boxes[k].channel, b.label.camera_boxes[k].channel);
+      EXPECT_EQ(a.label.camera_boxes[k].box.x1, b.label.camera_boxes[k].box.x1);
+      EXPECT_EQ(a.label.camera_boxes[k].box.y2, b.label.camera_boxes[k].box.y2);
+      EXPECT_EQ(a.label.camera_boxes[k].visible_fraction, b.label.camera_boxes[k].visible_fraction);
+    }
+  }
 }
 
 TEST_F(PipelineTest, EnvironmentLightIsRecordedPerFrameAndCamera) {

@@ -503,8 +503,8 @@ SaturationCap CapSaturation(ImageF* linear, const std::vector<OutlinePixel>& out
           const float clamped = static_cast<float>(std::clamp(v, 0.0, 1.0));
           lo = std::min(lo, clamped), hi = std::max(hi, clamped);
         }
-        const double mx = LinearToSrgb(hi), mn = LinearToSrgb(lo);
-        out[i] = mx > 0 ? (mx - mn) / mx : 0.0;  // HsvSaturation
+        const double mn = LinearToSrgb(lo);
+        out[i] = HsvSaturation(LinearToSrgb(hi), mn, mn);
       }
     });
     return OutlineSaturation(all);

@@ -15,10 +15,7 @@ std::array<Eigen::Vector3d, 8> Box3::Corners() const {
   return out;
 }
 
-bool Box3::Contains(const Eigen::Vector3d& p, double margin) const {
-  const Eigen::Vector3d local = T_frame_box.Inverse() * p;
-  return (local.cwiseAbs().array() <= (0.5 * size.array() + margin)).all();
-}
+bool Box3::Contains(const Eigen::Vector3d& p, double margin) const { return BoxContainment(*this, margin).Contains(p); }
 
 Box3 Box3::Transformed(const Rigid3d& T_new_frame) const {
   return Box3{T_new_frame * T_frame_box, size};

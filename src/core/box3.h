@@ -20,10 +20,25 @@ struct Box3 {
   // Corners in the parent frame. Order: bottom face (z-) then top face (z+), each counter-clockwise from
   // (+x, +y) seen from above: (+,+), (-,+), (-,-), (+,-).
   std::array<Eigen::Vector3d, 8> Corners() const;
-  // True when `p` (parent frame) lies inside the box grown by `margin` on every side.
+  // True when `p` (parent frame) lies inside the box grown by `margin` on every side (BoxContainment).
   bool Contains(const Eigen::Vector3d& p, double margin = 0.0) const;
   // Box expressed in another frame: T_new_frame * box.
   Box3 Transformed(const Rigid3d& T_new_frame) const;
+};
+
+// Box3::Contains for many points and one box: the box's inverse pose made once, not per point.
+class BoxContainment {
+ public:
+  BoxContainment(const Box3& box, double margin = 0.0)
+      : T_box_frame_(box.T_frame_box.Inverse()), reach_(0.5 * box.size.array() + margin) {}
+  // A parent-frame point in the box's own frame (its centre at the origin, its axes along the sides).
+  Eigen::Vector3d Local(const Eigen::Vector3d& p) const { return T_box_frame_ * p; }
+  bool ContainsLocal(const Eigen::Vector3d& q) const { return (q.cwiseAbs().array() <= reach_).all(); }
+  bool Contains(const Eigen::Vector3d& p) const { return ContainsLocal(Local(p)); }
+
+ private:
+  Rigid3d T_box_frame_;
+  Eigen::Array3d reach_;
 };
 
 // Overlap test in the ground plane (oriented rectangles, separating axis theorem) of two boxes in the same

@@ -473,15 +473,14 @@ LidarModel FitLidarModel(const PointCloud& sweep, const LidarFitOptions& options
     model.ground_reflectivity = Median(g);
     std::map<std::string, std::vector<double>> per_cat;
     for (const auto& [name, box] : options.annotated) {
-      const Rigid3d T_box_frame = box.T_frame_box.Inverse();
+      const BoxContainment inside(box, 0.05);
       const Eigen::Matrix3d R = box.T_frame_box.Rotation();
       const std::string cat = CanonicalCategory(name);
       for (size_t i = 0; i < n; ++i) {
         if (!valid[i]) continue;
         const Eigen::Vector3d p = sweep.xyz(i).cast<double>();
-        // Box3::Contains(p, 0.05), with the box's inverse pose made once for all points.
-        const Eigen::Vector3d q = T_box_frame * p;
-        if (!(q.cwiseAbs().array() <= (0.5 * box.size.array() + 0.05)).all()) continue;
+        const Eigen::Vector3d q = inside.Local(p);
+        if (!inside.ContainsLocal(q)) continue;
         // Nearest face of the box: smallest normalised distance to a face.
         int axis = 0;
         double best = 1e9;

@@ -68,11 +68,9 @@ std::vector<float> ReferenceIntensities(const PointCloud& sweep, const std::vect
       for (const auto& [name, box] : annotated) {
         const auto info = FindCategory(name);
         if (!info || info->name != cat) continue;
-        // Box3::Contains(p, 0.05), with the box's inverse pose made once for all points.
-        const Rigid3d T_box_ego = box.T_frame_box.Inverse();
-        const Eigen::Array3d reach = 0.5 * box.size.array() + 0.05;
+        const BoxContainment inside(box, 0.05);
         for (size_t i = 0; i < points_ego.size(); ++i)
-          if (((T_box_ego * points_ego[i]).cwiseAbs().array() <= reach).all()) vals.push_back(sweep.feature(i, fi));
+          if (inside.Contains(points_ego[i])) vals.push_back(sweep.feature(i, fi));
       }
       if (vals.size() >= 10) {
         by_category[cat] = Median(vals);

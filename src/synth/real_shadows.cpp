@@ -129,20 +129,14 @@ std::vector<GroundPatch> SampleGroundPatches(const Frame& frame, const LinearIma
       if ((c - centre).norm() <= half_diagonal + radius) under.push_back(bi);
       if (SegmentDistance(c, cam_o.head<2>(), centre) <= half_diagonal + radius) between.push_back(bi);
     }
-    // Box3::Contains for every cell, with each box's inverse pose made once.
-    std::vector<Rigid3d> T_box_ego_under;
-    std::vector<Eigen::Array3d> reach_under;
-    for (size_t bi : under) {
-      const Box3& b = frame.annotations[bi].box;
-      T_box_ego_under.push_back(b.T_frame_box.Inverse());
-      reach_under.push_back(0.5 * b.size.array() + (bi == ai ? opt.footprint_margin_m : 0.05));
-    }
+    std::vector<BoxContainment> inside_under;
+    for (size_t bi : under) inside_under.emplace_back(frame.annotations[bi].box, bi == ai ? opt.footprint_margin_m : 0.05);
     for (int j = 0; j < g.n; ++j)
       for (int i = 0; i < g.n; ++i) {
         const Eigen::Vector3d p(g.origin.x() + (i + 0.5) * g.cell, g.origin.y() + (j + 0.5) * g.cell, g.z);
         bool blocked = false;
-        for (size_t u = 0; u < under.size(); ++u)
-          if (((T_box_ego_under[u] * (p + Eigen::Vector3d(0, 0, 0.05))).cwiseAbs().array() <= reach_under[u]).all()) {
+        for (const BoxContainment& inside : inside_under)
+          if (inside.Contains(p + Eigen::Vector3d(0, 0, 0.05))) {
             blocked = true;
             break;
           }

@@ -112,8 +112,8 @@ std::optional<Eigen::Vector2d> PinholeCamera::Project(const Eigen::Vector3d& p_c
   return Eigen::Vector2d(fx * xy.x() + cx, fy * xy.y() + cy);
 }
 
-Eigen::Vector3d PinholeCamera::RayDirection(const Eigen::Vector2d& uv) const {
-  const Eigen::Vector2d xy = Undistort(Eigen::Vector2d((uv.x() - cx) / fx, (uv.y() - cy) / fy));
+Eigen::Vector3d PinholeCamera::RayDirectionDistorted(const Eigen::Vector2d& xy_distorted) const {
+  const Eigen::Vector2d xy = Undistort(xy_distorted);
   return Eigen::Vector3d(xy.x(), xy.y(), 1.0).normalized();
 }
 

@@ -28,7 +28,12 @@ struct PinholeCamera {
   // (z <= min_depth). The result may lie outside the image; see InImage().
   std::optional<Eigen::Vector2d> Project(const Eigen::Vector3d& p_cam, double min_depth = 1e-3) const;
   // Unit-length ray direction in the camera frame through image point `uv` (undoes distortion with Undistort).
-  Eigen::Vector3d RayDirection(const Eigen::Vector2d& uv) const;
+  // Inline for the undistorted camera: the renderers call it for every sub-sample.
+  Eigen::Vector3d RayDirection(const Eigen::Vector2d& uv) const {
+    const Eigen::Vector2d xy((uv.x() - cx) / fx, (uv.y() - cy) / fy);
+    if (distortion.IsZero()) return Eigen::Vector3d(xy.x(), xy.y(), 1.0).normalized();
+    return RayDirectionDistorted(xy);
+  }
   bool InImage(const Eigen::Vector2d& uv) const { return uv.x() >= 0 && uv.y() >= 0 && uv.x() < width && uv.y() < height; }
 
   // Normalised image plane <-> distorted normalised plane.
@@ -43,6 +48,10 @@ struct PinholeCamera {
   // TryUndistort for callers that cannot fail. Where it finds nothing, the step with the smallest residual that
   // stayed inside the fold (at worst xy_distorted itself). Without distortion, xy_distorted as given.
   Eigen::Vector2d Undistort(const Eigen::Vector2d& xy_distorted) const;
+
+ private:
+  // RayDirection's distorted case, from the distorted normalised point.
+  Eigen::Vector3d RayDirectionDistorted(const Eigen::Vector2d& xy_distorted) const;
 };
 
 }  // namespace sd

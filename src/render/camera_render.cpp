@@ -194,12 +194,9 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
   // road, which is in the photo already: it never hides an object; a patch laid on a kerb's slope rises metres
   // away from its object).
   // Its direction (scene frame) through sub-sample s's jittered position, and that direction's camera z.
-  const bool undistorted = camera.distortion.IsZero();
   const auto sub_sample_ray = [&](int x, int y, int s, PixelRng& rng, Eigen::Vector3f* dir, float* cam_z) {
     const Eigen::Vector2f jitter = pixel_grid(s, rng);
-    const Eigen::Vector2d uv(x + jitter.x(), y + jitter.y());
-    const Eigen::Vector3d d_cam = undistorted ? Eigen::Vector3d((uv.x() - camera.cx) / camera.fx, (uv.y() - camera.cy) / camera.fy, 1.0).normalized()
-                                              : camera.RayDirection(uv);
+    const Eigen::Vector3d d_cam = camera.RayDirection(Eigen::Vector2d(x + jitter.x(), y + jitter.y()));
     *dir = (R_scene_cam * d_cam).cast<float>().normalized();
     *cam_z = static_cast<float>(d_cam.z());
   };

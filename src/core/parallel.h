@@ -39,6 +39,14 @@ void ParallelForRethrow(size_t begin, size_t end, F&& body, size_t grain = 1) {
     if (e) std::rethrow_exception(e);
 }
 
+// ParallelForRethrow over the rows [y0, y1) of an image, with int row indices: for the loops that give each
+// pixel of a row from their inputs alone, so that rows in any order give the same image.
+template <typename Body>
+void ParallelRows(int y0, int y1, const Body& body) {
+  if (y1 <= y0) return;
+  ParallelForRethrow(static_cast<size_t>(y0), static_cast<size_t>(y1), [&](size_t y) { body(static_cast<int>(y)); });
+}
+
 // Limits worker threads for the life of the process (0 = library default: all cores).
 void SetMaxThreads(int n);
 // The worker threads kernels may use now (the limit above, or all cores). For libraries with their own pools

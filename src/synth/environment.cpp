@@ -297,11 +297,8 @@ EnvironmentMap BuildEnvironmentMap(const Frame& frame, const std::vector<ImageU8
 
   // Per-camera layers on the map.
   // The map's loops below give each of its pixels from that pixel alone: rows in parallel, the same result.
-  const auto map_rows = [&](const auto& body) {
-    ParallelFor(0, static_cast<size_t>(H), [&](size_t v) { body(static_cast<int>(v)); });
-  };
   std::vector<Eigen::Vector3d> directions(static_cast<size_t>(W) * H);
-  map_rows([&](int v) {
+  ParallelRows(0, H, [&](int v) {
     for (int u = 0; u < W; ++u) directions[static_cast<size_t>(v) * W + u] = LatLongDirection(u + 0.5, v + 0.5, W, H);
   });
   std::vector<Layer> layers(nc);
@@ -373,7 +370,7 @@ EnvironmentMap BuildEnvironmentMap(const Frame& frame, const std::vector<ImageU8
   // Blend.
   map.radiance = ImageF(W, H, 3, 0.0f);
   map.coverage = ImageF(W, H, 1, 0.0f);
-  map_rows([&](int v) {
+  ParallelRows(0, H, [&](int v) {
     for (int u = 0; u < W; ++u) {
       double acc[3] = {0, 0, 0}, wsum = 0;
       for (size_t k = 0; k < nc; ++k) {
@@ -467,7 +464,7 @@ EnvironmentMap BuildEnvironmentMap(const Frame& frame, const std::vector<ImageU8
   }
   // Feathered fill: where camera weights are small the model takes over smoothly.
   const float model_weight = 0.05f;
-  map_rows([&](int v) {
+  ParallelRows(0, H, [&](int v) {
     for (int u = 0; u < W; ++u) {
       const Eigen::Vector3d& d = directions[static_cast<size_t>(v) * W + u];
       const Eigen::Vector3f fill = d.z() > 0 ? map.sky.Radiance(d) : ground;

@@ -265,13 +265,6 @@ Image<uint8_t> DilateSquare(const Image<uint8_t>& marked, int r) {
   return out;
 }
 
-// Runs `body(row)` for rows [y0, y1) in parallel and rethrows the first row's error, if any, once all are done.
-template <typename Body>
-void ParallelRows(int y0, int y1, const Body& body) {
-  if (y1 <= y0) return;
-  ParallelForRethrow(static_cast<size_t>(y0), static_cast<size_t>(y1), [&](size_t y) { body(static_cast<int>(y)); });
-}
-
 // ReceiverShadowImage for any rule giving a hit face its light, in three passes over the rectangles' pixels:
 //  1. the primary rays in packets; at each receiver hit, the sky's open share (as ReceiverShadowRatio's) and one
 //     ray to the centre of the sun's disk;

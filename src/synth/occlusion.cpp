@@ -366,10 +366,7 @@ ImageF DenseVisibility(const DepthMap& scene, const ImageU8& image, const ImageF
     return scene.confidence.at(x, y) >= options.min_confidence && scene.depth.at(x, y) < d - tol;
   };
   // Every loop below writes each pixel from its own neighbourhood of the inputs: rows in parallel, the same result.
-  const auto rows = [](int begin, int end, const auto& body) {
-    ParallelFor(static_cast<size_t>(begin), static_cast<size_t>(end), [&](size_t y) { body(static_cast<int>(y)); });
-  };
-  rows(y0, y1 + 1, [&](int y) {
+  ParallelRows(y0, y1 + 1, [&](int y) {
     for (int x = x0; x <= x1; ++x) {
       const float d = object_depth.at(x, y);
       if (std::isfinite(d) && hidden(x, y, d)) vis.at(x, y) = 0.0f;
@@ -389,7 +386,7 @@ ImageF DenseVisibility(const DepthMap& scene, const ImageU8& image, const ImageF
     for (int x = 0; x < bw; ++x) depth[Idx(x, y, bw)] = object_depth.at(bx0 + x, by0 + y);
   for (int pass = 0; pass < 2 * r; ++pass) {
     std::vector<float> next = depth;
-    rows(0, bh, [&](int y) {
+    ParallelRows(0, bh, [&](int y) {
       for (int x = 0; x < bw; ++x) {
         if (std::isfinite(depth[Idx(x, y, bw)])) continue;
         float m = -kInf;
@@ -402,7 +399,7 @@ ImageF DenseVisibility(const DepthMap& scene, const ImageU8& image, const ImageF
     depth.swap(next);
   }
   std::vector<float> hard(depth.size(), 1.0f);
-  rows(0, bh, [&](int y) {
+  ParallelRows(0, bh, [&](int y) {
     for (int x = 0; x < bw; ++x) {
       const float d = depth[Idx(x, y, bw)];
       if (std::isfinite(d) && hidden(bx0 + x, by0 + y, d)) hard[Idx(x, y, bw)] = 0.0f;
@@ -411,7 +408,7 @@ ImageF DenseVisibility(const DepthMap& scene, const ImageU8& image, const ImageF
   // Two-colour matting on the one-pixel band each side of the hard boundary: the pixel's colour as a mix of the
   // occluder's and the background's (per-channel medians of the hidden and the visible pixels within r),
   // projected on the line between them. Where the two colours are too alike to tell, the hard verdict stays.
-  rows(0, bh, [&](int y) {
+  ParallelRows(0, bh, [&](int y) {
     std::vector<float> c0, c1;
     for (int x = 0; x < bw; ++x) {
       const int gx = bx0 + x, gy = by0 + y;

@@ -134,20 +134,45 @@ Eigen::Vector4f SampleRepeat(const ImageU8& img, const Eigen::Vector2f& uv) {
 
 }  // namespace
 
+// A scene with the flags and build quality every query here relies on.
+RTCScene NewScene() {
+  RTCScene scene = rtcNewScene(SharedDevice());
+  // ROBUST: watertight traversal (no leaks through shared edges/vertices). CONTEXT_FILTER_FUNCTION: lets
+  // Occluded() pass the skip filter through the context.
+  rtcSetSceneFlags(scene, static_cast<RTCSceneFlags>(RTC_SCENE_FLAG_ROBUST | RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION));
+  rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_HIGH);
+  return scene;
+}
+
 struct RayScene::Impl {
   RTCScene scene = nullptr;
+  // SetOftenSkipped: the scene without that mesh (null until Commit, or when none was set).
+  RTCScene without = nullptr;
+  int often_skipped = -1;
   std::vector<std::shared_ptr<const TriangleMesh>> meshes;
+  std::vector<RTCGeometry> geometries;  // by mesh id, held until Commit (null: an empty mesh)
   bool committed = false;
 
-  Impl() {
-    scene = rtcNewScene(SharedDevice());
-    // ROBUST: watertight traversal (no leaks through shared edges/vertices). CONTEXT_FILTER_FUNCTION: lets
-    // Occluded() pass the skip filter through the context.
-    rtcSetSceneFlags(scene, static_cast<RTCSceneFlags>(RTC_SCENE_FLAG_ROBUST | RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION));
-    rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_HIGH);
-  }
+  Impl() : scene(NewScene()) {}
   ~Impl() {
+    ReleaseGeometries();
+    if (without) rtcReleaseScene(without);
     if (scene) rtcReleaseScene(scene);
+  }
+  void ReleaseGeometries() {
+    for (RTCGeometry g : geometries)
+      if (g) rtcReleaseGeometry(g);
+    geometries.clear();
+  }
+
+  // The scene a query skipping `*skip_mesh` traverses; where that is the scene without the mesh, nothing is left
+  // to skip (-1).
+  RTCScene SceneFor(int* skip_mesh) const {
+    if (without && *skip_mesh == often_skipped) {
+      *skip_mesh = -1;
+      return without;
+    }
+    return scene;
   }
 
   const TriangleMesh& MeshOf(const RayHit& hit) const {
@@ -195,15 +220,31 @@ int RayScene::AddMesh(std::shared_ptr<const TriangleMesh> mesh) {
     }
     rtcCommitGeometry(geom);
     rtcAttachGeometryByID(impl_->scene, geom, static_cast<unsigned>(id));
-    rtcReleaseGeometry(geom);
+    impl_->geometries.push_back(geom);  // our reference, released at Commit
+  } else {
+    impl_->geometries.push_back(nullptr);  // empty meshes keep their id but have no geometry: rays never hit them
   }
-  // Empty meshes keep their id but have no geometry: rays never hit them.
   impl_->meshes.push_back(std::move(mesh));
   return id;
 }
 
+void RayScene::SetOftenSkipped(int mesh) {
+  SD_CHECK(!impl_->committed, << "SetOftenSkipped after Commit");
+  SD_CHECK(mesh >= -1 && mesh < NumMeshes(), << "mesh " << mesh << " of " << NumMeshes());
+  impl_->often_skipped = mesh;
+}
+
 void RayScene::Commit() {
   rtcCommitScene(impl_->scene);
+  if (impl_->often_skipped >= 0) {
+    // Embree lets one geometry be attached to several scenes, under the same id.
+    impl_->without = NewScene();
+    for (size_t id = 0; id < impl_->geometries.size(); ++id)
+      if (impl_->geometries[id] && static_cast<int>(id) != impl_->often_skipped)
+        rtcAttachGeometryByID(impl_->without, impl_->geometries[id], static_cast<unsigned>(id));
+    rtcCommitScene(impl_->without);
+  }
+  impl_->ReleaseGeometries();
   impl_->committed = true;
 }
 
@@ -218,10 +259,11 @@ RayHit RayScene::Intersect(const Eigen::Vector3f& origin, const Eigen::Vector3f&
                            int skip_mesh) const {
   SD_CHECK(impl_->committed, << "query before Commit");
   if (!RayWithinEmbreeContract(origin, dir, t_near, t_far)) return RayHit{};
+  RTCScene scene = impl_->SceneFor(&skip_mesh);
   SkipContext ctx;
   InitSkipContext(&ctx, skip_mesh);
   RTCRayHit rh = MakeRayHit(origin, dir, t_near, t_far);
-  rtcIntersect1(impl_->scene, &ctx.context, &rh);
+  rtcIntersect1(scene, &ctx.context, &rh);
   RayHit hit;
   if (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID) {
     hit.t = rh.ray.tfar;
@@ -237,10 +279,11 @@ bool RayScene::Occluded(const Eigen::Vector3f& origin, const Eigen::Vector3f& di
                         int skip_mesh) const {
   SD_CHECK(impl_->committed, << "query before Commit");
   if (!RayWithinEmbreeContract(origin, dir, t_near, t_far)) return false;
+  RTCScene scene = impl_->SceneFor(&skip_mesh);
   SkipContext ctx;
   InitSkipContext(&ctx, skip_mesh);
   RTCRay ray = MakeRayHit(origin, dir, t_near, t_far).ray;
-  rtcOccluded1(impl_->scene, &ctx.context, &ray);
+  rtcOccluded1(scene, &ctx.context, &ray);
   // Embree sets tfar to -inf when the ray is occluded.
   return ray.tfar < 0.0f;
 }
@@ -295,8 +338,8 @@ uint32_t TracePacket(RTCScene scene, const OriginOf& origin_of, const Eigen::Vec
 uint32_t RayScene::OccludedFan(const Eigen::Vector3f& origin, const Eigen::Vector3f* dirs, int count, float t_near,
                                float t_far, int skip_mesh) const {
   SD_CHECK(impl_->committed, << "query before Commit");
-  return TracePacket(impl_->scene, [&](int) -> const Eigen::Vector3f& { return origin; }, dirs, count, t_near, t_far,
-                     skip_mesh);
+  RTCScene scene = impl_->SceneFor(&skip_mesh);
+  return TracePacket(scene, [&](int) -> const Eigen::Vector3f& { return origin; }, dirs, count, t_near, t_far, skip_mesh);
 }
 
 namespace {
@@ -336,20 +379,22 @@ void RayScene::IntersectFan(const Eigen::Vector3f& origin, const Eigen::Vector3f
                             float t_far, int skip_mesh, RayHit* hits) const {
   SD_CHECK(impl_->committed, << "query before Commit");
   SD_CHECK(count >= 0 && count <= kMaxFanRays, << count << " rays in one packet (at most " << kMaxFanRays << ")");
+  RTCScene scene = impl_->SceneFor(&skip_mesh);
   // The narrowest packet that holds them: a wide packet's empty lanes still cost their share of every traversal step.
   if (count <= 4)
-    IntersectPacketOf<4, RTCRayHit4>(impl_->scene, rtcIntersect4, origin, dirs, count, t_near, t_far, skip_mesh, hits);
+    IntersectPacketOf<4, RTCRayHit4>(scene, rtcIntersect4, origin, dirs, count, t_near, t_far, skip_mesh, hits);
   else if (count <= 8)
-    IntersectPacketOf<8, RTCRayHit8>(impl_->scene, rtcIntersect8, origin, dirs, count, t_near, t_far, skip_mesh, hits);
+    IntersectPacketOf<8, RTCRayHit8>(scene, rtcIntersect8, origin, dirs, count, t_near, t_far, skip_mesh, hits);
   else
-    IntersectPacketOf<16, RTCRayHit16>(impl_->scene, rtcIntersect16, origin, dirs, count, t_near, t_far, skip_mesh, hits);
+    IntersectPacketOf<16, RTCRayHit16>(scene, rtcIntersect16, origin, dirs, count, t_near, t_far, skip_mesh, hits);
 }
 
 uint32_t RayScene::OccludedPacket(const Eigen::Vector3f* origins, const Eigen::Vector3f* dirs, int count, float t_near,
                                   float t_far, int skip_mesh) const {
   SD_CHECK(impl_->committed, << "query before Commit");
-  return TracePacket(impl_->scene, [&](int i) -> const Eigen::Vector3f& { return origins[i]; }, dirs, count, t_near,
-                     t_far, skip_mesh);
+  RTCScene scene = impl_->SceneFor(&skip_mesh);
+  return TracePacket(scene, [&](int i) -> const Eigen::Vector3f& { return origins[i]; }, dirs, count, t_near, t_far,
+                     skip_mesh);
 }
 
 void OcclusionFan::Add(const Eigen::Vector3f& dir, double weight) {

@@ -413,6 +413,7 @@ ObjectScene BuildObjectScene(const std::vector<PlacedObject>& placed, const Eige
     s.extent_of.push_back(std::move(extent));
   }
   s.receiver_id = s.scene.AddMesh(s.receiver);
+  s.scene.SetOftenSkipped(s.receiver_id);  // the objects' rays never see their own ground
   s.scene.Commit();
   return s;
 }

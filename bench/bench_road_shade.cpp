@@ -7,6 +7,8 @@
 // Variants (sun rays over the disk / sky rays per pixel):
 //   per pixel:   8 / 16, ReceiverShadowRatio at every pixel;
 //   image:       8 / 16, ReceiverShadowImage (the synth default);
+//   image 1 BVH: the same in a scene without the second BVH that leaves the receiver out
+//                (RayScene::SetOftenSkipped): the receiver's hits filtered out of every sky and sun ray instead;
 //   image 4 sky: 8 / 4, ReceiverShadowImage (what a quarter of the sky rays would give).
 // Quality: against a reference of 64 disk rays and 256 sky rays, ReceiverShadowRatio at every pixel, the error of
 // the ratio (the factor the real road's light is multiplied by, 0-1) over the receiver pixels the reference or
@@ -22,15 +24,18 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "assetgen/asset.h"
 #include "core/image.h"
+#include "core/mesh.h"
 #include "core/parallel.h"
 #include "datasets/readers.h"
 #include "io/image_io.h"
 #include "render/camera_render.h"
+#include "render/ray_scene.h"
 #include "synth/camera_look.h"
 #include "synth/environment.h"
 #include "synth/frame.h"
@@ -45,12 +50,14 @@ namespace fs = std::filesystem;
 struct Variant {
   const char* name;
   int sun_rays, sky_rays;
-  bool image;  // ReceiverShadowImage, else ReceiverShadowRatio per pixel
+  bool image;        // ReceiverShadowImage, else ReceiverShadowRatio per pixel
+  bool one_bvh = false;  // in the scene without SetOftenSkipped
 };
 const Variant kReference{"reference", 64, 256, false};
 const std::vector<Variant> kVariants = {
     {"per pixel", 8, 16, false},
     {"image", 8, 16, true},
+    {"image 1 BVH", 8, 16, true, true},
     {"image 4 sky", 8, 4, true},
 };
 
@@ -167,13 +174,16 @@ int main(int argc, char** argv) {
     const sd::EnvironmentMap map = sd::BuildEnvironmentMap(frame, images, eo);
     const sd::EnvironmentLight light = sd::MakeEnvironmentLight(map);
     const sd::frame_stages::ObjectScene s = sd::frame_stages::BuildObjectScene(placed, light.sun_direction);
+    sd::RayScene one_bvh;  // the same meshes, the same ids, one BVH
+    for (int m = 0; m < s.scene.NumMeshes(); ++m) one_bvh.AddMesh(std::make_shared<sd::TriangleMesh>(s.scene.Mesh(m)));
+    one_bvh.Commit();
     const auto shade = [&](const sd::CameraSensor& cam, const std::vector<std::array<int, 4>>& rects, const Variant& v) {
       sd::EnvShadingOptions o;
       o.sun_rays = v.sun_rays;
       o.sky_rays = v.sky_rays;
       o.seed = 7;
       if (!v.image) return PerPixel(s.scene, cam, s.receiver_id, light, o, rects);
-      return sd::ReceiverShadowImage(s.scene, cam.intrinsics, cam.T_ego_cam, s.receiver_id,
+      return sd::ReceiverShadowImage(v.one_bvh ? one_bvh : s.scene, cam.intrinsics, cam.T_ego_cam, s.receiver_id,
                                      std::vector<const sd::EnvironmentLight*>(s.receiver->faces.size(), &light), o, rects);
     };
     for (const sd::CameraSensor& cam : frame.cameras) {

@@ -243,6 +243,7 @@ TEST(RayScene, OftenSkippedMeshGivesTheSameAnswers) {
     return scene;
   };
   const RayScene one = build(false), two = build(true);
+  GTEST_FLAG_SET(death_test_style, "threadsafe");  // Embree's worker threads are running
   EXPECT_DEATH(RayScene().SetOftenSkipped(0), "mesh 0 of 0");
   uint32_t state = 99;
   const auto uniform = [&] {  // [-1, 1)

@@ -414,7 +414,7 @@ std::string Array::StringAt(int64_t i) const {
   std::string out;
   for (size_t k = 0; k < chars; ++k) {
     std::memcpy(&cp, data.data() + at + 4 * k, 4);
-    AppendUtf8(&out, IsScalarValue(cp) ? cp : 0xfffd);
+    AppendUtf8(IsScalarValue(cp) ? cp : 0xfffd, &out);
   }
   return out;
 }

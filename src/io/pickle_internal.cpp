@@ -9,24 +9,6 @@ namespace sd::pickle::internal {
 
 // --- UTF-8 and the other text encodings pickles use
 
-void AppendUtf8(std::string* out, uint32_t cp) {
-  if (cp < 0x80) {
-    out->push_back(static_cast<char>(cp));
-  } else if (cp < 0x800) {
-    out->push_back(static_cast<char>(0xc0 | (cp >> 6)));
-    out->push_back(static_cast<char>(0x80 | (cp & 0x3f)));
-  } else if (cp < 0x10000) {
-    out->push_back(static_cast<char>(0xe0 | (cp >> 12)));
-    out->push_back(static_cast<char>(0x80 | ((cp >> 6) & 0x3f)));
-    out->push_back(static_cast<char>(0x80 | (cp & 0x3f)));
-  } else {
-    out->push_back(static_cast<char>(0xf0 | (cp >> 18)));
-    out->push_back(static_cast<char>(0x80 | ((cp >> 12) & 0x3f)));
-    out->push_back(static_cast<char>(0x80 | ((cp >> 6) & 0x3f)));
-    out->push_back(static_cast<char>(0x80 | (cp & 0x3f)));
-  }
-}
-
 // Decodes one code point at s[*i]; false for invalid UTF-8 (overlong forms, surrogates, > U+10FFFF, truncated).
 bool NextCodePoint(std::string_view s, size_t* i, uint32_t* cp) {
   const auto b = [&](size_t k) { return static_cast<unsigned char>(s[k]); };
@@ -73,7 +55,7 @@ bool ValidUtf8(std::string_view s) {
 std::string Utf8FromLatin1(std::string_view s) {
   std::string out;
   out.reserve(s.size());
-  for (unsigned char c : s) AppendUtf8(&out, c);
+  for (unsigned char c : s) AppendUtf8(c, &out);
   return out;
 }
 

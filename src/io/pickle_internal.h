@@ -17,6 +17,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/utf8.h"
 #include "io/pickle.h"
 
 namespace sd::pickle {
@@ -66,7 +67,6 @@ namespace internal {
 
 // --- UTF-8 and the other text encodings pickles use (pickle_internal.cpp)
 
-void AppendUtf8(std::string* out, uint32_t cp);
 inline bool IsScalarValue(uint32_t cp) { return cp <= 0x10ffff && (cp < 0xd800 || cp > 0xdfff); }
 bool NextCodePoint(std::string_view s, size_t* i, uint32_t* cp);  // false for invalid UTF-8
 bool ValidUtf8(std::string_view s);

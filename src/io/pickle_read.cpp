@@ -337,7 +337,7 @@ Value Machine::RawUnicodeEscape(std::string_view s) {
   std::string out;
   for (size_t i = 0; i < s.size();) {
     if (s[i] != '\\') {
-      AppendUtf8(&out, static_cast<unsigned char>(s[i++]));
+      AppendUtf8(static_cast<unsigned char>(s[i++]), &out);
       continue;
     }
     size_t run = 0;
@@ -351,7 +351,7 @@ Value Machine::RawUnicodeEscape(std::string_view s) {
     const auto r = std::from_chars(s.data() + i + 1, s.data() + i + 1 + digits, cp, 16);
     if (r.ptr != s.data() + i + 1 + digits || r.ec != std::errc()) Fail("UNICODE with an invalid \\u escape");
     if (!IsScalarValue(cp)) Fail("UNICODE escape of a surrogate or beyond U+10FFFF (not supported)");
-    AppendUtf8(&out, cp);
+    AppendUtf8(cp, &out);
     i += 1 + digits;
   }
   return Text(out);

@@ -6,6 +6,7 @@
 #include <string_view>
 
 #include "core/error.h"
+#include "core/utf8.h"
 #include "io/gzip.h"
 
 namespace sd::models {
@@ -18,24 +19,6 @@ constexpr const char* kEndOfWord = "</w>";
 // Bound on the merges file once decompressed: OpenAI's is 3.2 MB (262,144 merges); a file that inflates past
 // this is not a merges file.
 constexpr size_t kMaxMergesFileBytes = size_t{64} << 20;
-
-void AppendUtf8(char32_t cp, std::string* out) {
-  if (cp < 0x80) {
-    out->push_back(static_cast<char>(cp));
-  } else if (cp < 0x800) {
-    out->push_back(static_cast<char>(0xC0 | (cp >> 6)));
-    out->push_back(static_cast<char>(0x80 | (cp & 0x3F)));
-  } else if (cp < 0x10000) {
-    out->push_back(static_cast<char>(0xE0 | (cp >> 12)));
-    out->push_back(static_cast<char>(0x80 | ((cp >> 6) & 0x3F)));
-    out->push_back(static_cast<char>(0x80 | (cp & 0x3F)));
-  } else {
-    out->push_back(static_cast<char>(0xF0 | (cp >> 18)));
-    out->push_back(static_cast<char>(0x80 | ((cp >> 12) & 0x3F)));
-    out->push_back(static_cast<char>(0x80 | ((cp >> 6) & 0x3F)));
-    out->push_back(static_cast<char>(0x80 | (cp & 0x3F)));
-  }
-}
 
 // Code points of UTF-8 text; a byte that does not start a valid sequence becomes U+FFFD, as Python's
 // errors="replace" would make of it (the reference only ever sees valid str).

@@ -132,8 +132,6 @@ Eigen::Vector4f SampleRepeat(const ImageU8& img, const Eigen::Vector2f& uv) {
   return a * (1 - fy) + b * fy;
 }
 
-}  // namespace
-
 // A scene with the flags and build quality every query here relies on.
 RTCScene NewScene() {
   RTCScene scene = rtcNewScene(SharedDevice());
@@ -143,6 +141,8 @@ RTCScene NewScene() {
   rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_HIGH);
   return scene;
 }
+
+}  // namespace
 
 struct RayScene::Impl {
   RTCScene scene = nullptr;

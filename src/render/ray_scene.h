@@ -32,7 +32,7 @@ class RayScene {
   // (do not modify the mesh afterwards); Embree gets its own copy of positions and indices. Ids are
   // 0, 1, 2, ... in call order; a mesh without faces keeps its id and is never hit.
   int AddMesh(std::shared_ptr<const TriangleMesh> mesh);
-  // Before Commit: many rays will skip `mesh` (skip_mesh below), as every ray of synthesis skips the ground
+  // Before Commit: many rays will skip `mesh` (skip_mesh below), as most rays of synthesis skip the ground
   // receiver the objects stand on. Commit then also builds a BVH without it, and those rays traverse that one
   // instead of having the mesh's hits filtered out: the same answers without its triangles, which lie under or
   // round every object, in their way. One mesh per scene; -1 none.

@@ -6,6 +6,7 @@
 
 #include "core/error.h"
 #include "core/parallel.h"
+#include "core/sampling.h"
 #include "core/stats.h"
 
 namespace sd {
@@ -53,8 +54,8 @@ class StratifiedGrid {
   int cols_, rows_;
 };
 
-// Cosine-weighted directions around a unit normal from points in [0,1)^2 (Malley's method). The orthonormal
-// basis (Duff et al. 2017, "Building an Orthonormal Basis, Revisited") is built once per shaded point.
+// The frame of a unit normal (Duff et al. 2017, "Building an Orthonormal Basis, Revisited"), built once per shaded
+// point, for its cosine-weighted sky directions (core/sampling.h).
 class CosineLobe {
  public:
   explicit CosineLobe(const Eigen::Vector3f& n) : n_(n) {
@@ -64,29 +65,31 @@ class CosineLobe {
     t_ = Eigen::Vector3f(1.0f + sign * n.x() * n.x() * a, sign * b, -sign * n.x());
     bt_ = Eigen::Vector3f(b, sign + n.y() * n.y() * a, -n.y());
   }
-  Eigen::Vector3f Direction(const Eigen::Vector2f& xi) const {
-    const float r = std::sqrt(xi.x());
-    const float phi = 2.0f * kPi * xi.y();
-    const float lx = r * std::cos(phi), ly = r * std::sin(phi), lz = std::sqrt(std::max(0.0f, 1.0f - xi.x()));
-    return (lx * t_ + ly * bt_ + lz * n_).normalized();
-  }
+  Eigen::Vector3f ToScene(const Eigen::Vector3f& local) const { return local.x() * t_ + local.y() * bt_ + local.z() * n_; }
 
  private:
   Eigen::Vector3f n_, t_, bt_;
 };
 
+// A shaded point's `n` sky directions: the shared pattern shifted by two draws of the pixel's stream.
+ShiftedCosinePattern SkyPattern(int n, PixelRng& rng) {
+  const float shift_x = rng.Next();
+  return ShiftedCosinePattern(n, shift_x, rng.Next());
+}
+
 // Of `n` cosine-weighted sky directions around `lobe`, how many are above the horizon (z > 0), and how many of
-// those no mesh but `skip_mesh` occludes. The directions are drawn in order from `rng` (every one, so the stream
-// does not depend on the scene); the rays above the horizon are traced in packets.
+// those no mesh but `skip_mesh` occludes. The directions' shift is drawn from `rng` whatever the scene; the rays
+// above the horizon are traced in packets.
 struct SkyCount {
   int above = 0, open = 0;
 };
-SkyCount CountOpenSky(const RayScene& scene, const Eigen::Vector3f& origin, const CosineLobe& lobe, const StratifiedGrid& grid,
-                      int n, PixelRng& rng, int skip_mesh) {
+SkyCount CountOpenSky(const RayScene& scene, const Eigen::Vector3f& origin, const CosineLobe& lobe, int n, PixelRng& rng,
+                      int skip_mesh) {
   SkyCount c;
+  const ShiftedCosinePattern pattern = SkyPattern(n, rng);
   OcclusionFan fan(scene, origin, skip_mesh);
   for (int k = 0; k < n; ++k) {
-    const Eigen::Vector3f d = lobe.Direction(grid(k, rng));
+    const Eigen::Vector3f d = lobe.ToScene(pattern.Local(k));
     if (d.z() <= 0) continue;
     ++c.above;
     fan.Add(d);
@@ -188,7 +191,7 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
   const int receiver = options.receiver_mesh;
   const bool filter_sky = options.sky_filter_radius > 0;
   const float inf = std::numeric_limits<float>::infinity();
-  const StratifiedGrid pixel_grid(spp), ao_grid(n_ao);
+  const StratifiedGrid pixel_grid(spp);
 
   // The sub-sample's primary ray: objects first, the receiver where none (the receiver stands in for the real
   // road, which is in the photo already: it never hides an object; a patch laid on a kerb's slope rises metres
@@ -209,7 +212,7 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
   // Light the real road got (no objects) vs what it gets now; visibility ignores the road itself.
   const auto receiver_ratio = [&](const Frame& f, float cos_sun, PixelRng& rng) {
     const bool sun_visible = cos_sun > 0 && !scene.Occluded(f.p_offset, sun_dir, 0.0f, inf, receiver);
-    const SkyCount sky_count = CountOpenSky(scene, f.p_offset, CosineLobe(f.n_shade), ao_grid, n_ao, rng, receiver);
+    const SkyCount sky_count = CountOpenSky(scene, f.p_offset, CosineLobe(f.n_shade), n_ao, rng, receiver);
     const float ao_with = n_ao > 0 ? static_cast<float>(sky_count.open) / n_ao : 1.0f;
     const float ao_without = n_ao > 0 ? static_cast<float>(sky_count.above) / n_ao : 1.0f;
     const float den = sun_y * cos_sun + sky_y * kPi * ao_without;
@@ -251,7 +254,7 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
       const float obj_cos_sun = own ? std::max(0.0f, f.n_shade.dot(obj_sun_dir)) : cos_sun;
       // Nor does the receiver shade an object: the real road below is already counted by the upper-hemisphere test.
       const bool sun_visible = obj_cos_sun > 0 && !scene.Occluded(f.p_offset, obj_sun_dir, 0.0f, inf, receiver);
-      const int sky_open = CountOpenSky(scene, f.p_offset, CosineLobe(f.n_shade), ao_grid, n_ao, rng, receiver).open;
+      const int sky_open = CountOpenSky(scene, f.p_offset, CosineLobe(f.n_shade), n_ao, rng, receiver).open;
       const float ao = n_ao > 0 ? static_cast<float>(sky_open) / n_ao : 1.0f;
       const Eigen::Vector3f E = l.sun_irradiance * (sun_visible ? obj_cos_sun : 0.0f) + l.sky_radiance * (kPi * ao);
       const Eigen::Vector3f albedo = scene.BaseColor(hit).head<3>();
@@ -341,8 +344,9 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
                           std::max(0.0f, f.n_shade.dot(obj_sun_dir)), hit.mesh, n_ao, 0, false});
           if (subs.back().cos_sun > 0) ray_origin.push_back(f.p_offset), ray_dir.push_back(obj_sun_dir), ray_sub.push_back(-1 - k);
           const CosineLobe lobe(f.n_shade);
+          const ShiftedCosinePattern sky = SkyPattern(n_ao, rng);
           for (int a = 0; a < n_ao; ++a) {
-            const Eigen::Vector3f d = lobe.Direction(ao_grid(a, rng));
+            const Eigen::Vector3f d = lobe.ToScene(sky.Local(a));
             if (d.z() > 0) ray_origin.push_back(f.p_offset), ray_dir.push_back(d), ray_sub.push_back(k);
           }
           depth = std::min(depth, hit.t * cam_z);

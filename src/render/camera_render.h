@@ -74,7 +74,8 @@ struct CameraRender {
 //
 // Sampling: sub-pixel positions are stratified on a ceil(sqrt(spp)) grid with hash jitter seeded by
 // (seed, pixel), so a pixel's result does not depend on threads or on the rectangle. AO directions are
-// cosine-weighted around the shading normal and stratified the same way.
+// cosine-weighted around the shading normal: a correlated multi-jittered pattern shifted per shaded sub-sample
+// (core/sampling.h).
 // Object samples (any mesh other than receiver_mesh): L = a * E / pi with a = BaseColor().rgb (alpha is
 // ignored), normals flipped to face the camera (double-sided), the sun visibility traced with one shadow
 // ray and AO = fraction of the ao_samples directions that point above the horizon (z > 0) and are

@@ -11,6 +11,7 @@
 
 #include "core/error.h"
 #include "core/parallel.h"
+#include "core/sampling.h"
 #include "core/stats.h"
 #include "synth/environment.h"
 
@@ -80,24 +81,25 @@ class CosineLobe {
   Eigen::Vector3d n_, t_, b_;
 };
 
-// CosineLobe in single precision, for the road's sky rays (16 per road pixel): the double-precision sine and
-// cosine save and restore the rounding mode on every call, and cost more than tracing the rays.
-class CosineLobeF {
+// The road's sky directions round a normal (16 per road pixel): a shifted pattern (core/sampling.h) in a basis
+// built once per point, in single precision (the double-precision sine and cosine of a freshly jittered direction
+// per ray cost more than tracing it).
+class RoadSkyLobe {
  public:
-  explicit CosineLobeF(const Eigen::Vector3d& normal) {
+  RoadSkyLobe(const Eigen::Vector3d& normal, int count, uint32_t seed)
+      : pattern_(count, static_cast<float>(Hash01(seed, 0x51ED27u)), static_cast<float>(Hash01(seed, 0xA3C59u))) {
     const Eigen::Vector3d n = normal.normalized();
     Eigen::Vector3d t, b;
     Basis(n, &t, &b);
     n_ = n.cast<float>(), t_ = t.cast<float>(), b_ = b.cast<float>();
   }
-  Eigen::Vector3f Ray(int k, int count, uint32_t seed) const {
-    const Eigen::Vector2d r = Stratified(k, count, seed, 29);
-    const float rx = static_cast<float>(r.x()), phi = 2.0f * static_cast<float>(M_PI) * static_cast<float>(r.y());
-    const float rr = std::sqrt(rx);
-    return (rr * std::cos(phi) * t_ + rr * std::sin(phi) * b_ + std::sqrt(std::max(0.0f, 1.0f - rx)) * n_).normalized();
+  Eigen::Vector3f Ray(int k) const {
+    const Eigen::Vector3f l = pattern_.Local(k);
+    return l.x() * t_ + l.y() * b_ + l.z() * n_;
   }
 
  private:
+  ShiftedCosinePattern pattern_;
   Eigen::Vector3f n_, t_, b_;
 };
 
@@ -164,13 +166,13 @@ namespace {
 double SkyOpenShare(const RayScene& scene, const Eigen::Vector3f& origin, const Eigen::Vector3d& n,
                     const EnvironmentLight& light, const EnvShadingOptions& o) {
   const int ns = std::max(1, o.sky_rays);
-  const CosineLobeF lobe(n);
+  const RoadSkyLobe lobe(n, ns, o.seed);
   // Per thread, reused: this runs once per road pixel.
   thread_local std::vector<Eigen::Vector3f> dirs;
   thread_local std::vector<char> blocked;
   dirs.clear();
   for (int k = 0; k < ns; ++k) {
-    const Eigen::Vector3f d = lobe.Ray(k, ns, o.seed);
+    const Eigen::Vector3f d = lobe.Ray(k);
     if (d.z() > 0) dirs.push_back(d);
   }
   blocked.assign(dirs.size(), 0);

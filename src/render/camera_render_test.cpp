@@ -415,7 +415,10 @@ RenderError ErrorAgainst(const CameraRender& r, const CameraRender& reference, b
 // box's silhouette against the wall, its creases, its face seen nearly edge-on in the 20 cm gap to the wall),
 // where a filter that blurs would show. Filtered, 16 rays must beat 16 rays unfiltered everywhere; against the
 // default's 64 unfiltered rays, this scene is the filter's hard case (the real keyframe's objects, measured by
-// bench_sky_filter, come out better overall): within a fifth overall and 70 % near the edges, unbiased overall and within 1 % of the value near them.
+// bench_sky_filter, come out better overall): measured 1.28x overall and 1.85x near the edges (bounds 1.35x and
+// 1.95x), unbiased overall and within 1 % of the value near them. (With a jittered grid the 64 rays were worse,
+// 0.0072 / 0.0070, and the gap 1.14x / 1.56x; the shifted pattern of core/sampling.h took 15-18 % off the 64 rays'
+// error here and 3-4 % off the filtered 16's.)
 // At the default 4 sub-samples, the whole image against a 16-sub-sample render: no worse than the default.
 TEST(RenderCamera, DenoisedSkyAgainstAConvergedRender) {
   const BoxBesideWall s;
@@ -434,8 +437,8 @@ TEST(RenderCamera, DenoisedSkyAgainstAConvergedRender) {
     ASSERT_GT(filtered_edges.pixels, 300);
     EXPECT_LT(filtered_all.rmse, 0.7 * few_all.rmse);
     EXPECT_LT(filtered_edges.rmse, 0.9 * few_edges.rmse);
-    EXPECT_LT(filtered_all.rmse, 1.2 * plain_all.rmse);
-    EXPECT_LT(filtered_edges.rmse, 1.7 * plain_edges.rmse);
+    EXPECT_LT(filtered_all.rmse, 1.35 * plain_all.rmse);
+    EXPECT_LT(filtered_edges.rmse, 1.95 * plain_edges.rmse);
     EXPECT_LT(std::abs(filtered_all.bias), 0.2 * plain_all.rmse);
     EXPECT_LT(std::abs(filtered_edges.bias), 0.01 * filtered_edges.mean_value);  // measured 0.4 %: a little bright
   }

@@ -49,22 +49,25 @@ Eigen::Vector2d Stratified(int k, int n, uint32_t seed, uint32_t salt) {
 Eigen::Vector3f Offset(const Eigen::Vector3d& p, const Eigen::Vector3d& n, float off) {
   return (p + n.normalized() * off).cast<float>();
 }
-// Directions uniform on the sun's disk; the basis round the sun built once.
+// Directions uniform on the sun's disk: the shifted pattern of the sky's rays (core/sampling.h), whose local x and
+// y (the square root of a uniform radius-squared, round a uniform azimuth) are uniform on the unit disk; the basis
+// round the sun built once per point.
 class SunDisk {
  public:
-  explicit SunDisk(const EnvironmentLight& light)
-      : s_(light.sun_direction.normalized()), tan_radius_(std::tan(light.sun_angular_radius_rad)) {
+  SunDisk(const EnvironmentLight& light, int count, uint32_t seed)
+      : s_(light.sun_direction.normalized()), tan_radius_(std::tan(light.sun_angular_radius_rad)),
+        pattern_(count, static_cast<float>(Hash01(seed, 0x5D15Cu)), static_cast<float>(Hash01(seed, 0x7A9E3u))) {
     Basis(s_, &t_, &b_);
   }
-  Eigen::Vector3d Ray(int k, int n, uint32_t seed) const {
-    const Eigen::Vector2d r = Stratified(k, n, seed, 17);
-    const double rad = tan_radius_ * std::sqrt(r.x()), phi = 2 * M_PI * r.y();
-    return (s_ + rad * (std::cos(phi) * t_ + std::sin(phi) * b_)).normalized();
+  Eigen::Vector3d Ray(int k) const {
+    const Eigen::Vector3f l = pattern_.Local(k);
+    return (s_ + tan_radius_ * (static_cast<double>(l.x()) * t_ + static_cast<double>(l.y()) * b_)).normalized();
   }
 
  private:
   Eigen::Vector3d s_, t_, b_;
   double tan_radius_;
+  ShiftedCosinePattern pattern_;
 };
 
 // Cosine-weighted directions round a normal; the basis built once per shaded point.
@@ -131,9 +134,9 @@ float SampleBilinear1(const ImageF& img, float u, float v) {
 double SunVisibility(const RayScene& scene, const Eigen::Vector3d& p, const Eigen::Vector3d& normal, const EnvironmentLight& light,
                      const EnvShadingOptions& o) {
   const int n = std::max(1, o.sun_rays);
-  const SunDisk disk(light);
+  const SunDisk disk(light, n, o.seed);
   OcclusionFan fan(scene, Offset(p, normal, o.ray_offset), o.skip_mesh);
-  for (int k = 0; k < n; ++k) fan.Add(disk.Ray(k, n, o.seed).cast<float>(), 1.0);
+  for (int k = 0; k < n; ++k) fan.Add(disk.Ray(k).cast<float>(), 1.0);
   return fan.OpenWeight() / n;
 }
 

@@ -65,8 +65,7 @@ AlbedoRender RenderAlbedo(const TriangleMesh& mesh, const ViewCamera& view, int 
 
   const int w = view.camera.width, h = view.camera.height;
   AlbedoRender out{ImageF(w, h, 3), ImageF(w, h, 1)};
-  ParallelFor(0, static_cast<size_t>(h), [&](size_t yy) {
-    const int y = static_cast<int>(yy);
+  ParallelRows(0, h, [&](int y) {
     for (int x = 0; x < w; ++x) {
       Eigen::Vector3f sum = Eigen::Vector3f::Zero();
       const int covered = VisitCoveredSamples(rast, cam.width, x, y, ss, [&](size_t p) {

@@ -441,22 +441,20 @@ ImageF GrabCut(const ImageU8& image, const Box2& box, const ImageF* prior, const
     return s;
   };
   std::vector<double> row_sum(static_cast<size_t>(h), 0.0), row_count(static_cast<size_t>(h), 0.0);
-  ParallelFor(0, static_cast<size_t>(h), [&](size_t yy) {
-    const int y = static_cast<int>(yy);
+  ParallelRows(0, h, [&](int y) {
     for (int x = 0; x < w; ++x)
       for (const auto& o : kOffsets) {
         const int qx = x + o[0], qy = y + o[1];
         if (qx < 0 || qx >= w || qy >= h) continue;
-        row_sum[yy] += diff2(index(x, y), index(qx, qy));
-        row_count[yy] += 1;
+        row_sum[static_cast<size_t>(y)] += diff2(index(x, y), index(qx, qy));
+        row_count[static_cast<size_t>(y)] += 1;
       }
   });
   double sum = 0, count = 0;
   for (int y = 0; y < h; ++y) sum += row_sum[static_cast<size_t>(y)], count += row_count[static_cast<size_t>(y)];
   const double beta = sum > 0 ? count / (2 * sum) : 0.0;
   std::vector<std::array<double, 4>> pair(n);
-  ParallelFor(0, static_cast<size_t>(h), [&](size_t yy) {
-    const int y = static_cast<int>(yy);
+  ParallelRows(0, h, [&](int y) {
     for (int x = 0; x < w; ++x)
       for (size_t k = 0; k < kOffsets.size(); ++k) {
         const int qx = x + kOffsets[k][0], qy = y + kOffsets[k][1];

@@ -238,8 +238,7 @@ ImageF Harmonizer::HarmonizeClassical(const ImageF& composite, const ImageF& mas
                options_.chroma_strength * ((b.mean[c] - cast_ring[c - 1]) - (f.mean[c] - cast_fg[c - 1]));
   // Every pixel the mask touches (soft edges included) gets the transfer; BlendByMask weighs it by coverage.
   ImageF harmonised = composite;
-  ParallelFor(static_cast<size_t>(by0), static_cast<size_t>(by1) + 1, [&](size_t row) {  // pixel by pixel
-    const int y = static_cast<int>(row);
+  ParallelRows(by0, by1 + 1, [&](int y) {  // pixel by pixel
     for (int x = bx0; x <= bx1; ++x) {
       if (mask.at(x, y) <= 0) continue;
       std::array<float, 3> lab = SrgbToLab(rgb_at(x, y));

@@ -84,8 +84,7 @@ ImageF ResizeBicubic(const ImageF& image, int width, int height) {
   const int w = image.width(), h = image.height(), ch = image.channels();
   const std::vector<Taps> tx = ResampleTaps(w, width), ty = ResampleTaps(h, height);
   ImageF wide(width, h, ch);
-  ParallelFor(0, static_cast<size_t>(h), [&](size_t yi) {
-    const int y = static_cast<int>(yi);
+  ParallelRows(0, h, [&](int y) {
     for (int xo = 0; xo < width; ++xo) {
       const Taps& t = tx[static_cast<size_t>(xo)];
       for (int c = 0; c < ch; ++c) {

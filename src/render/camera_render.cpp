@@ -274,8 +274,7 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
   };
 
   if (!filter_sky) {
-    ParallelFor(static_cast<size_t>(y0), static_cast<size_t>(y1), [&](size_t row) {
-      const int y = static_cast<int>(row);
+    ParallelRows(y0, y1, [&](int y) {
       for (const auto& [x0, x1] : RowSpans(rects, y, w))
         for (int x = x0; x < x1; ++x) render_pixel(x, y);
     });
@@ -294,9 +293,8 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
   Image<int> first(bw, y1 - y0, 1, -1), count(bw, y1 - y0, 1, 0);
   const float fx = static_cast<float>(camera.fx);
 
-  ParallelFor(static_cast<size_t>(y0), static_cast<size_t>(y1), [&](size_t row) {
-    const int y = static_cast<int>(row);
-    std::vector<SkySurface>& surfaces = rows[row - static_cast<size_t>(y0)];
+  ParallelRows(y0, y1, [&](int y) {
+    std::vector<SkySurface>& surfaces = rows[static_cast<size_t>(y - y0)];
     struct Sub {  // an object sub-sample
       Eigen::Vector3f albedo, p, n;
       const Lighting* light;
@@ -407,10 +405,9 @@ CameraRender RenderCamera(const RayScene& scene, const PinholeCamera& camera, co
   const int radius = options.sky_filter_radius;
   const float sigma_px = std::max(1.0f, 0.6f * static_cast<float>(radius));
   const float inv_2s2 = 1.0f / (2.0f * sigma_px * sigma_px);
-  ParallelFor(static_cast<size_t>(y0), static_cast<size_t>(y1), [&](size_t row) {
-    const int y = static_cast<int>(row);
+  ParallelRows(y0, y1, [&](int y) {
     const float inv_spp = 1.0f / static_cast<float>(spp);
-    const std::vector<SkySurface>& surfaces = rows[row - static_cast<size_t>(y0)];
+    const std::vector<SkySurface>& surfaces = rows[static_cast<size_t>(y - y0)];
     for (size_t i = 0; i < surfaces.size();) {
       const int x = surfaces[i].x;
       Eigen::Vector3f color = Eigen::Vector3f::Zero();

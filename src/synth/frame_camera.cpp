@@ -370,8 +370,7 @@ int HarmonizeObjects(const models::Harmonizer& harmonizer, const ObjectRender& r
     ImageF composite(cx1 - cx0, cy1 - cy0, 3);
     ImageF mask(composite.width(), composite.height(), 1, 0.0f);
     // Three sRGB conversions a pixel of a crop that grows with the object: rows in parallel (the same result).
-    ParallelFor(static_cast<size_t>(cy0), static_cast<size_t>(cy1), [&](size_t row) {
-      const int y = static_cast<int>(row);
+    ParallelRows(cy0, cy1, [&](int y) {
       for (int x = cx0; x < cx1; ++x) {
         for (int ch = 0; ch < 3; ++ch) composite.at(x - cx0, y - cy0, ch) = LinearToSrgb(std::clamp(linear->at(x, y, ch), 0.0f, 1.0f));
         if (x >= b.x0 && x < b.x1 && y >= b.y0 && y < b.y1 && r.render.object.at(x, y) == static_cast<int>(k))
@@ -381,8 +380,7 @@ int HarmonizeObjects(const models::Harmonizer& harmonizer, const ObjectRender& r
     const ImageF out = harmonizer.Harmonize(composite, mask);
     // Back to linear only where the object is: elsewhere the harmoniser returned the composite bit for bit, and the
     // round trip through sRGB would not be.
-    ParallelFor(static_cast<size_t>(b.y0), static_cast<size_t>(b.y1), [&](size_t row) {
-      const int y = static_cast<int>(row);
+    ParallelRows(b.y0, b.y1, [&](int y) {
       for (int x = b.x0; x < b.x1; ++x)
         if (mask.at(x - cx0, y - cy0) > 0)
           for (int ch = 0; ch < 3; ++ch) linear->at(x, y, ch) = SrgbToLinear(out.at(x - cx0, y - cy0, ch));

@@ -35,8 +35,7 @@ ImageF ComputeVisibility(const std::vector<ProjectedPoint>& points, const ImageF
   }
   for (auto& col : columns) std::sort(col.begin(), col.end(), [](auto* a, auto* b) { return a->v < b->v; });
 
-  ParallelFor(0, static_cast<size_t>(H), [&](size_t yi) {
-    const int y = static_cast<int>(yi);
+  ParallelRows(0, H, [&](int y) {
     const float vc = y + 0.5f;
     for (int x = 0; x < W; ++x) {
       const float d = object_depth.at(x, y);
@@ -81,16 +80,14 @@ size_t Idx(int x, int y, int w) { return static_cast<size_t>(y) * w + x; }
 // Separable running minimum over a (2r+1)^2 window.
 std::vector<float> MinFilter(const std::vector<float>& in, int w, int h, int r) {
   std::vector<float> tmp(in.size(), kInf), out(in.size(), kInf);
-  ParallelFor(0, static_cast<size_t>(h), [&](size_t yi) {
-    const int y = static_cast<int>(yi);
+  ParallelRows(0, h, [&](int y) {
     for (int x = 0; x < w; ++x) {
       float m = kInf;
       for (int k = std::max(0, x - r); k <= std::min(w - 1, x + r); ++k) m = std::min(m, in[Idx(k, y, w)]);
       tmp[Idx(x, y, w)] = m;
     }
   });
-  ParallelFor(0, static_cast<size_t>(h), [&](size_t yi) {
-    const int y = static_cast<int>(yi);
+  ParallelRows(0, h, [&](int y) {
     for (int x = 0; x < w; ++x) {
       float m = kInf;
       for (int k = std::max(0, y - r); k <= std::min(h - 1, y + r); ++k) m = std::min(m, tmp[Idx(x, k, w)]);
@@ -247,8 +244,7 @@ DepthMap DenseDepth(const std::vector<ProjectedPoint>& points, const ImageU8& im
   DepthMap out{ImageF(W, H, 1, kInf), ImageF(W, H, 1, 0.0f), ImageU8(W, H, 1, 0)};
   const float R = static_cast<float>(options.max_fill_px), R2 = R * R;
   const double inv_sc = 1.0 / (2 * options.sigma_color * options.sigma_color);
-  ParallelFor(static_cast<size_t>(ry0), static_cast<size_t>(ry1), [&](size_t yi) {
-    const int y = static_cast<int>(yi);
+  ParallelRows(ry0, ry1, [&](int y) {
     const float pv = y + 0.5f;
     std::vector<Vote> votes;
     const int cy0 = std::max(0, static_cast<int>((pv - R) / kCell)), cy1 = std::min(gh - 1, static_cast<int>((pv + R) / kCell));
@@ -325,8 +321,7 @@ DepthMap DenseDepth(const std::vector<ProjectedPoint>& points, const ImageU8& im
   const Rigid3d T_world_cam = priors.T_world_ego * T_ego_cam;
   std::vector<std::pair<Rigid3d, Eigen::Vector3d>> boxes;  // T_box_cam, half size
   for (const auto& b : priors.boxes_ego) boxes.push_back({(T_cam_ego * b.T_frame_box).Inverse(), 0.5 * b.size});
-  ParallelFor(static_cast<size_t>(ry0), static_cast<size_t>(ry1), [&](size_t yi) {
-    const int y = static_cast<int>(yi);
+  ParallelRows(ry0, ry1, [&](int y) {
     for (const auto& [sx0, sx1] : RowSpans(rects, y, W)) for (int x = sx0; x < sx1; ++x) {
       if (out.confidence.at(x, y) > 0) continue;
       const Eigen::Vector3d dir = camera.RayDirection(Eigen::Vector2d(x + 0.5, y + 0.5));

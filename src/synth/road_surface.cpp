@@ -456,8 +456,7 @@ RoadSurface RoadSurface::Build(const std::vector<SweepInWorld>& sweeps, const Ro
     const int reach = static_cast<int>(std::floor(o.max_fill_distance / o.cell));
     constexpr double kGradeTolerance = 0.02;  // local grade and camber changes the seed plane does not follow
     const int dirs[4][2] = {{1, 0}, {0, 1}, {1, 1}, {1, -1}};
-    ParallelFor(0, static_cast<size_t>(ny), [&](size_t yy) {
-      const int y = static_cast<int>(yy);
+    ParallelRows(0, ny, [&](int y) {
       for (int x = 0; x < nx; ++x) {
         const int c = y * nx + x;
         if (s.observed_[c] || target[c] || dist[c] > o.max_fill_distance) continue;
@@ -559,8 +558,7 @@ RoadSurface RoadSurface::Build(const std::vector<SweepInWorld>& sweeps, const Ro
   std::vector<uint8_t> kerb(ncell, 0);
   auto valid = [&](int x, int y) { return x >= 0 && y >= 0 && x < nx && y < ny && !std::isnan(s.height_[y * nx + x]); };
   auto h = [&](int x, int y) { return static_cast<double>(s.height_[y * nx + x]); };
-  ParallelFor(0, static_cast<size_t>(ny), [&](size_t yy) {
-    const int y = static_cast<int>(yy);
+  ParallelRows(0, ny, [&](int y) {
     std::vector<Eigen::Vector3d> window;
     for (int x = 0; x < nx; ++x) {
       if (!valid(x, y)) continue;

@@ -67,7 +67,8 @@ ShiftedCosinePattern::ShiftedCosinePattern(int n, float shift_x, float shift_azi
     last = &points, last_n = n;
   }
   points_ = last;
-  shift_x_ = std::clamp(shift_x, 0.0f, std::nextafter(1.0f, 0.0f));
+  constexpr float kBelowOne = 0x1.fffffep-1f;  // the largest float under 1: a shift keeps x in [0, 1)
+  shift_x_ = std::clamp(shift_x, 0.0f, kBelowOne);
   const float a = 2.0f * static_cast<float>(M_PI) * shift_azimuth;
   cos_shift_ = std::cos(a), sin_shift_ = std::sin(a);
 }

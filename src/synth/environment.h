@@ -148,13 +148,13 @@ struct EnvironmentLight {
 EnvironmentLight MakeEnvironmentLight(const EnvironmentMap& map);
 
 struct EnvShadingOptions {
-  int sun_rays = 16;      // jittered shadow rays over the sun disk (soft shadows)
+  int sun_rays = 16;      // shadow rays over the sun disk (soft shadows), a shifted pattern (core/sampling.h)
   int sky_rays = 32;      // cosine-weighted hemisphere rays (ambient occlusion)
   uint32_t seed = 1;
   int skip_mesh = -1;     // mesh never counted as an occluder (-1 none)
   float ray_offset = 1e-3f;  // metres along the normal before tracing
 };
-// Fraction of the sun disk visible from p (stratified jittered cone sampling).
+// Fraction of the sun disk visible from p (rays over the disk from the shifted pattern of core/sampling.h).
 double SunVisibility(const RayScene& scene, const Eigen::Vector3d& p, const Eigen::Vector3d& normal,
                      const EnvironmentLight& light, const EnvShadingOptions& options = {});
 // Unoccluded share of the cosine-weighted hemisphere around `normal` that lies above the horizon.

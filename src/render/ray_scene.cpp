@@ -309,29 +309,39 @@ void SetLane(RayPacket* rays, int i, const Eigen::Vector3f* origin, const Eigen:
   rays->flags[i] = 0;
 }
 
-// One packet of up to 16 occlusion rays; origin_of(i) gives ray i's origin.
-template <typename OriginOf>
-uint32_t TracePacket(RTCScene scene, const OriginOf& origin_of, const Eigen::Vector3f* dirs, int count, float t_near,
-                     float t_far, int skip_mesh) {
-  SD_CHECK(count >= 0 && count <= RayScene::kMaxFanRays,
-           << count << " rays in one packet (at most " << RayScene::kMaxFanRays << ")");
+// One Embree packet of W (4, 8 or 16) occlusion rays; origin_of(i) gives ray i's origin.
+template <int W, typename RTCRayW, typename OccludedW, typename OriginOf>
+uint32_t OccludedPacketOf(RTCScene scene, const OccludedW& occluded_w, const OriginOf& origin_of, const Eigen::Vector3f* dirs,
+                          int count, float t_near, float t_far, int skip_mesh) {
   SkipContext ctx;
   InitSkipContext(&ctx, skip_mesh);
-  alignas(64) int valid[16];
-  RTCRay16 rays;
+  alignas(64) int valid[W];
+  RTCRayW rays;
   bool any = false;
-  for (int i = 0; i < 16; ++i) {
+  for (int i = 0; i < W; ++i) {
     const bool ok = i < count && RayWithinEmbreeContract(origin_of(i), dirs[i], t_near, t_far);
     valid[i] = ok ? -1 : 0;
     any = any || ok;
     SetLane(&rays, i, ok ? &origin_of(i) : nullptr, ok ? &dirs[i] : nullptr, t_near, t_far);
   }
   if (!any) return 0;
-  rtcOccluded16(valid, scene, &ctx.context, &rays);
+  occluded_w(valid, scene, &ctx.context, &rays);
   uint32_t occluded = 0;
   for (int i = 0; i < count; ++i)
     if (valid[i] && rays.tfar[i] < 0.0f) occluded |= 1u << i;  // Embree sets tfar to -inf when occluded
   return occluded;
+}
+
+// Up to 16 occlusion rays in the narrowest packet that holds them: a wide packet's empty lanes still cost their
+// share of every traversal step (the render's 4 sun rays and 16 sky rays per pixel leave a tail of 4).
+template <typename OriginOf>
+uint32_t TracePacket(RTCScene scene, const OriginOf& origin_of, const Eigen::Vector3f* dirs, int count, float t_near,
+                     float t_far, int skip_mesh) {
+  SD_CHECK(count >= 0 && count <= RayScene::kMaxFanRays,
+           << count << " rays in one packet (at most " << RayScene::kMaxFanRays << ")");
+  if (count <= 4) return OccludedPacketOf<4, RTCRay4>(scene, rtcOccluded4, origin_of, dirs, count, t_near, t_far, skip_mesh);
+  if (count <= 8) return OccludedPacketOf<8, RTCRay8>(scene, rtcOccluded8, origin_of, dirs, count, t_near, t_far, skip_mesh);
+  return OccludedPacketOf<16, RTCRay16>(scene, rtcOccluded16, origin_of, dirs, count, t_near, t_far, skip_mesh);
 }
 }  // namespace
 

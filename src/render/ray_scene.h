@@ -37,6 +37,12 @@ class RayScene {
   // instead of having the mesh's hits filtered out: the same answers without its triangles, which lie under or
   // round every object, in their way. One mesh per scene; -1 none.
   void SetOftenSkipped(int mesh);
+  // Before Commit: OccludedFan and OccludedPacket will trace rays whose answers are counted, not looked at one by
+  // one (a surface's sky and sun rays, millions a frame). Commit then also builds their BVHs without Embree's
+  // robust mode, whose traversal is 10-20 % slower; a ray that meets a shared edge or vertex within rounding
+  // may pass through there, which is one ray of an estimate of many. Intersect, IntersectFan and Occluded stay
+  // watertight: a pixel's primary ray or a LiDAR beam through a crack would be seen.
+  void SetFastOcclusion(bool on = true);
   // Must be called after the last AddMesh and before any query. Builds a high-quality BVH with Embree's
   // robust (watertight) traversal: rays through shared edges and vertices of a closed mesh do not leak.
   void Commit();
@@ -53,8 +59,9 @@ class RayScene {
   bool Occluded(const Eigen::Vector3f& origin, const Eigen::Vector3f& dir, float t_near, float t_far,
                 int skip_mesh = -1) const;
   // Occluded for up to kMaxFanRays rays leaving one point (a surface point's sky or sun rays), traced as one
-  // packet: the same answers as `count` calls of Occluded, at a fraction of the cost on SIMD hardware. Bit i of
-  // the result is set when ray i is occluded; a ray outside Occluded's contract is not (as there).
+  // packet: the same answers as `count` calls of Occluded (but within rounding of an edge, with SetFastOcclusion),
+  // at a fraction of the cost on SIMD hardware. Bit i of the result is set when ray i is occluded; a ray outside
+  // Occluded's contract is not (as there).
   static constexpr int kMaxFanRays = 16;
   uint32_t OccludedFan(const Eigen::Vector3f& origin, const Eigen::Vector3f* dirs, int count, float t_near, float t_far,
                        int skip_mesh = -1) const;

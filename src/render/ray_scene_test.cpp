@@ -231,61 +231,69 @@ TEST(RayScene, OccludedPacketAnswersAsOccludedDoes) {
 
 // A scene that keeps a second BVH without its often-skipped mesh answers every query as the scene with one BVH
 // does, whatever is skipped: the often-skipped mesh (traced in the second BVH), another mesh or none (the first).
+// So does a scene with SetFastOcclusion's BVH for its occlusion fans and packets, with or without an often-skipped
+// mesh, for rays that do not graze an edge (random rays here).
 TEST(RayScene, OftenSkippedMeshGivesTheSameAnswers) {
-  const auto build = [](bool second_bvh) {
+  const auto build = [](bool second_bvh, bool fast_occlusion) {
     RayScene scene;
     const int ground = scene.AddMesh(Quad({0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 20, 20));
     scene.AddMesh(Box({-1, -1, 0}, {1, 1, 2}));
     scene.AddMesh(std::make_shared<TriangleMesh>());
     scene.AddMesh(Box({2, -0.5f, 0}, {3, 0.5f, 3}));
     if (second_bvh) scene.SetOftenSkipped(ground);
+    scene.SetFastOcclusion(fast_occlusion);
     scene.Commit();
     return scene;
   };
-  const RayScene one = build(false), two = build(true);
+  const RayScene one = build(false, false);
   GTEST_FLAG_SET(death_test_style, "threadsafe");  // Embree's worker threads are running
   EXPECT_DEATH(RayScene().SetOftenSkipped(0), "mesh 0 of 0");
-  uint32_t state = 99;
-  const auto uniform = [&] {  // [-1, 1)
-    state = state * 1664525u + 1013904223u;
-    return static_cast<float>(state >> 8) / 8388608.0f - 1.0f;
-  };
-  const float inf = std::numeric_limits<float>::infinity();
-  int hits = 0, occluded = 0, ground_hits = 0;
-  for (int trial = 0; trial < 300; ++trial) {
-    const int skip = trial % 3 - 1;  // none, the ground, the first box
-    const Eigen::Vector3f origin(4 * uniform(), 4 * uniform(), 2.0f + 2.0f * uniform());
-    std::vector<Eigen::Vector3f> dirs(RayScene::kMaxFanRays), origins(RayScene::kMaxFanRays);
-    for (size_t i = 0; i < dirs.size(); ++i) {
-      dirs[i] = Eigen::Vector3f(uniform(), uniform(), uniform()).normalized();
-      origins[i] = Eigen::Vector3f(3 * uniform(), 3 * uniform(), 1.5f + 1.5f * uniform());
-    }
-    std::vector<RayHit> fan_one(dirs.size()), fan_two(dirs.size());
-    one.IntersectFan(origin, dirs.data(), static_cast<int>(dirs.size()), 0.0f, inf, skip, fan_one.data());
-    two.IntersectFan(origin, dirs.data(), static_cast<int>(dirs.size()), 0.0f, inf, skip, fan_two.data());
-    for (size_t i = 0; i < dirs.size(); ++i) {
-      const RayHit a = one.Intersect(origin, dirs[i], 0.0f, inf, skip), b = two.Intersect(origin, dirs[i], 0.0f, inf, skip);
-      ASSERT_EQ(a.mesh, b.mesh) << "trial " << trial << " ray " << i;
-      ASSERT_EQ(a.face, b.face) << "trial " << trial << " ray " << i;
-      ASSERT_EQ(fan_two[i].mesh, b.mesh);
-      ASSERT_EQ(fan_two[i].face, b.face);
-      if (a.Hit()) {
-        EXPECT_NEAR(a.t, b.t, 1e-6f * (1 + a.t));
-        ++hits;
+  EXPECT_DEATH(build(false, false).SetFastOcclusion(), "SetFastOcclusion after Commit");
+  for (const auto& [second_bvh, fast_occlusion] : {std::pair{true, false}, std::pair{true, true}, std::pair{false, true}}) {
+    SCOPED_TRACE(testing::Message() << "second BVH " << second_bvh << ", fast occlusion " << fast_occlusion);
+    const RayScene two = build(second_bvh, fast_occlusion);
+    uint32_t state = 99;
+    const auto uniform = [&] {  // [-1, 1)
+      state = state * 1664525u + 1013904223u;
+      return static_cast<float>(state >> 8) / 8388608.0f - 1.0f;
+    };
+    const float inf = std::numeric_limits<float>::infinity();
+    int hits = 0, occluded = 0, ground_hits = 0;
+    for (int trial = 0; trial < 300; ++trial) {
+      const int skip = trial % 3 - 1;  // none, the ground, the first box
+      const Eigen::Vector3f origin(4 * uniform(), 4 * uniform(), 2.0f + 2.0f * uniform());
+      std::vector<Eigen::Vector3f> dirs(RayScene::kMaxFanRays), origins(RayScene::kMaxFanRays);
+      for (size_t i = 0; i < dirs.size(); ++i) {
+        dirs[i] = Eigen::Vector3f(uniform(), uniform(), uniform()).normalized();
+        origins[i] = Eigen::Vector3f(3 * uniform(), 3 * uniform(), 1.5f + 1.5f * uniform());
       }
-      ground_hits += a.mesh == 0;
-      const bool o = one.Occluded(origin, dirs[i], 0.0f, inf, skip);
-      ASSERT_EQ(o, two.Occluded(origin, dirs[i], 0.0f, inf, skip)) << "trial " << trial << " ray " << i;
-      occluded += o;
+      std::vector<RayHit> fan_one(dirs.size()), fan_two(dirs.size());
+      one.IntersectFan(origin, dirs.data(), static_cast<int>(dirs.size()), 0.0f, inf, skip, fan_one.data());
+      two.IntersectFan(origin, dirs.data(), static_cast<int>(dirs.size()), 0.0f, inf, skip, fan_two.data());
+      for (size_t i = 0; i < dirs.size(); ++i) {
+        const RayHit a = one.Intersect(origin, dirs[i], 0.0f, inf, skip), b = two.Intersect(origin, dirs[i], 0.0f, inf, skip);
+        ASSERT_EQ(a.mesh, b.mesh) << "trial " << trial << " ray " << i;
+        ASSERT_EQ(a.face, b.face) << "trial " << trial << " ray " << i;
+        ASSERT_EQ(fan_two[i].mesh, b.mesh);
+        ASSERT_EQ(fan_two[i].face, b.face);
+        if (a.Hit()) {
+          EXPECT_NEAR(a.t, b.t, 1e-6f * (1 + a.t));
+          ++hits;
+        }
+        ground_hits += a.mesh == 0;
+        const bool o = one.Occluded(origin, dirs[i], 0.0f, inf, skip);
+        ASSERT_EQ(o, two.Occluded(origin, dirs[i], 0.0f, inf, skip)) << "trial " << trial << " ray " << i;
+        occluded += o;
+      }
+      const int n = RayScene::kMaxFanRays;
+      ASSERT_EQ(one.OccludedFan(origin, dirs.data(), n, 0.0f, inf, skip), two.OccludedFan(origin, dirs.data(), n, 0.0f, inf, skip));
+      ASSERT_EQ(one.OccludedPacket(origins.data(), dirs.data(), n, 0.0f, inf, skip),
+                two.OccludedPacket(origins.data(), dirs.data(), n, 0.0f, inf, skip));
     }
-    const int n = RayScene::kMaxFanRays;
-    ASSERT_EQ(one.OccludedFan(origin, dirs.data(), n, 0.0f, inf, skip), two.OccludedFan(origin, dirs.data(), n, 0.0f, inf, skip));
-    ASSERT_EQ(one.OccludedPacket(origins.data(), dirs.data(), n, 0.0f, inf, skip),
-              two.OccludedPacket(origins.data(), dirs.data(), n, 0.0f, inf, skip));
+    EXPECT_GT(hits, 1000);
+    EXPECT_GT(occluded, 1000);
+    EXPECT_GT(ground_hits, 300);  // where the ground is not skipped, it is hit in both
   }
-  EXPECT_GT(hits, 1000);
-  EXPECT_GT(occluded, 1000);
-  EXPECT_GT(ground_hits, 300);  // where the ground is not skipped, it is hit in both
 }
 
 // The gatherer sums the weights of the open rays over several packets, as ray-by-ray tracing does.

@@ -414,6 +414,7 @@ ObjectScene BuildObjectScene(const std::vector<PlacedObject>& placed, const Eige
   }
   s.receiver_id = s.scene.AddMesh(s.receiver);
   s.scene.SetOftenSkipped(s.receiver_id);  // the objects' rays never see their own ground
+  s.scene.SetFastOcclusion();              // the render's and the road shade's sky and sun rays are counted
   s.scene.Commit();
   return s;
 }

@@ -38,13 +38,16 @@ class RayScene {
   // round every object, in their way. One mesh per scene; -1 none.
   void SetOftenSkipped(int mesh);
   // Before Commit: OccludedFan and OccludedPacket will trace rays whose answers are counted, not looked at one by
-  // one (a surface's sky and sun rays, millions a frame). Commit then also builds their BVHs without Embree's
-  // robust mode, whose traversal is 10-20 % slower; a ray that meets a shared edge or vertex within rounding
-  // may pass through there, which is one ray of an estimate of many. Intersect, IntersectFan and Occluded stay
-  // watertight: a pixel's primary ray or a LiDAR beam through a crack would be seen.
+  // one (a surface's sky and sun rays, millions a frame). Commit then also builds a BVH for them without Embree's
+  // robust mode (without the often-skipped mesh, if one is set: the rays that skip it traverse it; the others
+  // keep the robust BVHs); a ray that meets a shared edge or vertex within rounding may pass through there, one
+  // ray of an estimate of many, and the keyframe's sky and sun rays trace 5-16 % faster (bench/RESULTS.md).
+  // Intersect, IntersectFan and Occluded stay watertight: a pixel's primary ray or a LiDAR beam through a crack
+  // would be seen.
   void SetFastOcclusion(bool on = true);
   // Must be called after the last AddMesh and before any query. Builds a high-quality BVH with Embree's
-  // robust (watertight) traversal: rays through shared edges and vertices of a closed mesh do not leak.
+  // robust (watertight) traversal: rays through shared edges and vertices of a closed mesh do not leak (and the
+  // BVHs SetOftenSkipped and SetFastOcclusion ask for).
   void Commit();
   int NumMeshes() const;
   const TriangleMesh& Mesh(int id) const;
